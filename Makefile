@@ -1,0 +1,29 @@
+# make demo | make test | make bench  — each bootstraps .venv on first use.
+# GPU users: make demo TORCH_SPEC=torch   (or install your CUDA torch build into .venv first)
+VENV ?= .venv
+TORCH_SPEC ?= torch==2.13.0
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+export VENV TORCH_SPEC
+
+.PHONY: demo test test-all bench install clean
+
+$(STAMP): pyproject.toml scripts/bootstrap.sh
+	bash scripts/bootstrap.sh
+
+install: $(STAMP)
+
+demo: $(STAMP)
+	bash scripts/demo.sh
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+test-all: $(STAMP)
+	$(BIN)/python -m pytest -q -m "not gpu"
+
+bench: $(STAMP)
+	$(BIN)/python -m benchmarks.run
+
+clean:
+	rm -rf logs outputs multirun .pytest_cache

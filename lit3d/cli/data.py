@@ -1,0 +1,60 @@
+"""``lit3d-data task=NAME [data=NAME data.root=PATH] [--show N]``: prepare a dataset ahead of training.
+
+Generates the synthetic set (or indexes and converts a real one) into
+``paths.data_dir``, prints counts per split and category, sizes and the
+manifest hash; ``--show N`` writes a PNG of N samples into the run dir.
+"""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import hydra
+from omegaconf import DictConfig
+
+from lit3d.cli.common import CONF_DIR, build_datamodule, run_cli
+
+
+def prepare(cfg: DictConfig) -> dict:
+    dm = build_datamodule(cfg.data)
+    dm.prepare_data()
+    dm.setup("fit")
+    info = dm.describe()
+    print(json.dumps(info, indent=2, sort_keys=True, default=str))
+    n_show = int(cfg.get("show", 0) or 0)
+    if n_show > 0:
+        path = Path(cfg.paths.output_dir) / f"{cfg.task.name}_samples.png"
+        dm.show(n_show, path)
+        print(f"wrote {path}")
+    return info
+
+
+def _argv_show_to_override(argv: list[str]) -> list[str]:
+    """Turn ``--show N`` into the Hydra override ``+show=N``."""
+    out, i = [], 0
+    while i < len(argv):
+        if argv[i] == "--show" and i + 1 < len(argv):
+            out.append(f"+show={argv[i + 1]}")
+            i += 2
+        elif argv[i].startswith("--show="):
+            out.append("+show=" + argv[i].split("=", 1)[1])
+            i += 1
+        else:
+            out.append(argv[i])
+            i += 1
+    return out
+
+
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="train")
+def _hydra_main(cfg: DictConfig) -> None:
+    run_cli(prepare, cfg)
+
+
+def main() -> None:
+    sys.argv = [sys.argv[0], *_argv_show_to_override(sys.argv[1:])]
+    _hydra_main()
+
+
+if __name__ == "__main__":
+    main()

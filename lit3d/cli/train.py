@@ -1,0 +1,132 @@
+"""``lit3d-train``: fit a task, test the best checkpoint, write metrics.json.
+
+    lit3d-train experiment=completion_demo
+    lit3d-train experiment=completion_demo trainer=fdr
+    lit3d-train hydra.run.dir=logs/completion/runs/X ckpt_path=last     # resume
+    lit3d-train -m +sweep=completion_k                                  # ablation sweep
+
+Returns the monitored metric (``task.monitor``) so Hydra sweepers can optimise it.
+"""
+from __future__ import annotations
+
+import os
+import uuid
+from pathlib import Path
+
+import hydra
+import lightning.pytorch as pl
+import torch
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+
+from lit3d.cli.common import (
+    CONF_DIR,
+    MetadataCallback,
+    UserError,
+    build_datamodule,
+    build_task,
+    log,
+    read_checkpoint_meta,
+    run_cli,
+    to_plain,
+)
+from lit3d.utils.io import atomic_write_text, write_json
+
+
+def resolve_ckpt_path(ckpt_path: str | None, output_dir: Path) -> str | None:
+    """``None`` -> None; ``last`` -> <run dir>/checkpoints/last.ckpt; else the given path."""
+    if ckpt_path in (None, "", "null"):
+        return None
+    if ckpt_path == "last":
+        last = output_dir / "checkpoints" / "last.ckpt"
+        if not last.is_file():
+            raise UserError(
+                f"{last}: no last checkpoint to resume; set hydra.run.dir=<the run dir to resume> "
+                "or ckpt_path=<path/to/file.ckpt>"
+            )
+        return str(last)
+    if not Path(ckpt_path).is_file():
+        raise UserError(f"{ckpt_path}: checkpoint not found (ckpt_path)")
+    return str(ckpt_path)
+
+
+def build_loggers(cfg: DictConfig, wandb_id: str) -> list:
+    """Instantiate the configured loggers; a W&B logger gets a stable run id (resumable)."""
+    loggers = []
+    for name, lg_cfg in (cfg.get("logger") or {}).items():
+        if lg_cfg is None:
+            continue
+        if "WandbLogger" in str(lg_cfg.get("_target_", "")):
+            os.environ.setdefault("WANDB_SILENT", "true")
+            loggers.append(instantiate(lg_cfg, id=wandb_id, resume="allow"))
+        else:
+            loggers.append(instantiate(lg_cfg))
+    return loggers
+
+
+def finish_wandb(loggers: list) -> None:
+    """Close W&B runs (also on errors) so multirun jobs do not share a run."""
+    for lg in loggers:
+        if type(lg).__name__ == "WandbLogger":
+            try:
+                import wandb
+
+                wandb.finish()
+            except Exception:  # pragma: no cover - best effort on shutdown
+                pass
+
+
+def scalar_metrics(metrics: dict) -> dict[str, float]:
+    return {k: float(v) for k, v in metrics.items() if torch.as_tensor(v).numel() == 1}
+
+
+def train(cfg: DictConfig) -> float | None:
+    """Fit, then test the best checkpoint. Returns the monitored metric value."""
+    output_dir = Path(cfg.paths.output_dir)
+    output_dir.mkdir(parents=True, exist_ok=True)
+    pl.seed_everything(cfg.seed, workers=True)
+    torch.set_float32_matmul_precision(cfg.matmul_precision)
+    ckpt_path = resolve_ckpt_path(cfg.get("ckpt_path"), output_dir)
+    wandb_id = (read_checkpoint_meta(ckpt_path).get("wandb_id") if ckpt_path else None) or uuid.uuid4().hex[:8]
+
+    atomic_write_text(output_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
+    datamodule = build_datamodule(cfg.data)
+    task = build_task(cfg.task)
+    loggers = build_loggers(cfg, wandb_id)
+    callbacks = [instantiate(c) for c in (cfg.get("callbacks") or {}).values() if c is not None]
+    callbacks.append(MetadataCallback(to_plain(cfg.task), to_plain(cfg.data), wandb_id))
+    trainer: pl.Trainer = instantiate(cfg.trainer, callbacks=callbacks, logger=loggers or False)
+    for lg in loggers:
+        lg.log_hyperparams(to_plain(cfg))
+    try:
+        trainer.fit(task, datamodule=datamodule, ckpt_path=ckpt_path)
+        fit_metrics = scalar_metrics(trainer.callback_metrics)
+        monitored = _monitored_value(trainer, cfg.task.monitor, fit_metrics)
+        test_metrics: dict[str, float] = {}
+        if cfg.get("test_after_fit", True):
+            best = trainer.checkpoint_callback.best_model_path if trainer.checkpoint_callback else ""
+            trainer.test(task, datamodule=datamodule, ckpt_path=best or None)
+            test_metrics = {k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("test/")}
+        if trainer.is_global_zero:
+            summary = {"monitor": cfg.task.monitor, "monitored_value": monitored, **test_metrics}
+            write_json(output_dir / "metrics.json", summary)
+            log.info("wrote %s", output_dir / "metrics.json")
+        return monitored
+    finally:
+        finish_wandb(loggers)
+
+
+def _monitored_value(trainer: pl.Trainer, monitor: str, metrics: dict[str, float]) -> float | None:
+    cb = trainer.checkpoint_callback
+    if cb is not None and cb.best_model_score is not None:
+        return float(cb.best_model_score)
+    return metrics.get(monitor)
+
+
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="train")
+def main(cfg: DictConfig) -> float | None:
+    return run_cli(train, cfg)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,102 @@
+"""results.md and PNG figures for shape completion, in the layout of thesis tables 3.1-3.6.
+
+Thesis rows are the thesis's published figures on the full 3D-RecGAN++ ShapeNet
+data; ours are measured on whatever data the evaluation ran on.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+from PIL import Image
+
+from lit3d.reports.tables import fmt, markdown_table
+from lit3d.tasks.completion import SEEN, UNSEEN
+from lit3d.utils.io import atomic_write_text
+from lit3d.utils.voxel_images import panel
+
+# (table, title, split, categories, {method: [IoU per category]}) from SPEC.md / the thesis.
+THESIS = [
+    ("3.1", "single-category training, same view", "same", SEEN,
+     {"3D-RecGAN++ (thesis)": [.580, .647, .753, .679], "3DCascade-GAN (thesis)": [.641, .701, .809, .698]}),
+    ("3.2", "multi-category training, same view", "same", SEEN,
+     {"3DCascade-GAN (thesis)": [.624, .669, .773, .682]}),
+    ("3.3", "single-category training, cross view", "cross", SEEN,
+     {"3DCascade-GAN (thesis)": [.585, .628, .680, .647]}),
+    ("3.4", "multi-category training, cross view", "cross", SEEN,
+     {"3DCascade-GAN (thesis)": [.574, .620, .673, .633]}),
+    ("3.5", "unseen categories, cross view", "unseen", UNSEEN,
+     {"3DCascade-GAN (thesis)": [.564, .537, .425, .455, .560, .394]}),
+    ("3.6", "unseen categories, same view", "unseen", UNSEEN,
+     {"3DCascade-GAN (thesis)": [.559, .541, .430, .455, .569, .395]}),
+]
+OURS = (("lit3d (ours)", ""), ("input as prediction (ours)", "_input"), ("per-voxel prior (ours)", "_prior"))
+
+
+def category_rows(metrics: dict, split: str, categories, kind: str = "iou") -> list[list[str]]:
+    """Our rows (model and baselines) for one split: per category + mean."""
+    rows = []
+    for label, suffix in OURS:
+        vals = [metrics.get(f"test/{split}/{kind}{suffix}/{c}") for c in categories]
+        total = metrics.get(f"test/{split}/{kind}{suffix}")
+        if all(v is None for v in vals) and total is None:
+            continue
+        rows.append([label] + [fmt(v) for v in vals] + [fmt(total)])
+    return rows
+
+
+def write_results(metrics: dict, out_dir: Path) -> Path:
+    """Write results.md: one table per thesis table, thesis rows beside ours."""
+    parts = [
+        "# Shape completion results",
+        "",
+        f"Threshold chosen on validation: {fmt(metrics.get('test/threshold'), 2)} "
+        f"(validation IoU {fmt(metrics.get('val/iou'))}). IoU per category, last column = mean over test samples.",
+        "Rows marked *(thesis)* are the thesis's published figures on the full 3D-RecGAN++ ShapeNet data; "
+        "rows marked *(ours)* are measured in this run on this run's data. Compare them only when the data is the same.",
+    ]
+    for number, title, split, cats, thesis in THESIS:
+        ours = category_rows(metrics, split, cats)
+        if not ours:
+            continue
+        rows = [[name] + [fmt(v) for v in vals] + ["–"] for name, vals in thesis.items()] + ours
+        parts += ["", f"## Table {number}: IoU, {title}", "", markdown_table(["method", *cats, "mean"], rows)]
+    for split, cats in (("same", SEEN), ("cross", SEEN), ("unseen", UNSEEN)):
+        ce = category_rows(metrics, split, cats, kind="ce")
+        if ce:
+            parts += ["", f"## Cross-entropy, {split} split (lower is better)", "",
+                      markdown_table(["method", *cats, "mean"], ce)]
+    path = Path(out_dir) / "results.md"
+    atomic_write_text(path, "\n".join(parts) + "\n")
+    return path
+
+
+def write_figures(task, datamodule, out_dir: Path, n: int = 4) -> list[Path]:
+    """PNG per test split: rows of input | prediction | target (depth-shaded, two view axes)."""
+    out_dir = Path(out_dir)
+    paths = []
+    task.eval()
+    loaders = datamodule.test_dataloader()
+    loaders = loaders if isinstance(loaders, list) else [loaders]
+    names = list(getattr(datamodule, "test_split_names", [f"split{i}" for i in range(len(loaders))]))
+    threshold = float(task.threshold)
+    for name, loader in zip(names, loaders):
+        rows = []
+        for batch in loader:
+            with torch.no_grad():
+                probs = task(batch["input"].to(task.device)).cpu()
+            for i in range(batch["input"].shape[0]):
+                vols = [batch["input"][i, 0], probs[i, 0], batch["target"][i, 0]]
+                rows.append(panel(vols, threshold=threshold))
+                rows.append(panel([v.transpose(0, 2) for v in vols], threshold=threshold))
+                rows.append(np.full((4, rows[-1].shape[1]), 40, np.uint8))
+                if len(rows) >= 3 * n:
+                    break
+            if len(rows) >= 3 * n:
+                break
+        if rows:
+            path = out_dir / f"completion_{name}.png"
+            Image.fromarray(np.concatenate(rows[:-1], axis=0)).save(path)
+            paths.append(path)
+    return paths

@@ -1,0 +1,312 @@
+"""3DCascade-GAN shape completion as a LightningModule (manual optimisation, WGAN-GP).
+
+Batches are dicts from ``datamodules.completion``:
+    input  (B, 1, r, r, r) float32 {0,1}   partial 2.5D grid (r = out_res / 4)
+    target (B, 1, R, R, R) float32 {0,1}   complete solid shape
+    label  (B,) int64                      index into ``categories`` or -1 (unseen)
+    category list[str]                     category name (seen or unseen)
+
+One training step = ``critic_steps`` critic updates, then one generator update
+(generator + auxiliary classifier share the generator optimiser).
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import lightning.pytorch as pl
+import torch
+import torch.nn.functional as F
+
+from lit3d.losses import critic_loss, generator_adv_loss, gradient_penalty, weighted_bce_with_logits
+from lit3d.metrics.voxel import VoxelSweepMetrics, best_threshold, default_thresholds
+from lit3d.nets.completion import build_completion_nets
+from lit3d.utils.voxel_images import panel
+
+SEEN = ("bench", "chair", "couch", "table")
+UNSEEN = ("car", "faucet", "firearm", "guitar", "monitor", "plane")
+SPLITS = ("same", "cross", "unseen")
+# predictions: the model, the partial input upsampled, the per-voxel training prior
+SOURCES = ("model", "input", "prior")
+
+
+def split_key(name: str) -> str:
+    """'test_same' / 'same' -> 'same'."""
+    return name.removeprefix("test_")
+
+
+class NonFiniteLossError(FloatingPointError):
+    """A loss became NaN/Inf: names the generator step and the loss term."""
+
+
+class CompletionTask(pl.LightningModule):
+    """Cascade generator + critic (+ classifier) trained with WGAN-GP and weighted BCE."""
+
+    # lit3d-eval runs validation first: the IoU threshold is chosen there
+    validate_before_test = True
+
+    def __init__(
+        self,
+        nets: dict,
+        critic_steps: int = 1,
+        lr_g: float = 1e-4,
+        lr_d: float = 1e-4,
+        betas: Sequence[float] = (0.9, 0.999),
+        eps: float = 1e-8,
+        alpha: float = 0.35,
+        gamma: float = 0.8,
+        zeta: float = 0.01,
+        gp_lambda: float = 10.0,
+        adversarial: bool = True,
+        categories: Sequence[str] = SEEN,
+        unseen_categories: Sequence[str] = UNSEEN,
+        prior_samples: int = 256,
+        image_every_n_epochs: int = 1,
+        channels_last: bool = False,
+        on_nonfinite: str = "raise",
+    ):
+        super().__init__()
+        self.save_hyperparameters()
+        self.automatic_optimization = False
+        built = build_completion_nets(nets)
+        self.generator = built["generator"]
+        self.critic = built["critic"] if adversarial else None
+        self.classifier = built.get("classifier")
+        self.eval_categories = list(categories) + [c for c in unseen_categories if c not in categories]
+        self.cat_index = {c: i for i, c in enumerate(self.eval_categories)}
+        thresholds = default_thresholds()
+        self.register_buffer("thresholds", thresholds.float(), persistent=False)
+        # chosen on validation, applied to test; saved in checkpoints
+        self.register_buffer("threshold", torch.tensor(0.5))
+        self.register_buffer("prior_threshold", torch.tensor(0.5))
+        self.val_metrics = torch.nn.ModuleDict({s: VoxelSweepMetrics(self.eval_categories, thresholds) for s in SOURCES})
+        self.test_metrics = torch.nn.ModuleDict(
+            {f"{sp}_{s}": VoxelSweepMetrics(self.eval_categories, thresholds) for sp in SPLITS for s in SOURCES}
+        )
+        self.prior: torch.Tensor | None = None
+        self.generator_steps = 0
+        self.skipped_steps = 0
+
+    # ------------------------------------------------------------------ helpers
+    def forward(self, partial: torch.Tensor) -> torch.Tensor:
+        """(B, 1, r, r, r) partial grid -> (B, 1, R, R, R) occupancy probabilities."""
+        return torch.sigmoid(self.generator(self._fmt(partial)).logits.float())
+
+    def _fmt(self, x: torch.Tensor) -> torch.Tensor:
+        return x.contiguous(memory_format=torch.channels_last_3d) if self.hparams.channels_last else x
+
+    def _categories(self, batch: dict) -> torch.Tensor:
+        return torch.tensor([self.cat_index.get(c, -1) for c in batch["category"]], device=self.device)
+
+    @staticmethod
+    def upsample_input(partial: torch.Tensor, size: int) -> torch.Tensor:
+        """Nearest upsampling of the partial grid: the input-as-prediction baseline."""
+        return F.interpolate(partial.float(), size=(size,) * 3, mode="nearest")
+
+    def _check_finite(self, **losses: torch.Tensor) -> bool:
+        """False (skip) or raise when a loss is NaN/Inf, naming the step and the term."""
+        bad = [k for k, v in losses.items() if not bool(torch.isfinite(v.detach()).all())]
+        if not bad:
+            return True
+        msg = f"non-finite loss at generator step {self.generator_steps} (epoch {self.current_epoch}): {', '.join(bad)}"
+        if self.hparams.on_nonfinite == "skip":
+            self.skipped_steps += 1
+            self.print(f"warning: {msg}; step skipped ({self.skipped_steps} so far)")
+            return False
+        raise NonFiniteLossError(msg + " (set task.on_nonfinite=skip to skip such steps)")
+
+    # ------------------------------------------------------------------ training
+    def configure_optimizers(self):
+        hp = self.hparams
+        g_params = list(self.generator.parameters())
+        if self.classifier is not None:
+            g_params += list(self.classifier.parameters())
+        opt_g = torch.optim.Adam(g_params, lr=hp.lr_g, betas=tuple(hp.betas), eps=hp.eps)
+        if self.critic is None:
+            return opt_g
+        opt_d = torch.optim.Adam(self.critic.parameters(), lr=hp.lr_d, betas=tuple(hp.betas), eps=hp.eps)
+        return [opt_g, opt_d]
+
+    def _optimizers(self):
+        opts = self.optimizers()
+        return (opts[0], opts[1]) if isinstance(opts, list) else (opts, None)
+
+    def training_step(self, batch: dict, batch_idx: int) -> None:
+        hp = self.hparams
+        x, y = self._fmt(batch["input"]), self._fmt(batch["target"])
+        opt_g, opt_d = self._optimizers()
+        logs: dict[str, torch.Tensor] = {}
+        if opt_d is not None:
+            for _ in range(hp.critic_steps):
+                with self.toggled_optimizer(opt_d):
+                    with torch.no_grad():
+                        fake = torch.sigmoid(self.generator(x).logits)
+                    d_real, d_fake = self.critic(x, y), self.critic(x, fake)
+                    gp, grad_norm = gradient_penalty(self.critic, x, y, fake)
+                    loss_d = critic_loss(d_fake, d_real, gp, hp.gp_lambda)
+                    if self._check_finite(critic=loss_d):
+                        opt_d.zero_grad(set_to_none=True)
+                        self.manual_backward(loss_d)
+                        opt_d.step()
+            logs.update({"loss_d": loss_d, "gp": gp, "grad_norm": grad_norm,
+                         "wasserstein": (d_real - d_fake).mean()})
+        with self.toggled_optimizer(opt_g):
+            out = self.generator(x)
+            probs = torch.sigmoid(out.logits)
+            bce = weighted_bce_with_logits(out.logits, y, hp.alpha)
+            loss_g = hp.gamma * bce if opt_d is not None else bce
+            terms = {"bce": bce}
+            if opt_d is not None:
+                terms["adv"] = generator_adv_loss(self.critic(x, probs))
+                loss_g = loss_g + (1 - hp.gamma) * terms["adv"]
+            if self.classifier is not None:
+                seen = batch["label"] >= 0
+                if bool(seen.any()):
+                    terms["cls"] = F.cross_entropy(self.classifier(probs[seen]).float(), batch["label"][seen])
+                    loss_g = loss_g + hp.zeta * terms["cls"]
+            if self._check_finite(generator=loss_g, **terms):
+                opt_g.zero_grad(set_to_none=True)
+                self.manual_backward(loss_g)
+                opt_g.step()
+        self.generator_steps += 1
+        logs.update(terms)
+        logs.update({"loss_g": loss_g, "keep_fraction": out.keep_fraction})
+        self.log_dict({f"train/{k}": v.detach().float() for k, v in logs.items()},
+                      prog_bar=False, on_step=True, on_epoch=True, batch_size=x.shape[0])
+        self.log("train/generator_steps", float(self.generator_steps), on_step=True, on_epoch=False)
+
+    # ------------------------------------------------------------------ priors
+    def _ensure_prior(self) -> None:
+        """Per-voxel mean occupancy of (up to ``prior_samples``) training targets: a baseline."""
+        if self.prior is not None:
+            self.prior = self.prior.to(self.device)
+            return
+        dm = getattr(self.trainer, "datamodule", None)
+        total, n = None, 0
+        if dm is not None:
+            for batch in dm.train_dataloader():
+                t = batch["target"].float().sum(0, keepdim=True)
+                total = t if total is None else total + t
+                n += batch["target"].shape[0]
+                if n >= self.hparams.prior_samples:
+                    break
+        if total is None:
+            res = self.hparams.nets["out_res"]
+            self.prior = torch.full((1, 1, res, res, res), 0.5, device=self.device)
+        else:
+            self.prior = (total / n).to(self.device)
+
+    def _predictions(self, batch: dict) -> dict[str, torch.Tensor]:
+        x, y = batch["input"], batch["target"]
+        size = y.shape[-1]
+        return {
+            "model": self(x),
+            "input": self.upsample_input(x, size),
+            "prior": self.prior.expand(y.shape[0], -1, -1, -1, -1),
+        }
+
+    # ------------------------------------------------------------------ validation
+    def on_validation_epoch_start(self) -> None:
+        self._ensure_prior()
+
+    def validation_step(self, batch: dict, batch_idx: int) -> None:
+        cats = self._categories(batch)
+        preds = self._predictions(batch)
+        for src, p in preds.items():
+            self.val_metrics[src].update(p, batch["target"], cats)
+        if batch_idx == 0:
+            self._log_panels(batch)
+
+    def on_validation_epoch_end(self) -> None:
+        model = self.val_metrics["model"].compute()
+        prior = self.val_metrics["prior"].compute()
+        inp = self.val_metrics["input"].compute()
+        t, iou = best_threshold(model["iou"], self.thresholds)
+        tp, iou_p = best_threshold(prior["iou"], self.thresholds)
+        self.threshold.fill_(t)
+        self.prior_threshold.fill_(tp)
+        self.log_dict({
+            "val/iou": iou, "val/threshold": t, "val/ce": float(model["ce"]),
+            "val/iou_input": float(inp["iou"][0]), "val/iou_prior": iou_p,
+            "val/iou_at_0.5": float(model["iou"][self._thr_index(0.5)]),
+        }, sync_dist=False)
+        for m in self.val_metrics.values():
+            m.reset()
+
+    def _thr_index(self, t: float) -> int:
+        return int(torch.argmin((self.thresholds - t).abs()))
+
+    # ------------------------------------------------------------------ test
+    def on_test_epoch_start(self) -> None:
+        self._ensure_prior()
+
+    def _split_name(self, dataloader_idx: int) -> str:
+        dm = getattr(self.trainer, "datamodule", None)
+        names = list(getattr(dm, "test_split_names", SPLITS))
+        return split_key(names[dataloader_idx]) if dataloader_idx < len(names) else SPLITS[dataloader_idx]
+
+    def test_step(self, batch: dict, batch_idx: int, dataloader_idx: int = 0) -> None:
+        split = self._split_name(dataloader_idx)
+        cats = self._categories(batch)
+        for src, p in self._predictions(batch).items():
+            self.test_metrics[f"{split}_{src}"].update(p, batch["target"], cats)
+
+    def on_test_epoch_end(self) -> None:
+        thresholds = {"model": float(self.threshold), "prior": float(self.prior_threshold), "input": 0.5}
+        out: dict[str, float] = {"test/threshold": float(self.threshold)}
+        for split in SPLITS:
+            for src in SOURCES:
+                metric = self.test_metrics[f"{split}_{src}"]
+                res = metric.compute()
+                if float(res["count_per_category"].sum()) == 0:
+                    metric.reset()
+                    continue
+                j = self._thr_index(thresholds[src])
+                suffix = "" if src == "model" else f"_{src}"
+                out[f"test/{split}/iou{suffix}"] = float(res["iou"][j])
+                out[f"test/{split}/ce{suffix}"] = float(res["ce"])
+                for c, cat in enumerate(self.eval_categories):
+                    if res["count_per_category"][c] > 0:
+                        out[f"test/{split}/iou{suffix}/{cat}"] = float(res["iou_per_category"][c, j])
+                        out[f"test/{split}/ce{suffix}/{cat}"] = float(res["ce_per_category"][c])
+                metric.reset()
+        self.log_dict(out, sync_dist=False)
+
+    # ------------------------------------------------------------------ images
+    def _log_panels(self, batch: dict) -> None:
+        every = max(int(self.hparams.image_every_n_epochs), 1)
+        if self.current_epoch % every or not self.trainer.is_global_zero:
+            return
+        loggers = [lg for lg in self.loggers if type(lg).__name__ == "WandbLogger"]
+        if not loggers:
+            return
+        with torch.no_grad():
+            out = self.generator(self._fmt(batch["input"][:1]))
+        vols = [batch["input"][0, 0]] + [torch.sigmoid(s[0, 0].float()) for s in out.stage_logits]
+        vols += [torch.sigmoid(out.logits[0, 0].float()), batch["target"][0, 0]]
+        image = panel(vols, threshold=float(self.threshold))
+        caption = "input | " + " | ".join(f"stage {i + 1}" for i in range(len(out.stage_logits))) + " | final | target"
+        for lg in loggers:
+            lg.log_image(key="val/panels", images=[image], caption=[caption], step=self.global_step)
+
+    # ------------------------------------------------------------------ state
+    def on_save_checkpoint(self, checkpoint: dict) -> None:
+        checkpoint["generator_steps"] = self.generator_steps
+        checkpoint["skipped_steps"] = self.skipped_steps
+
+    def on_load_checkpoint(self, checkpoint: dict) -> None:
+        self.generator_steps = int(checkpoint.get("generator_steps", 0))
+        self.skipped_steps = int(checkpoint.get("skipped_steps", 0))
+
+    def adapt_data_config(self, data_cfg: dict) -> dict:
+        """Make a data config deliver grids at this checkpoint's resolution."""
+        return {**data_cfg, "target_res": int(self.hparams.nets["out_res"])}
+
+    # ------------------------------------------------------------------ summary
+    @staticmethod
+    def summary_rows(kwargs: dict) -> list[dict]:
+        """Per-component rows for ``lit3d-summary`` (meta device, nothing allocated)."""
+        from lit3d.nets.summary import summarize_completion
+
+        return summarize_completion(kwargs["nets"])
+
+

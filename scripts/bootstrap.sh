@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Create .venv and install lit3d with its dev extras; make sure the EGL libraries are there.
+#   TORCH_SPEC   torch requirement (default torch==2.13.0, the CPU wheel). GPU users:
+#                TORCH_SPEC="torch" (or a CUDA build index via PIP_INDEX_URL) make demo
+#   VENV         virtual environment folder (default .venv)
+#   PYTHON       interpreter used to create it (default python3)
+set -euo pipefail
+VENV=${VENV:-.venv}
+TORCH_SPEC=${TORCH_SPEC:-torch==2.13.0}
+PYTHON=${PYTHON:-python3}
+EGL_PKGS="libegl1 libgl1 libgl1-mesa-dri libegl-mesa0"
+
+have_egl() {
+  ldconfig -p 2>/dev/null | grep -q 'libEGL.so.1' && ldconfig -p 2>/dev/null | grep -q 'libEGL_mesa.so.0\|libEGL_nvidia.so.0' \
+    && { [ -d /usr/lib/x86_64-linux-gnu/dri ] || [ -d /usr/lib/dri ] || ldconfig -p | grep -q 'libEGL_nvidia'; }
+}
+
+if ! have_egl; then
+  if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null; then
+    echo "bootstrap: installing EGL libraries ($EGL_PKGS)"
+    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $EGL_PKGS) >/dev/null
+  else
+    echo "bootstrap: EGL libraries missing: run 'sudo apt-get install $EGL_PKGS' and retry" >&2
+    exit 1
+  fi
+fi
+
+if [ ! -x "$VENV/bin/python" ]; then
+  echo "bootstrap: creating $VENV"
+  "$PYTHON" -m venv "$VENV"
+fi
+"$VENV/bin/python" -m pip install -q --upgrade pip >/dev/null 2>&1 || true
+echo "bootstrap: installing $TORCH_SPEC and lit3d[dev]"
+"$VENV/bin/pip" install -q "$TORCH_SPEC"
+"$VENV/bin/pip" install -q -e ".[dev]"
+touch "$VENV/.installed"

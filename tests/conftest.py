@@ -1,0 +1,61 @@
+"""Shared fixtures: Hydra config composition with per-test output dirs."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from hydra.core.global_hydra import GlobalHydra
+from omegaconf import DictConfig, open_dict
+
+from lit3d.cli.common import CONF_DIR
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_DATA = REPO.parent / "shared" / "data"
+
+os.environ.setdefault("WANDB_SILENT", "true")
+os.environ.setdefault("WANDB_MODE", "offline")
+
+
+@pytest.fixture(scope="package")
+def hydra_conf_dir() -> str:
+    return CONF_DIR
+
+
+@pytest.fixture
+def compose_cfg(tmp_path):
+    """compose_cfg(overrides, config_name="train") -> DictConfig with paths inside tmp_path.
+
+    ``paths.output_dir`` (normally Hydra's run dir) and ``paths.data_dir`` point into the
+    test's own tmp dir, so tests never share outputs.
+    """
+
+    def _compose(overrides: list[str] | None = None, config_name: str = "train", data_dir: Path | None = None) -> DictConfig:
+        GlobalHydra.instance().clear()
+        with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+            cfg = compose(config_name=config_name, overrides=list(overrides or []), return_hydra_config=False)
+        with open_dict(cfg):
+            cfg.paths.output_dir = str(tmp_path / "run")
+            cfg.paths.data_dir = str(data_dir or tmp_path / "data")
+            cfg.paths.log_dir = str(tmp_path / "logs")
+        return cfg
+
+    yield _compose
+    GlobalHydra.instance().clear()
+
+
+def pytest_collection_modifyitems(config, items):
+    """GPU tests skip on machines without CUDA (they still run with -m gpu on a GPU box)."""
+    try:
+        import torch
+
+        has_cuda = torch.cuda.is_available()
+    except Exception:  # pragma: no cover
+        has_cuda = False
+    if has_cuda:
+        return
+    skip = pytest.mark.skip(reason="needs a CUDA GPU")
+    for item in items:
+        if "gpu" in item.keywords:
+            item.add_marker(skip)
