@@ -19,7 +19,7 @@ import torch.nn.functional as F
 
 from lit3d.losses import critic_loss, generator_adv_loss, gradient_penalty, weighted_bce_with_logits
 from lit3d.metrics.voxel import VoxelSweepMetrics, best_threshold, default_thresholds
-from lit3d.nets.completion import build_completion_nets
+from lit3d.nets.completion import build_completion_nets, resolve_config
 from lit3d.utils.voxel_images import panel
 
 SEEN = ("bench", "chair", "couch", "table")
@@ -67,6 +67,7 @@ class CompletionTask(pl.LightningModule):
         super().__init__()
         self.save_hyperparameters()
         self.automatic_optimization = False
+        self.net_cfg = resolve_config(nets)
         built = build_completion_nets(nets)
         self.generator = built["generator"]
         self.critic = built["critic"] if adversarial else None
@@ -190,7 +191,7 @@ class CompletionTask(pl.LightningModule):
                 if n >= self.hparams.prior_samples:
                     break
         if total is None:
-            res = self.hparams.nets["out_res"]
+            res = self.net_cfg["out_res"]
             self.prior = torch.full((1, 1, res, res, res), 0.5, device=self.device)
         else:
             self.prior = (total / n).to(self.device)
@@ -299,7 +300,7 @@ class CompletionTask(pl.LightningModule):
 
     def adapt_data_config(self, data_cfg: dict) -> dict:
         """Make a data config deliver grids at this checkpoint's resolution."""
-        return {**data_cfg, "target_res": int(self.hparams.nets["out_res"])}
+        return {**data_cfg, "target_res": int(self.net_cfg["out_res"])}
 
     # ------------------------------------------------------------------ summary
     @staticmethod
