@@ -90,10 +90,17 @@ def run_cli(fn, cfg: DictConfig) -> Any:
     """
     import os
 
+    from omegaconf.errors import MissingMandatoryValue
+
+    from datamodules.cache import DataError
+
     try:
         return fn(cfg)
-    except UserError as exc:
+    except (UserError, DataError, MissingMandatoryValue) as exc:
         if os.environ.get("HYDRA_FULL_ERROR") == "1" or cfg.get("debug", False):
             raise
+        if isinstance(exc, MissingMandatoryValue):
+            key = getattr(exc, "full_key", "") or "a required option"
+            exc = UserError(f"missing value for {key}: set {key}=... on the command line")
         print(f"error: {exc}", file=sys.stderr)
         sys.exit(2)

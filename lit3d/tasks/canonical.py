@@ -5,7 +5,9 @@ Batches come from ``datamodules.canonical`` (``depth``, ``mask``, ``canon_depth`
 depth + mask to the canonical depth + mask; the loss is alpha L_depth + beta L_mask with
 alpha/beta set per epoch by the :class:`~lit3d.callbacks.loss_phases.LossPhases` callback
 that this module adds itself (``configure_callbacks``), so it is saved in checkpoints and a
-resumed run continues in its phase.
+resumed run continues in its phase. ``mask_loss``: "mse" (thesis) or "bce" (from logits;
+measured here: at demo scale the MSE version collapses to an all-background mask, the BCE
+version does not).
 
 Logged: ``train/loss|depth_loss|mask_loss|alpha|beta``; ``val/`` and ``test/`` ``depth_mse``
 (masked depth error, see :func:`lit3d.losses_canonical.per_sample_depth_mse`), ``iou`` (mask
@@ -46,6 +48,7 @@ class CanonicalTask(pl.LightningModule):
         phase_unit: str = "fraction",
         alpha: float = 1000.0,
         beta: float = 100.0,
+        mask_loss: str = "mse",
         mask_threshold: float = 0.5,
         image_every_n_epochs: int = 1,
         n_panel: int = 4,
@@ -84,7 +87,7 @@ class CanonicalTask(pl.LightningModule):
     def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
         out = self(batch["depth"], batch["mask"])
         losses = canonical_loss(out.depth, out.mask, batch["canon_depth"], batch["canon_mask"],
-                                self.loss_alpha, self.loss_beta)
+                                self.loss_alpha, self.loss_beta, self.hparams.mask_loss, out.mask_logits)
         if not torch.isfinite(losses["loss"]):
             raise FloatingPointError(f"non-finite canonical loss at epoch {self.current_epoch}, batch {batch_idx}: "
                                      f"depth {losses['depth'].item()}, mask {losses['mask'].item()}")

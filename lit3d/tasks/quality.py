@@ -86,6 +86,7 @@ class QualityTask(pl.LightningModule):
         self.scaling: TargetScaling | None = None
         self.sfs_info: dict | None = None
         self.dataset_name: str | None = None
+        self.feature_options: dict | None = None
         self.net: QualityMLP | None = QualityMLP(len(self.features), **self.net_kwargs) if self.features else None
         self._outputs: dict[str, list] = {"val": [], "test": []}
         self.test_predictions: dict[str, dict] = {}
@@ -145,6 +146,8 @@ class QualityTask(pl.LightningModule):
             raise RuntimeError("QualityTask needs a datamodule (datamodules.quality.QualityDataModule)")
         dm.setup(stage)
         self.dataset_name = dm.name
+        if self.feature_options is None:
+            self.feature_options = dict(getattr(dm.hparams, "feature_options", None) or {}) if hasattr(dm, "hparams") else {}
         if self.scaling is None:
             self.scaling = dm.scaling
         if self.net is None:
@@ -288,7 +291,7 @@ class QualityTask(pl.LightningModule):
     def quality_meta(self) -> dict:
         return {"features": list(self.features), "net": dict(self.net_kwargs),
                 "scaling": self.scaling.to_dict() if self.scaling else None, "sfs": self.sfs_info,
-                "dataset": self.dataset_name}
+                "dataset": self.dataset_name, "feature_options": self.feature_options}
 
     def on_save_checkpoint(self, checkpoint: dict) -> None:
         checkpoint[CKPT_KEY] = self.quality_meta()
@@ -302,6 +305,7 @@ class QualityTask(pl.LightningModule):
         self.scaling = TargetScaling.from_dict(meta["scaling"]) if meta.get("scaling") else None
         self.sfs_info = meta.get("sfs")
         self.dataset_name = meta.get("dataset")
+        self.feature_options = meta.get("feature_options")
         self.net = QualityMLP(len(self.features), **self.net_kwargs)
 
     # ------------------------------------------------------------ summary

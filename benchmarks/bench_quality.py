@@ -1,0 +1,119 @@
+"""Quality feature table vs per-style lit rendering; batched Mask-SSIM vs scikit-image per image.
+
+Rows:
+1. Full feature table (30 styles x 2 shadings x 12 views, every measure, Chamfer and
+   Hausdorff) of one ~30k-face mesh pair at 256^2, against rendering every style as a
+   separate lit pyrender pass (the thesis's Blender approach: 2 meshes x 2 shadings x
+   30 styles x 12 views = 1440 renders). The baseline is timed on one style's 48
+   renders and multiplied by 30, and counts rendering only (no measures), which
+   favours the baseline.
+2. Mask-SSIM (all four variants + SSIM from one map) for 360 image pairs at 256^2,
+   batched torch vs scikit-image ``structural_similarity(full=True)`` + masked mean per
+   image (timed on 24 pairs, scaled to 360).
+3. On a CUDA machine: the feature table at 512^2 with measures on the GPU.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import torch
+
+from benchmarks.common import median_time, row
+
+
+def _pair(faces_major: int = 192, faces_minor: int = 80):
+    import trimesh
+
+    ref = trimesh.creation.torus(0.5, 0.2, major_sections=faces_major, minor_sections=faces_minor)
+    g = np.random.default_rng(0)
+    v = ref.vertices
+    bumps = 0.01 * np.sin(12 * np.arctan2(v[:, 1], v[:, 0]))[:, None]
+    ref = trimesh.Trimesh(v + ref.vertex_normals * bumps, ref.faces, process=False)
+    dist = ref.copy()
+    dist.vertices = dist.vertices + dist.vertex_normals * g.normal(0, 0.004, (len(v), 1))
+    return ref, dist
+
+
+def lit_render_per_style(meshes, size: int, n_styles: int, shadings=("flat", "smooth")) -> float:
+    """Seconds to render ``n_styles`` lit passes per mesh x shading x 12 views (pyrender)."""
+    from lit3d.render.convert import normalise
+    from lit3d.render.egl import import_pyrender, offscreen_renderer
+    from lit3d.render.views import camera_poses
+
+    pyrender = import_pyrender()
+    r = offscreen_renderer(size, size)
+    poses = camera_poses(3.0)
+    t0 = time.perf_counter()
+    for m in meshes:
+        m = normalise(m)
+        for shading in shadings:
+            for s in range(n_styles):
+                scene = pyrender.Scene(bg_color=[0, 0, 0, 0], ambient_light=[0.1, 0.1, 0.1])
+                mat = pyrender.MetallicRoughnessMaterial(baseColorFactor=[0.3 + 0.02 * s, 0.5, 0.7, 1.0],
+                                                         metallicFactor=0.2, roughnessFactor=0.5)
+                scene.add(pyrender.Mesh.from_trimesh(m, material=mat, smooth=shading == "smooth"))
+                cam = scene.add(pyrender.OrthographicCamera(0.9, 0.9, znear=0.05, zfar=5.0), pose=poses[0])
+                light = scene.add(pyrender.DirectionalLight(intensity=3.0), pose=poses[0])
+                for p in poses:
+                    scene.set_pose(cam, p)
+                    scene.set_pose(light, p)
+                    r.render(scene)
+    return time.perf_counter() - t0
+
+
+def _mask_ssim_rows(size: int = 256, n: int = 360, n_ref: int = 24) -> dict:
+    from skimage.metrics import structural_similarity
+
+    from lit3d.metrics.image import mask_ssim_all
+
+    g = torch.Generator().manual_seed(0)
+    yy, xx = torch.meshgrid(torch.linspace(-1, 1, size), torch.linspace(-1, 1, size), indexing="ij")
+    disc = (xx**2 + yy**2 < 0.6).expand(n, 1, size, size)
+    a = torch.rand(n, 1, size, size, generator=g) * disc
+    b = (a + 0.05 * torch.randn(n, 1, size, size, generator=g)).clamp(0, 1) * disc
+    ours = median_time(lambda: mask_ssim_all(a, b, disc, disc), repeats=3)
+    an, bn, mn = a.numpy(), b.numpy(), disc.numpy()
+
+    def ref():
+        for i in range(n_ref):
+            _, s = structural_similarity(an[i, 0], bn[i, 0], gaussian_weights=True, sigma=1.5,
+                                         use_sample_covariance=False, data_range=1.0, full=True)
+            m = mn[i, 0]
+            _ = (s * m).sum() / m.sum()
+    base = median_time(ref, repeats=3) * n / n_ref
+    return {"ours": ours, "base": base, "n": n, "size": size}
+
+
+def run() -> list[dict]:
+    from lit3d.quality.features import FeatureConfig, feature_table
+    from lit3d.render.gbuffer import RenderConfig
+
+    rows = []
+    ref, dist = _pair()
+    nf = len(ref.faces)
+    cfg = FeatureConfig(render=RenderConfig(size=256))
+    feature_table(ref, dist, FeatureConfig(render=RenderConfig(size=64), styles=("toon",)))  # warm EGL/LUTs
+    ours = median_time(lambda: feature_table(ref, dist, cfg), repeats=2, warmup=0)
+    one_style = min(lit_render_per_style([ref, dist], 256, 1) for _ in range(2))
+    base = one_style * 30
+    rows.append(row(f"quality feature table, {nf}-face pair, 30 styles x 2 shadings x 12 views, 256^2, all measures",
+                    "make bench", ours, base, baseline_name="1440 lit pyrender passes (render only)",
+                    note=f"target < 10 s and >= 10x; baseline = 30 x measured one-style time ({one_style:.2f} s)"))
+    ms = _mask_ssim_rows()
+    rows.append(row(f"Mask-SSIM (4 variants + SSIM), {ms['n']} pairs at {ms['size']}^2", "make bench",
+                    ms["ours"], ms["base"], baseline_name="scikit-image per image",
+                    note="scikit-image timed on 24 pairs, scaled"))
+    if torch.cuda.is_available():
+        cfg512 = FeatureConfig(render=RenderConfig(size=512))
+        gpu = median_time(lambda: feature_table(ref, dist, cfg512, device="cuda"), repeats=2)
+        rows.append(row(f"quality feature table, {nf}-face pair, 512^2, measures on GPU", "make bench", gpu, None,
+                        note="per pair"))
+    for r in rows:
+        r["ours_s"], r["baseline_s"] = r["ours"], r["baseline"]
+    return rows
+
+
+if __name__ == "__main__":
+    for r in run():
+        print(r)

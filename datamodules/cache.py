@@ -1,0 +1,209 @@
+"""Generic on-disk cache pieces shared by every lit3d DataModule.
+
+- :class:`DataError`: a bad input file or setting, one message naming the file/setting.
+- :func:`stable_hash` / :func:`stable_seed`: hashes and RNG seeds that do not depend
+  on Python's per-process ``hash()`` salt.
+- :func:`atomic_save_npz`: arrays -> ``.npz`` through a temp file + ``os.replace``.
+- :class:`CacheBuilder`: the preparation protocol. A ``prepare.json`` marker (generator,
+  version, config hash of the item files in the folder) is written first and kept,
+  items are written atomically one by one, ``manifest.json`` is written last
+  (atomically). Re-running skips items already on disk (also when the manifest was
+  deleted); a marker or manifest from another config/version, or item files of
+  unknown origin, wipe the stale items first, so a cache never mixes two configs.
+
+Manifest layout (``manifest.json``)::
+
+    {"generator": str, "version": str, "config": {...}, "config_hash": sha256,
+     "items": [{"file": "items/...npz", "split": ..., ...}, ...],
+     "manifest_hash": sha256 of the canonical JSON of "items", ...extra}
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import shutil
+import tempfile
+import zlib
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lit3d.utils.io import atomic_write_bytes, write_json
+
+log = logging.getLogger("lit3d.data")
+
+MANIFEST = "manifest.json"
+MARKER = "prepare.json"
+TMP_SUFFIX = ".tmp"
+
+__all__ = [
+    "MANIFEST", "MARKER", "CacheBuilder", "DataError", "atomic_save_npz", "atomic_write_bytes",
+    "clean_temp_files", "read_manifest", "stable_hash", "stable_seed", "write_json",
+]
+
+
+class DataError(ValueError):
+    """A bad data file or data setting; the message names the file (or setting) and the problem."""
+
+
+def canonical_json(obj: Any) -> str:
+    """JSON with sorted keys and no whitespace: the form that is hashed."""
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
+
+
+def stable_hash(obj: Any) -> str:
+    """sha256 hex digest of the canonical JSON of ``obj``."""
+    return hashlib.sha256(canonical_json(obj).encode("utf-8")).hexdigest()
+
+
+def stable_seed(*parts: int | str) -> np.random.SeedSequence:
+    """A numpy SeedSequence from ints and strings (strings via crc32, stable across processes)."""
+    ints = [p if isinstance(p, int) else zlib.crc32(str(p).encode("utf-8")) for p in parts]
+    return np.random.SeedSequence([int(i) & 0xFFFFFFFF for i in ints])
+
+
+def atomic_save_npz(path: str | os.PathLike, compress: bool = True, **arrays: np.ndarray) -> Path:
+    """Save ``arrays`` as ``path`` (.npz) via a temp file in the same folder + ``os.replace``.
+
+    An interrupted write leaves only a ``.<name>.*.tmp`` file, which
+    :func:`clean_temp_files` removes; ``path`` is either absent or complete.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=TMP_SUFFIX)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            (np.savez_compressed if compress else np.savez)(f, **arrays)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def clean_temp_files(root: str | os.PathLike) -> int:
+    """Remove leftover temp files (``.*.tmp``) under ``root``; returns how many."""
+    n = 0
+    root = Path(root)
+    if not root.exists():
+        return 0
+    for p in root.rglob(f".*{TMP_SUFFIX}"):
+        if p.is_file():
+            p.unlink(missing_ok=True)
+            n += 1
+    return n
+
+
+def read_manifest(root: str | os.PathLike) -> dict | None:
+    """The manifest in ``root`` or None when there is none; a corrupt one raises :class:`DataError`."""
+    path = Path(root) / MANIFEST
+    if not path.is_file():
+        return None
+    try:
+        return json.loads(path.read_text("utf-8"))
+    except (OSError, json.JSONDecodeError) as exc:
+        raise DataError(f"{path}: unreadable manifest ({exc}); delete it to re-prepare the data") from exc
+
+
+class CacheBuilder:
+    """Resumable, atomic preparation of a cache folder of item files + manifest.
+
+    Usage::
+
+        b = CacheBuilder(root, generator="completion_synth", version="1", config=cfg)
+        if not b.is_complete():
+            b.begin()
+            for item in items:
+                if not b.has(item["file"]):
+                    atomic_save_npz(b.path(item["file"]), ...)
+            b.finish(items, extra={...})
+        manifest = b.manifest()
+    """
+
+    def __init__(self, root: str | os.PathLike, generator: str, version: str, config: dict,
+                 items_dir: str = "items"):
+        self.root = Path(root)
+        self.generator, self.version = generator, str(version)
+        self.config = config
+        self.config_hash = stable_hash({"generator": generator, "version": self.version, "config": config})
+        self.items_dir = items_dir
+
+    # ---------------------------------------------------------------- state
+    def _matches(self, info: dict | None) -> bool:
+        return bool(info) and info.get("generator") == self.generator and \
+            str(info.get("version")) == self.version and info.get("config_hash") == self.config_hash
+
+    def manifest(self) -> dict | None:
+        return read_manifest(self.root)
+
+    def _safe_manifest(self) -> dict | None:
+        try:
+            return self.manifest()
+        except DataError:  # half-written manifests cannot happen (atomic), but hand edits can
+            return None
+
+    def is_complete(self) -> bool:
+        """True when a manifest of this generator/version/config exists and all its files are there."""
+        m = self._safe_manifest()
+        return self._matches(m) and all((self.root / it["file"]).is_file() for it in m["items"])
+
+    def path(self, rel: str) -> Path:
+        return self.root / rel
+
+    def has(self, rel: str) -> bool:
+        """An item file is complete when it exists (it only ever appears through ``os.replace``)."""
+        p = self.root / rel
+        return p.is_file() and p.stat().st_size > 0
+
+    # ---------------------------------------------------------------- protocol
+    def begin(self) -> None:
+        """Start or resume: clean temp files, wipe items of another config, write the marker."""
+        self.root.mkdir(parents=True, exist_ok=True)
+        n_tmp = clean_temp_files(self.root)
+        if n_tmp:
+            log.info("%s: removed %d unfinished temp file(s) of an interrupted preparation", self.root, n_tmp)
+        marker_path = self.root / MARKER
+        marker = None
+        if marker_path.is_file():
+            try:
+                marker = json.loads(marker_path.read_text("utf-8"))
+            except (OSError, json.JSONDecodeError):
+                marker = None
+        manifest = self._safe_manifest()
+        stale = (manifest is not None and not self._matches(manifest)) or \
+                (marker is not None and not self._matches(marker)) or \
+                (marker_path.is_file() and marker is None)
+        if manifest is None and marker is None and (self.root / self.items_dir).exists():
+            stale = True  # items of unknown origin
+        if stale:
+            log.warning("%s: cached data is from another config or generator version: regenerating", self.root)
+            shutil.rmtree(self.root / self.items_dir, ignore_errors=True)
+        (self.root / MANIFEST).unlink(missing_ok=True)
+        if stale or not self._matches(marker):
+            write_json(marker_path, {"generator": self.generator, "version": self.version,
+                                     "config_hash": self.config_hash, "config": self.config})
+
+    def finish(self, items: list[dict], extra: dict | None = None) -> dict:
+        """Check every item file exists, then write the manifest atomically (the marker stays)."""
+        missing = [it["file"] for it in items if not self.has(it["file"])]
+        if missing:
+            raise DataError(f"{self.root}: {len(missing)} item file(s) missing after preparation, e.g. {missing[0]}")
+        manifest = {
+            "generator": self.generator, "version": self.version, "config": self.config,
+            "config_hash": self.config_hash, "items": items, "manifest_hash": stable_hash(items),
+            **(extra or {}),
+        }
+        write_json(self.root / MANIFEST, manifest)
+        return manifest
+
+
+def bytes_on_disk(root: str | os.PathLike, files: Iterable[str]) -> int:
+    """Total size of ``files`` (relative to ``root``) plus the manifest."""
+    root = Path(root)
+    total = sum((root / f).stat().st_size for f in files)
+    m = root / MANIFEST
+    return total + (m.stat().st_size if m.is_file() else 0)

@@ -1,0 +1,323 @@
+"""Shape-completion data: procedural depth voxels or the 3D-RecGAN++ release, one packed cache.
+
+``CompletionDataModule(source="synth")`` generates procedural furniture (seen:
+bench, chair, couch, table) and unseen categories (car, faucet, firearm, guitar,
+monitor, plane), renders one depth view per sample and voxelises it like
+3D-RecGAN++ (see :mod:`datamodules.synth.depth_voxels`).
+``CompletionDataModule(source="recgan", root=PATH)`` converts the real release
+(see :mod:`datamodules.readers.recgan`). Both write the same packed-bit cache
+(:mod:`datamodules.voxel_cache`) with a ``manifest.json`` into ``data_dir``.
+
+Batches (default collate) are dicts:
+    input    (B, 1, r, r, r) float32 {0,1}   r = target_res / input_factor
+    target   (B, 1, R, R, R) float32 {0,1}   R = target_res
+    label    (B,) int64  index into SEEN_CATEGORIES or -1 (unseen)
+    category, split, name: list[str]
+"""
+from __future__ import annotations
+
+import logging
+from collections import Counter, defaultdict
+from collections.abc import Sequence
+from pathlib import Path
+
+import lightning.pytorch as pl
+import numpy as np
+from torch.utils.data import DataLoader
+
+from datamodules.cache import CacheBuilder, DataError, bytes_on_disk, stable_seed
+from datamodules.voxel_cache import SEEN_CATEGORIES, VoxelPairDataset, load_pair, save_pair
+
+log = logging.getLogger("lit3d.data")
+
+UNSEEN_CATEGORIES = ("car", "faucet", "firearm", "guitar", "monitor", "plane")
+SPLITS = ("train", "val", "test_same", "test_cross", "test_unseen")
+TEST_SPLITS = ("test_same", "test_cross", "test_unseen")
+DEFAULT_SIZES = {"train": 240, "val": 40, "test_same": 40, "test_cross": 40, "test_unseen": 40}
+SYNTH_VERSION = "1"
+RECGAN_VERSION = "1"
+
+
+class DataConfigError(DataError):
+    """A data setting that cannot work (e.g. source=recgan without root)."""
+
+
+# ---------------------------------------------------------------- synthetic item plan
+def synth_items(sizes: dict, categories: Sequence[str], unseen_categories: Sequence[str], seed: int,
+                views_per_shape: int = 4, unseen_view_set: str = "same") -> list[dict]:
+    """The plan of every synthetic item (cheap: no geometry), deterministic in ``seed``.
+
+    Items cycle over the categories (balanced counts); the j-th item of a category
+    shows shape ``j // views_per_shape`` of that category. Shape instances come from groups: train, val, test (shared by test_same
+    and test_cross, as in 3D-RecGAN++ whose test_125/test_216 hold the same ids) and
+    unseen. Views of one shape are distinct and drawn from the split's view set.
+    """
+    from datamodules.synth.depth_voxels import VIEW_SETS, view_index  # noqa: PLC0415
+
+    items = []
+    for split in SPLITS:
+        n = int(sizes.get(split, 0) or 0)
+        cats = list(unseen_categories) if split == "test_unseen" else list(categories)
+        if n <= 0 or not cats:
+            continue
+        group = {"test_same": "test", "test_cross": "test", "test_unseen": "unseen"}.get(split, split)
+        view_set = {"test_cross": "cross", "test_unseen": unseen_view_set}.get(split, "same")
+        views = VIEW_SETS[view_set]
+        for i in range(n):
+            category = cats[i % len(cats)]
+            j = i // len(cats)  # item number within the category
+            shape_index = j // views_per_shape
+            vrng = np.random.default_rng(stable_seed(seed, "views", split, category, shape_index))
+            chosen = vrng.choice(len(views), size=min(views_per_shape, len(views)), replace=False)
+            v = int(chosen[j % len(chosen)])
+            a, b, c = view_index(view_set, v)
+            name = f"{category}_{group}{shape_index:04d}_{a}_{b}_{c}"
+            items.append({
+                "name": name, "split": split, "category": category, "view_set": view_set,
+                "shape_group": group, "shape_index": shape_index, "view": [float(x) for x in views[v]],
+                "file": f"items/{split}/{name}.npz",
+            })
+    return items
+
+
+def synth_pair(item: dict, seed: int, target_res: int, input_factor: int, render_factor: int = 2):
+    """Generate one planned synthetic item -> (input, target) bool grids."""
+    from datamodules.synth.depth_voxels import make_sample  # noqa: PLC0415
+    from datamodules.synth.furniture import make_shape  # noqa: PLC0415
+
+    rng = np.random.default_rng(stable_seed(seed, "shape", item["shape_group"], item["category"], item["shape_index"]))
+    shape = make_shape(item["category"], rng)
+    out = make_sample(shape, tuple(item["view"]), target_res=target_res, input_factor=input_factor,
+                      render_factor=render_factor)
+    return out["input"], out["target"]
+
+
+class CompletionDataModule(pl.LightningDataModule):
+    """Shape-completion DataModule (see module docstring for the batch layout).
+
+    Args:
+        source: "synth" (procedural) or "recgan" (the 3D-RecGAN++ release at ``root``).
+        data_dir: cache folder (manifest.json + items/<split>/*.npz).
+        root: raw 3D-RecGAN++ folder (source=recgan only).
+        target_res: R, the target grid (64 demo, 256 paper).
+        input_factor: r = R / input_factor (4: 64 -> 16, 256 -> 64).
+        sizes: synthetic items per split (train, val, test_same, test_cross, test_unseen); splits
+            left out keep the demo defaults (240/40/40/40/40); 0 drops a split.
+        categories: seen categories used for train/val/test_same/test_cross.
+        unseen_categories: categories of test_unseen.
+        views_per_shape: synthetic views per shape instance.
+        unseen_view_set: view set of synthetic test_unseen ("same" or "cross").
+        val_fraction: recgan: share of train shape ids held out as val.
+        raw_res: recgan: grids are centre-padded/cropped to raw_res^3 (256).
+        skip_bad: recgan: skip bad files with a warning (count in describe()) instead of raising.
+        compress: zlib-compress the packed bits (smaller; measured about as fast to load).
+        render_factor: synth depth image size = render_factor * target_res.
+        progress: tqdm progress bar during preparation.
+    """
+
+    test_split_names: list[str]
+
+    def __init__(self, source: str = "synth", data_dir: str = "data/completion_synth", root: str | None = None,
+                 target_res: int = 64, input_factor: int = 4, sizes: dict | None = None,
+                 categories: Sequence[str] = SEEN_CATEGORIES, unseen_categories: Sequence[str] = UNSEEN_CATEGORIES,
+                 batch_size: int = 4, num_workers: int = 0, seed: int = 0, skip_bad: bool = False,
+                 pin_memory: bool = False, views_per_shape: int = 4, unseen_view_set: str = "same",
+                 val_fraction: float = 0.1, raw_res: int = 256, compress: bool = True, render_factor: int = 2,
+                 progress: bool = True):
+        super().__init__()
+        if source not in ("synth", "recgan"):
+            raise DataConfigError(f"data.source={source!r}: expected 'synth' or 'recgan'")
+        if target_res % input_factor:
+            raise DataConfigError(f"data.target_res={target_res} is not divisible by data.input_factor={input_factor}")
+        bad = [c for c in categories if c not in SEEN_CATEGORIES]
+        if bad:
+            raise DataConfigError(f"data.categories: unknown seen categories {bad}; known: {list(SEEN_CATEGORIES)}")
+        self.source, self.data_dir = source, Path(data_dir)
+        self.root = None if root in (None, "") else Path(root)
+        self.target_res, self.input_factor = int(target_res), int(input_factor)
+        self.input_res = self.target_res // self.input_factor
+        self.sizes = {**DEFAULT_SIZES, **(sizes or {})}
+        self.categories, self.unseen_categories = tuple(categories), tuple(unseen_categories)
+        self.batch_size, self.num_workers = int(batch_size), int(num_workers)
+        self.seed, self.skip_bad, self.pin_memory = int(seed), bool(skip_bad), bool(pin_memory)
+        self.views_per_shape, self.unseen_view_set = int(views_per_shape), unseen_view_set
+        self.val_fraction, self.raw_res = float(val_fraction), int(raw_res)
+        self.compress, self.render_factor, self.progress = bool(compress), int(render_factor), bool(progress)
+        if source == "recgan" and self.raw_res % self.target_res:
+            raise DataConfigError(f"data.target_res={target_res} must divide data.raw_res={raw_res}")
+        self.manifest: dict | None = None
+        self.datasets: dict[str, VoxelPairDataset] = {}
+        self.test_split_names = []
+
+    # ---------------------------------------------------------------- config
+    def cache_config(self) -> dict:
+        """Everything that changes the cached bytes (its hash is the manifest's config hash)."""
+        cfg = {"source": self.source, "target_res": self.target_res, "input_factor": self.input_factor,
+               "categories": list(self.categories), "unseen_categories": list(self.unseen_categories),
+               "seed": self.seed, "compress": self.compress}
+        if self.source == "synth":
+            cfg.update(sizes={k: int(v) for k, v in sorted(self.sizes.items())}, views_per_shape=self.views_per_shape,
+                       unseen_view_set=self.unseen_view_set, render_factor=self.render_factor)
+        else:
+            cfg.update(root=str(self.root.resolve()) if self.root else None, raw_res=self.raw_res,
+                       val_fraction=self.val_fraction, skip_bad=self.skip_bad)
+        return cfg
+
+    def _builder(self) -> CacheBuilder:
+        gen, ver = ("completion_synth", SYNTH_VERSION) if self.source == "synth" else ("completion_recgan", RECGAN_VERSION)
+        return CacheBuilder(self.data_dir, gen, ver, self.cache_config())
+
+    # ---------------------------------------------------------------- preparation
+    def prepare_data(self) -> None:
+        """Generate (synth) or convert (recgan) into ``data_dir``; no-op when the cache is complete."""
+        if self.source == "recgan" and self.root is None:
+            raise DataConfigError("data.source=recgan needs the 3D-RecGAN++ folder: set data.root=PATH")
+        builder = self._builder()
+        if builder.is_complete():
+            return
+        builder.begin()
+        if self.source == "synth":
+            items, extra = self._prepare_synth(builder)
+        else:
+            items, extra = self._prepare_recgan(builder)
+        extra.update(target_res=self.target_res, input_res=self.input_res,
+                     seen_categories=list(SEEN_CATEGORIES))
+        builder.finish(items, extra)
+
+    def _progress(self, iterable, total: int, desc: str):
+        from tqdm.auto import tqdm  # noqa: PLC0415
+
+        return tqdm(iterable, total=total, desc=desc, unit="item", disable=not self.progress, dynamic_ncols=True)
+
+    def _prepare_synth(self, builder: CacheBuilder) -> tuple[list[dict], dict]:
+        items = synth_items(self.sizes, self.categories, self.unseen_categories, self.seed,
+                            self.views_per_shape, self.unseen_view_set)
+        todo = [it for it in items if not builder.has(it["file"])]
+        if len(todo) < len(items):
+            log.info("%s: %d of %d items already prepared", self.data_dir, len(items) - len(todo), len(items))
+        for it in self._progress(todo, len(todo), "completion synth"):
+            inp, tgt = synth_pair(it, self.seed, self.target_res, self.input_factor, self.render_factor)
+            save_pair(builder.path(it["file"]), inp, tgt, compress=self.compress)
+        return items, {"skipped": []}
+
+    def _prepare_recgan(self, builder: CacheBuilder) -> tuple[list[dict], dict]:
+        from datamodules.readers.recgan import assign_splits, convert_pair, index_recgan  # noqa: PLC0415
+
+        pairs, problems = index_recgan(self.root, skip_bad=self.skip_bad)
+        planned = assign_splits(pairs, self.categories, self.unseen_categories, self.val_fraction, self.seed)
+        items = []
+        for split, p in self._progress(planned, len(planned), "completion recgan"):
+            it = {"name": p.name, "split": split, "category": p.category, "view_set": p.view_set,
+                  "shape_id": p.shape_id, "view": p.view, "source_folder": p.folder,
+                  "input_file": str(p.input_path.relative_to(self.root)),
+                  "file": f"items/{split}/{p.name}_{p.view_set}.npz"}
+            if not builder.has(it["file"]):
+                try:
+                    inp, tgt = convert_pair(p, self.raw_res, self.target_res, self.input_res)
+                except DataError as exc:
+                    if not self.skip_bad:
+                        raise
+                    log.warning("skipping: %s", exc)
+                    problems.append(str(exc))
+                    continue
+                save_pair(builder.path(it["file"]), inp, tgt, compress=self.compress)
+            items.append(it)
+        if problems:
+            log.warning("%s: skipped %d bad file(s)", self.root, len(problems))
+        return items, {"skipped": problems}
+
+    # ---------------------------------------------------------------- loading
+    def setup(self, stage: str | None = None) -> None:
+        """Read the manifest and build one dataset per split (prepare_data() must have run)."""
+        builder = self._builder()
+        manifest = builder.manifest()
+        if manifest is None or manifest.get("config_hash") != builder.config_hash:
+            raise DataError(f"{self.data_dir}: no prepared data for this config (run prepare_data() or lit3d-data)")
+        self.manifest = manifest
+        by_split: dict[str, list[dict]] = defaultdict(list)
+        for it in manifest["items"]:
+            by_split[it["split"]].append(it)
+        self.datasets = {s: VoxelPairDataset(self.data_dir, by_split.get(s, []), SEEN_CATEGORIES) for s in SPLITS}
+        self.test_split_names = [s for s in TEST_SPLITS if len(self.datasets[s])]
+
+    def _loader(self, split: str, shuffle: bool) -> DataLoader:
+        if not self.datasets:
+            self.setup()
+        return DataLoader(self.datasets[split], batch_size=self.batch_size, shuffle=shuffle,
+                          num_workers=self.num_workers, pin_memory=self.pin_memory,
+                          persistent_workers=self.num_workers > 0, drop_last=False)
+
+    def train_dataloader(self) -> DataLoader:
+        return self._loader("train", shuffle=True)
+
+    def val_dataloader(self) -> DataLoader:
+        return self._loader("val", shuffle=False)
+
+    def test_dataloader(self) -> list[DataLoader]:
+        """One loader per split in ``self.test_split_names`` (splits without items are left out)."""
+        if not self.datasets:
+            self.setup()
+        return [self._loader(s, shuffle=False) for s in self.test_split_names]
+
+    # ---------------------------------------------------------------- reporting
+    def describe(self) -> dict:
+        """Counts per split and category, grid sizes, bytes on disk, manifest hash."""
+        if self.manifest is None:
+            self.setup()
+        m = self.manifest
+        counts: dict[str, dict[str, int]] = {}
+        for it in m["items"]:
+            counts.setdefault(it["split"], Counter())[it["category"]] += 1
+        return {
+            "source": self.source, "data_dir": str(self.data_dir),
+            "root": str(self.root) if self.root else None,
+            "generator": m["generator"], "version": m["version"],
+            "counts": {s: dict(sorted(c.items())) for s, c in counts.items()},
+            "split_sizes": {s: sum(c.values()) for s, c in counts.items()},
+            "input_shape": [1, self.input_res, self.input_res, self.input_res],
+            "target_shape": [1, self.target_res, self.target_res, self.target_res],
+            "bytes_on_disk": bytes_on_disk(self.data_dir, [it["file"] for it in m["items"]]),
+            "manifest_hash": m["manifest_hash"], "config_hash": m["config_hash"],
+            "skipped_bad_files": len(m.get("skipped", [])),
+            "test_split_names": list(self.test_split_names),
+        }
+
+    def show(self, n: int, path: str | Path) -> Path:
+        """PNG of ``n`` samples spread over the splits: rows of input | target, two view axes each.
+
+        Tiles are depth-shaded projections (near = bright) at the target resolution.
+        """
+        from PIL import Image, ImageDraw  # noqa: PLC0415
+
+        from lit3d.utils.voxel_images import panel  # noqa: PLC0415
+
+        if not self.datasets:
+            self.setup()
+        import torch  # noqa: PLC0415
+
+        splits = [s for s in SPLITS if len(self.datasets[s])]
+        picks = []
+        for idx in range(max((len(self.datasets[s]) for s in splits), default=0)):
+            picks += [(s, idx) for s in splits if idx < len(self.datasets[s])]
+            if len(picks) >= n:
+                break
+        picks = picks[:n]
+        rows = []
+        for s, idx in picks:
+            it = self.datasets[s].items[idx]
+            inp, tgt = (torch.from_numpy(a) for a in load_pair(self.data_dir / it["file"]))
+            # depth axis (k) first: what the camera sees, then a side view along x
+            vols = [inp.permute(2, 1, 0).flip(1), tgt.permute(2, 1, 0).flip(1)]
+            side = [inp.flip(1), tgt.flip(1)]  # along x: rows y (up at top), columns depth
+            size = self.target_res
+            row = np.concatenate([panel(vols, size=size), np.full((size, 6), 40, np.uint8), panel(side, size=size)], 1)
+            label = np.zeros((12, row.shape[1]), np.uint8)
+            img = Image.fromarray(label)
+            ImageDraw.Draw(img).text((2, 0), f"{s}: {it['name']}"[: row.shape[1] // 6], fill=255)
+            rows += [np.asarray(img), row, np.full((4, row.shape[1]), 40, np.uint8)]
+        if not rows:
+            raise DataError(f"{self.data_dir}: no samples to show")
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        Image.fromarray(np.concatenate(rows[:-1], 0)).save(path)
+        return path

@@ -1,0 +1,197 @@
+"""One view of a procedural shape -> (partial 2.5D grid, complete solid grid), as in 3D-RecGAN++.
+
+Grid convention (view-aligned, the same as the real 3D-RecGAN++ files, where the
+2.5D surface lies within about one voxel of the target's low-z face):
+arrays are indexed ``[i, j, k]`` = ``[x, y, depth]``; x to the camera's right, y
+up in the image, ``k`` grows away from the camera (the camera looks along +k).
+The object is rotated into the camera frame and scaled/centred so that its
+longest side spans ``res - 2 * margin`` voxels.
+
+Steps for one sample:
+1. camera rotation from (azimuth, elevation, roll) in degrees;
+2. normalisation from the mesh vertices in the camera frame;
+3. target: union of the primitives' analytic inside tests at voxel centres, each
+   primitive grown by half a voxel (a conservative, binvox-like filled solid);
+4. orthographic depth image (pyrender, EGL) at ``render_factor * res`` pixels a side;
+5. back-projection: each foreground pixel's surface point, pushed a quarter voxel
+   along the ray into the object, marks its voxel -> partial surface grid at ``res``
+   (with the conservative target of step 3, >95% of these voxels are target voxels);
+6. the network input is that grid max-pooled by ``input_factor``.
+"""
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from datamodules.synth.furniture import Shape, shape_mesh
+from datamodules.voxel_cache import max_pool_bool
+
+# Analogues of the 3D-RecGAN++ view sets: same-view 5x5x5 (125 views), cross-view
+# 6x6x6 (216 views), as (azimuth, elevation, roll) grids. The two sets share no view.
+SAME_VIEW_AXES = ((0.0, 72.0, 144.0, 216.0, 288.0), (0.0, 12.0, 24.0, 36.0, 48.0), (-10.0, -5.0, 0.0, 5.0, 10.0))
+CROSS_VIEW_AXES = ((30.0, 90.0, 150.0, 210.0, 270.0, 330.0), (-6.0, 6.0, 18.0, 30.0, 42.0, 54.0),
+                   (-12.5, -7.5, -2.5, 2.5, 7.5, 12.5))
+VIEW_SETS = {
+    "same": list(itertools.product(*SAME_VIEW_AXES)),
+    "cross": list(itertools.product(*CROSS_VIEW_AXES)),
+}
+
+
+def view_index(view_set: str, idx: int) -> tuple[int, int, int]:
+    """Flat index into a view set -> (a, b, c) grid indices (as in ``<id>_<a>_<b>_<c>.npz``)."""
+    n = len(SAME_VIEW_AXES[0]) if view_set == "same" else len(CROSS_VIEW_AXES[0])
+    return idx // (n * n), (idx // n) % n, idx % n
+
+
+def camera_rotation(azimuth: float, elevation: float, roll: float = 0.0) -> np.ndarray:
+    """(3, 3) rotation object frame (y up) -> camera frame (OpenGL: x right, y up, camera looks along -z).
+
+    The camera sits on the direction (cos e sin a, sin e, cos e cos a) from the object centre.
+    """
+    a, e, r = np.radians([azimuth, elevation, roll])
+    z = np.array([np.cos(e) * np.sin(a), np.sin(e), np.cos(e) * np.cos(a)])
+    x = np.cross([0.0, 1.0, 0.0], z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    rot = np.stack([x, y, z])
+    c, s = np.cos(r), np.sin(r)
+    roll_m = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    return roll_m @ rot
+
+
+class ViewGeometry:
+    """Object frame -> voxel frame for one view: ``v = ((R p) - centre) * scale + res/2`` (GL axes)."""
+
+    def __init__(self, shape: Shape, rot: np.ndarray, res: int, margin: float = 1.0):
+        self.rot, self.res = rot, res
+        verts = shape.vertices() @ rot.T
+        lo, hi = verts.min(0), verts.max(0)
+        self.centre = (lo + hi) / 2
+        self.scale = (res - 2 * margin) / float(np.max(hi - lo))
+
+    def to_voxel(self, p: np.ndarray) -> np.ndarray:
+        """(N, 3) object points -> (N, 3) GL voxel-unit points, centred at 0 (range [-res/2, res/2])."""
+        return (p @ self.rot.T - self.centre) * self.scale
+
+    def voxel_centres_to_object(self, idx: np.ndarray) -> np.ndarray:
+        """(N, 3) integer ``[i, j, k]`` grid indices -> (N, 3) object-frame voxel centres."""
+        h = self.res / 2
+        gl = np.stack([idx[:, 0] + 0.5 - h, idx[:, 1] + 0.5 - h, h - (idx[:, 2] + 0.5)], axis=1)
+        return (gl / self.scale + self.centre) @ self.rot
+
+
+def solid_occupancy(shape: Shape, geom: ViewGeometry, pad: float = 0.5) -> np.ndarray:
+    """(res, res, res) bool filled solid from the analytic inside tests at voxel centres.
+
+    ``pad`` (voxels) grows every primitive before the centre test: with 0.5 a voxel
+    is set when it touches an axis-aligned box (a conservative, binvox-like
+    voxelisation, so thin parts never vanish and the visible surface lies in the
+    solid); 0 gives the plain centre-inside test. Each primitive is tested only on
+    its own bounding box, with separable broadcasting (no index meshgrid).
+    """
+    res = geom.res
+    occ = np.zeros((res, res, res), dtype=bool)
+    h = res / 2
+    # voxel index -> GL voxel units -> object frame: affine (A, b)
+    flip = np.diag([1.0, 1.0, -1.0])
+    g0 = np.array([0.5 - h, 0.5 - h, h - 0.5])
+    a_obj = geom.rot.T @ flip / geom.scale
+    b_obj = geom.rot.T @ (g0 / geom.scale + geom.centre)
+    for prim in shape.primitives:
+        gl = geom.to_voxel(prim.corners())
+        ic = np.stack([gl[:, 0] + h, gl[:, 1] + h, h - gl[:, 2]], axis=1)
+        lo = np.clip(np.floor(ic.min(0) - pad).astype(int) - 1, 0, res)
+        hi = np.clip(np.ceil(ic.max(0) + pad).astype(int) + 1, 0, res)
+        if np.any(hi <= lo):
+            continue
+        inv = np.linalg.inv(prim.transform)
+        m = (inv[:3, :3] @ a_obj).astype(np.float32)
+        t = (inv[:3, :3] @ b_obj + inv[:3, 3]).astype(np.float32)
+        ii = np.arange(lo[0], hi[0], dtype=np.float32)[:, None, None]
+        jj = np.arange(lo[1], hi[1], dtype=np.float32)[None, :, None]
+        kk = np.arange(lo[2], hi[2], dtype=np.float32)[None, None, :]
+        x, y, z = (m[r, 0] * ii + m[r, 1] * jj + m[r, 2] * kk + t[r] for r in range(3))
+        inside = prim.inside(x, y, z, pad / geom.scale)
+        occ[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] |= inside
+    return occ
+
+
+def _linear_ortho_depth(depth: np.ndarray, znear: float, zfar: float) -> np.ndarray:
+    """Undo pyrender's perspective depth linearisation for an orthographic camera.
+
+    pyrender 0.1.45 maps every depth buffer with the perspective formula; for an
+    orthographic projection the NDC depth is linear in eye depth.
+    """
+    out = np.zeros_like(depth, dtype=np.float64)
+    fg = depth > 0
+    d = depth[fg].astype(np.float64)
+    ndc = (zfar + znear - 2.0 * znear * zfar / d) / (zfar - znear)
+    out[fg] = (ndc * (zfar - znear) + zfar + znear) / 2.0
+    return out
+
+
+def render_depth(shape: Shape, geom: ViewGeometry, pixels: int) -> np.ndarray:
+    """(pixels, pixels) float64 orthographic eye depth in voxel units (0 = background).
+
+    Row 0 is the top of the image (GL +y). The camera sits at GL z = res looking along -z.
+    """
+    from lit3d.render.egl import import_pyrender, offscreen_renderer  # noqa: PLC0415
+
+    pyrender = import_pyrender()
+    mesh = shape_mesh(shape)
+    mesh.vertices = geom.to_voxel(np.asarray(mesh.vertices))
+    res = geom.res
+    znear, zfar = 1.0, 3.0 * res
+    scene = pyrender.Scene()
+    scene.add(pyrender.Mesh.from_trimesh(mesh, smooth=False))
+    cam = pyrender.OrthographicCamera(xmag=res / 2, ymag=res / 2, znear=znear, zfar=zfar)
+    pose = np.eye(4)
+    pose[2, 3] = float(res)
+    scene.add(cam, pose=pose)
+    renderer = offscreen_renderer(pixels, pixels)
+    depth = renderer.render(scene, flags=pyrender.RenderFlags.DEPTH_ONLY)
+    return _linear_ortho_depth(np.asarray(depth), znear, zfar)
+
+
+def backproject(depth: np.ndarray, res: int, push: float = 0.25) -> np.ndarray:
+    """Depth image (from :func:`render_depth`) -> (res, res, res) bool surface voxels.
+
+    Each foreground pixel's surface point is moved ``push`` voxels further along its
+    ray (into the object) before it is binned, so it is not binned into the empty
+    voxel in front of a surface that lies on a voxel boundary.
+    """
+    px = depth.shape[0]
+    rows, cols = np.nonzero(depth > 0)
+    f = px / res
+    x = (cols + 0.5) / f  # index units, 0..res
+    y = res - (rows + 0.5) / f
+    # eye depth d -> GL z = res - d -> k = res/2 - z = d - res/2
+    k = depth[rows, cols] - res / 2 + push
+    idx = np.stack([x, y, k], axis=1).astype(np.int64)
+    keep = np.all((idx >= 0) & (idx < res), axis=1)
+    idx = idx[keep]
+    grid = np.zeros((res, res, res), dtype=bool)
+    grid[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+    return grid
+
+
+def max_pool(grid: np.ndarray, factor: int) -> np.ndarray:
+    """(R, R, R) bool -> (R/f, R/f, R/f) bool, a voxel is set when any of its f^3 children is."""
+    return max_pool_bool(grid, factor)
+
+
+def make_sample(shape: Shape, view: tuple[float, float, float], target_res: int = 64, input_factor: int = 4,
+                render_factor: int = 2, margin: float = 1.0, pad: float = 0.5,
+                push: float = 0.25) -> dict[str, np.ndarray]:
+    """One view of ``shape`` -> dict(input=(r,r,r) bool, target=(R,R,R) bool, surface=(R,R,R) bool).
+
+    ``R = target_res``, ``r = R / input_factor``; ``surface`` is the partial grid before pooling.
+    """
+    if target_res % input_factor:
+        raise ValueError(f"target_res={target_res} is not divisible by input_factor={input_factor}")
+    geom = ViewGeometry(shape, camera_rotation(*view), target_res, margin)
+    target = solid_occupancy(shape, geom, pad)
+    depth = render_depth(shape, geom, render_factor * target_res)
+    surface = backproject(depth, target_res, push)
+    return {"input": max_pool(surface, input_factor), "target": target, "surface": surface}

@@ -1,0 +1,99 @@
+"""Shape-retrieval scores with the Princeton Shape Benchmark / SHREC definitions.
+
+For every query q (a row of the distance matrix) the other n-1 items are ranked
+by increasing distance; q itself is excluded. With C = size of q's class,
+r = C - 1 relevant items remain, and with G_i = 1 when the i-th result is in
+q's class:
+
+    NN  = G_1
+    FT  = (sum_{i<=r} G_i) / r                         (first tier)
+    ST  = (sum_{i<=2r} G_i) / r                        (second tier)
+    E   = 2 P R / (P + R) over the top k = min(32, n-1): P = h/k, R = h/r,
+          which equals 2h / (r + k) with h = sum_{i<=k} G_i
+    DCG = (G_1 + sum_{i>=2} G_i / log2 i) / (1 + sum_{j=2}^{r} 1 / log2 j)
+
+Each score is averaged over queries; queries whose class has a single member
+(r = 0) are skipped. Ties in distance are resolved by expectation: a block of
+tied results shares its hits evenly over its positions, which is the mean of
+the score over all orders of the tie (every score above is linear in the G_i).
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+KEYS = ("nn", "ft", "st", "e", "dcg")
+E_K = 32
+
+
+def _expected_gains(d: np.ndarray, rel: np.ndarray) -> np.ndarray:
+    """Expected G_i at each rank (ties share their hits evenly). ``d``, ``rel``: (n-1,)."""
+    order = np.argsort(d, kind="stable")
+    ds, rs = d[order], rel[order].astype(float)
+    g = np.empty_like(rs)
+    start = 0
+    n = len(ds)
+    while start < n:
+        end = start + 1
+        while end < n and ds[end] == ds[start]:
+            end += 1
+        g[start:end] = rs[start:end].mean()
+        start = end
+    return g
+
+
+def retrieval_scores(dist, labels: Sequence) -> dict[str, float]:
+    """``dist``: (n, n) distances (smaller = more similar; need not be symmetric),
+    ``labels``: n class labels. Returns ``{"nn", "ft", "st", "e", "dcg", "n_queries"}``."""
+    dist = np.asarray(dist, dtype=float)
+    labels = np.asarray(list(labels))
+    n = len(labels)
+    if dist.shape != (n, n):
+        raise ValueError(f"distance matrix of shape {dist.shape} for {n} labels")
+    if np.isnan(dist).any():
+        raise ValueError("distance matrix contains NaN")
+    sums = dict.fromkeys(KEYS, 0.0)
+    count = 0
+    for q in range(n):
+        others = np.arange(n) != q
+        rel = labels[others] == labels[q]
+        r = int(rel.sum())
+        if r == 0:
+            continue
+        g = _expected_gains(dist[q, others], rel)
+        k = min(E_K, n - 1)
+        disc = np.ones(n - 1)
+        disc[1:] = 1.0 / np.log2(np.arange(2, n))
+        sums["nn"] += g[0]
+        sums["ft"] += g[:r].sum() / r
+        sums["st"] += g[: 2 * r].sum() / r
+        sums["e"] += 2.0 * g[:k].sum() / (r + k)
+        sums["dcg"] += float((g * disc).sum() / disc[:r].sum())
+        count += 1
+    out = {k: (v / count if count else float("nan")) for k, v in sums.items()}
+    out["n_queries"] = count
+    return out
+
+
+def chance_scores(labels: Sequence, n_trials: int = 100, seed: int = 0) -> dict[str, float]:
+    """Mean scores of ``n_trials`` random symmetric distance matrices (the chance level)."""
+    labels = list(labels)
+    n = len(labels)
+    rng = np.random.default_rng(seed)
+    acc = dict.fromkeys(KEYS, 0.0)
+    for _ in range(max(n_trials, 1)):
+        a = rng.random((n, n))
+        s = retrieval_scores((a + a.T) / 2, labels)
+        for k in KEYS:
+            acc[k] += s[k]
+    out = {k: v / max(n_trials, 1) for k, v in acc.items()}
+    out["n_queries"] = retrieval_scores(np.zeros((n, n)), labels)["n_queries"]
+    return out
+
+
+def expected_chance_scores(labels: Sequence) -> dict[str, float]:
+    """Exact expectation under a uniformly random ranking: every G_i has mean r / (n-1)."""
+    labels = np.asarray(list(labels))
+    n = len(labels)
+    return retrieval_scores(np.zeros((n, n)), labels)

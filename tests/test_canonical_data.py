@@ -1,0 +1,152 @@
+"""Synthetic figures, depth camera, canonical DataModule (cache, manifest, strict splits), TOSCA source."""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from datamodules.canonical import CanonicalDataModule, DataError, split_pose, split_subject_pose
+from datamodules.readers import tosca
+from datamodules.synth.figures import KINDS, figure_mesh, joint_positions, make_pose, make_subject
+from lit3d.retrieval.depthcam import depth_to_mesh, depth_to_points, render_depth
+
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "tosca8k"
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_figures_are_closed_posed_and_subject_specific(kind):
+    s1, s2 = make_subject(kind, 1), make_subject(kind, 2)
+    assert not np.allclose(s1.offsets, s2.offsets)  # proportions differ per subject
+    v, f = figure_mesh(s1, None, resolution=32)
+    m = trimesh.Trimesh(v, f)
+    assert m.is_watertight and m.volume > 0
+    p = make_pose(kind, 3)
+    assert np.allclose(joint_positions(s1, p)[0], joint_positions(s1)[0])  # root stays
+    assert not np.allclose(joint_positions(s1, p), joint_positions(s1))
+    # the same pose index gives the same joint angles for every subject
+    assert all(np.allclose(a, b) for a, b in zip(make_pose(kind, 3).values(), p.values()))
+
+
+def test_depth_camera_is_linear_and_back_projects():
+    box = trimesh.creation.box(extents=(0.6, 0.6, 0.4))  # front face at z = +0.2 -> distance 1.8
+    d, m = render_depth(box.vertices, box.faces, 64)
+    assert m[32, 32] and not m[0, 0] and d[0, 0] == 0
+    expected = 1 - 0.9 * (1.8 - 1.5)  # = 0.73
+    assert d[m].mean() == pytest.approx(expected, abs=2e-3)
+    pts = depth_to_points(d, m)
+    assert pts[:, 2].mean() == pytest.approx(0.2, abs=3e-3)
+    assert np.abs(pts[:, :2]).max() == pytest.approx(0.3, abs=0.02)
+    v, f = depth_to_mesh(d, m)
+    assert len(v) == m.sum() and len(f) > 0
+    n = trimesh.Trimesh(v, f).face_normals
+    assert (n[:, 2] > 0.9).all()  # faces look at the camera
+
+
+def _dm(tmp_path, **kw):
+    args = dict(image_size=32, n_subjects=6, n_poses=6, mesh_resolution=24, n_folds=3, batch_size=4,
+                kinds=["humanoid", "quadruped"], seed=1)
+    args.update(kw)
+    return CanonicalDataModule(str(tmp_path / "data"), **args)
+
+
+def test_datamodule_cache_manifest_and_strict_split(tmp_path):
+    dm = _dm(tmp_path)
+    dm.prepare_data()
+    man = json.loads((tmp_path / "data" / "manifest.json").read_text())
+    assert man["complete"] and man["config_hash"] == dm.config_hash() and len(man["subjects"]) == 6
+    dm.setup()
+    info = dm.describe()
+    assert info["train"]["items"] == 16 and info["test"]["items"] == 4 and info["val"]["items"] == 16
+    tr = dm.splits["train"]
+    te = dm.splits["test"]
+    assert not {r["subject"] for r in te} & {r["subject"] for r in tr}
+    assert not {r["pose"] for r in te} & {r["pose"] for r in tr}
+    b = next(iter(dm.train_dataloader()))
+    assert b["depth"].shape == b["canon_mask"].shape == (4, 1, 32, 32)
+    assert float(b["depth"].max()) <= 1 and float(b["depth"][b["mask"] > 0].min()) >= 0.1 - 1e-3
+    assert ((b["depth"] > 0) == (b["mask"] > 0)).all()
+    png = dm.show(3, tmp_path / "show.png")
+    assert png.stat().st_size > 100
+    # a second module with the same config reuses the cache (no rendering)
+    mtime = (tmp_path / "data" / man["subjects"][0]).with_suffix(".npz").stat().st_mtime
+    dm2 = _dm(tmp_path)
+    dm2.prepare_data()
+    assert (tmp_path / "data" / man["subjects"][0]).with_suffix(".npz").stat().st_mtime == mtime
+
+
+def test_interrupted_preparation_resumes(tmp_path, monkeypatch):
+    dm = _dm(tmp_path, n_subjects=4, n_poses=3, n_folds=2)
+    calls = []
+    orig = dm._render_subject
+
+    def flaky(s):
+        calls.append(s)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return orig(s)
+
+    monkeypatch.setattr(dm, "_render_subject", flaky)
+    with pytest.raises(KeyboardInterrupt):
+        dm.prepare_data()
+    assert not json.loads((tmp_path / "data" / "manifest.json").read_text())["complete"]
+    assert len(list((tmp_path / "data").glob("*.npz"))) == 2
+    assert not list((tmp_path / "data").glob(".*.tmp"))
+    dm2 = _dm(tmp_path, n_subjects=4, n_poses=3, n_folds=2)
+    rendered = []
+    orig2 = dm2._render_subject
+    monkeypatch.setattr(dm2, "_render_subject", lambda s: rendered.append(s) or orig2(s))
+    dm2.prepare_data()
+    assert len(rendered) == 2 and json.loads((tmp_path / "data" / "manifest.json").read_text())["complete"]
+
+
+def test_split_functions_cover_every_fold():
+    subjects, poses = [f"s{i}" for i in range(6)], list(range(6))
+    tested = set()
+    for fold in range(3):
+        sp = split_subject_pose(subjects, poses, 3, fold, seed=0)
+        assert len(sp["train"]) == 16 and len(sp["test"]) == 4
+        tested |= set(sp["test"])
+    assert len({s for s, _ in tested}) == 6 and len({p for _, p in tested}) == 6
+    ps = split_pose({"cat": [1, 2, 3, 4, 5, 6], "wolf": [1, 2]}, 3, 0, seed=0)
+    assert not set(ps["test"]) & set(ps["train"])
+    assert {s for s, _ in ps["test"]} == {"cat", "wolf"}
+    with pytest.raises(DataError, match="needs at least"):
+        split_subject_pose(subjects[:2], poses, 3, 0, 0)
+
+
+def test_bad_config_is_named(tmp_path):
+    with pytest.raises(DataError, match="needs root"):
+        CanonicalDataModule(str(tmp_path), source="tosca")
+    with pytest.raises(DataError, match="unknown canonical data source"):
+        CanonicalDataModule(str(tmp_path), source="nope")
+
+
+def test_tosca_source_on_written_files(tmp_path):
+    v = trimesh.creation.capsule(height=1.0, radius=0.2).vertices
+    f = trimesh.creation.capsule(height=1.0, radius=0.2).faces
+    root = tmp_path / "tosca"
+    root.mkdir()
+    rng = np.random.default_rng(0)
+    for cls in ("cat", "dog"):
+        for pose in (0, 1, 3, 4):
+            bent = v + 0.05 * pose * np.stack([v[:, 2] ** 2, 0 * v[:, 2], 0 * v[:, 2]], 1)
+            (tosca.write_mat if pose % 2 else tosca.write_off)(root / f"{cls}{pose}.{'mat' if pose % 2 else 'off'}",
+                                                               bent * (1 + 0.1 * rng.random()), f)
+    dm = CanonicalDataModule(str(tmp_path / "c"), source="tosca", root=str(root), image_size=32, split="pose",
+                             n_folds=3, batch_size=2)
+    dm.prepare_data()
+    dm.setup()
+    info = dm.describe()
+    assert info["subjects"] == 2 and info["test"]["items"] == 2 and info["train"]["items"] == 2
+    assert info["val"]["items"] == 2
+
+
+@pytest.mark.skipif(not SHARED.is_dir(), reason="../shared/data/tosca8k not present")
+def test_real_tosca8k_renders(tmp_path):
+    dm = CanonicalDataModule(str(tmp_path / "t"), source="tosca", root=str(SHARED), classes=["wolf", "centaur"],
+                             image_size=32, split="pose", n_folds=2)
+    dm.prepare_data()
+    dm.setup()
+    b = dm.datasets["test"][0]
+    assert b["mask"].sum() > 20 and b["canon_mask"].sum() > 20

@@ -1,0 +1,53 @@
+"""Canonical nets: size-agnostic blocks, ablation switches, thesis sizes at 500^2 (meta device)."""
+import pytest
+import torch
+
+from lit3d.nets.canonical import LFE, MSFE, PAPER, SMALL, CanonicalNet, UNet, build_canonical_net, summarize
+
+
+@pytest.mark.parametrize("size", [33, 64, 75])
+def test_blocks_return_input_size(size):
+    x = torch.rand(2, 2, size, size)
+    assert LFE(2, 3, (4, 8, 8))(x).shape == (2, 3, size, size)
+    m = MSFE(2, 2, (4, 4, 2), grid=4, fuser_hidden=16, fuser_out=8, dec_channels=(8, 8, 4, 4, 4, 4))
+    assert m(x).shape == (2, 2, size, size)
+    out = CanonicalNet(**SMALL)(x[:, :1], x[:, 1:])
+    assert out.depth.shape == out.mask.shape == (2, 1, size, size)
+    assert 0 <= out.depth.min() and out.depth.max() <= 1 and 0 <= out.mask.min() and out.mask.max() <= 1
+    assert UNet((4, 8))(x[:, :1], x[:, 1:]).depth.shape == (2, 1, size, size)
+
+
+def test_non_square_input():
+    d = torch.rand(1, 1, 40, 56)
+    assert CanonicalNet(**SMALL)(d, d).depth.shape == (1, 1, 40, 56)
+
+
+def test_ablation_switches_drop_components_and_still_train():
+    for lfe, msfe in [(True, True), (False, True), (True, False), (False, False)]:
+        net = CanonicalNet(**{**SMALL, "use_lfe": lfe, "use_msfe": msfe})
+        assert (net.lfe is not None) == lfe and (net.msfe is not None) == msfe
+        d = torch.rand(2, 1, 32, 32)
+        out = net(d, (d > 0.5).float())
+        (out.depth.mean() + out.mask.mean()).backward()
+        assert all(p.grad is not None for p in net.parameters() if p.requires_grad)
+
+
+def test_paper_sizes_at_500():
+    with torch.device("meta"):
+        net = CanonicalNet(**PAPER)
+        rows = {r["component"]: r for r in summarize(net, 500)}
+    for d in (1, 2, 3):
+        assert rows[f"MSFE encoder d={d}"]["output"] == (1, 16000)
+    assert net.msfe.latent_dim == 48000
+    assert rows["MSFE fuser"]["output"] == (1, 500)
+    assert rows["LFE"]["output"] == (1, 1, 500, 500)
+    assert rows["MSFE decoder"]["output"] == (1, 1, 500, 500)
+    assert [m.kernel_size[0] for m in net.msfe.decoder if isinstance(m, torch.nn.ConvTranspose2d)] == [3, 3, 6, 2, 2, 2, 3]
+    assert [m.kernel_size[0] for m in net.lfe.up if isinstance(m, torch.nn.ConvTranspose2d)] == [5, 3, 5, 2, 2]
+
+
+def test_build_from_plain_dict():
+    assert isinstance(build_canonical_net({"kind": "unet", "channels": [4, 8]}), UNet)
+    assert isinstance(build_canonical_net({"kind": "canonical", **SMALL}), CanonicalNet)
+    with pytest.raises(ValueError, match="unknown"):
+        build_canonical_net({"kind": "nope"})

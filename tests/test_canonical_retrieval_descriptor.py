@@ -1,0 +1,67 @@
+"""CM-BOF-style descriptor (views, rotations, distances) and the MDS / GPS canonical-form baselines."""
+import numpy as np
+import pytest
+import trimesh
+
+from lit3d.canonical_baselines import canonical_forms, classical_mds, geodesic_matrix, gps_embedding, simplify
+from lit3d.metrics.retrieval import retrieval_scores
+from lit3d.retrieval.descriptor import (
+    DescriptorConfig,
+    cube_rotations,
+    distance_matrix_from_meshes,
+    octahedron_views,
+    view_permutations,
+)
+
+
+def test_views_and_rotation_group():
+    assert [len(octahedron_views(k)) for k in (0, 1, 2)] == [6, 18, 66]
+    R = cube_rotations()
+    assert len(R) == 24 and np.allclose([np.linalg.det(r) for r in R], 1)
+    dirs = octahedron_views(2)
+    P = view_permutations(dirs)
+    assert P.shape == (24, 66)
+    assert all(sorted(p) == list(range(66)) for p in P)  # each rotation permutes the views
+
+
+def test_descriptor_separates_shape_classes_and_ignores_rotation():
+    rng = np.random.default_rng(0)
+    meshes, labels = [], []
+    for i in range(3):
+        box = trimesh.creation.box(extents=(1.0, 0.5 + 0.05 * i, 0.25))
+        cyl = trimesh.creation.torus(major_radius=0.5, minor_radius=0.12 + 0.01 * i) if hasattr(trimesh.creation, "torus") \
+            else trimesh.creation.cylinder(radius=0.3, height=1.0)
+        for m, lab in ((box, "box"), (cyl, "ring")):
+            R = trimesh.transformations.random_rotation_matrix(rng.random(3))
+            m = m.copy()
+            m.apply_transform(R)
+            meshes.append((m.vertices, m.faces))
+            labels.append(lab)
+    cfg = DescriptorConfig(level=1, view_size=64, vocab=48, dense_step=6)
+    D = distance_matrix_from_meshes(meshes, cfg)
+    assert D.shape == (6, 6) and np.allclose(D, D.T) and np.allclose(np.diag(D), 0)
+    assert retrieval_scores(D, labels)["nn"] == 1.0
+
+
+def test_mds_and_gps_baselines_are_pose_invariant():
+    """A bent and a straight capsule (same intrinsic geometry) get similar canonical forms."""
+    cap = trimesh.creation.capsule(height=2.0, radius=0.3, count=[12, 12])
+    v = cap.vertices.copy()
+    bent = v.copy()
+    theta = v[:, 2] * 0.3  # bend along z into an arc (approximately isometric)
+    bent[:, 0] = (1 / 0.3 + v[:, 0]) * np.cos(theta) - 1 / 0.3
+    bent[:, 2] = (1 / 0.3 + v[:, 0]) * np.sin(theta)
+    f = cap.faces
+    D1, D2 = geodesic_matrix(v, f), geodesic_matrix(bent, f)
+    assert np.abs(D1 - D2).mean() < 0.1 * D1.mean()
+    e1, e2 = classical_mds(v, f, D=D1), classical_mds(bent, f, D=D2)
+    s1, s2 = np.sort(np.abs(e1).max(0)), np.sort(np.abs(e2).max(0))
+    assert np.allclose(s1, s2, rtol=0.15)
+    g = gps_embedding(v, f)
+    assert g.shape == (len(v), 3) and np.isfinite(g).all()
+    sv, sf = simplify(v, f, 100)
+    assert len(sv) <= 100 and sf.max() < len(sv)
+    out = canonical_forms([(v, f)], "gps", max_vertices=200)
+    assert out[0][0].shape[1] == 3
+    with pytest.raises(ValueError, match="unknown canonical baseline"):
+        canonical_forms([(v, f)], "nope")

@@ -1,0 +1,222 @@
+"""3DCascade-GAN nets: selector, generator shapes and ablations, self-attention, critic, classifier."""
+from __future__ import annotations
+
+import pytest
+import torch
+
+from lit3d.nets.attention import SelfAttention3d
+from lit3d.nets.completion import (
+    DEMO,
+    CascadeGenerator,
+    Critic,
+    GeneratorOutput,
+    LatentSelector,
+    ShapeClassifier,
+    build_completion_nets,
+    resolve_config,
+)
+
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_thread():
+    """Tiny nets: one intra-op thread is faster than two, and much faster on a shared CPU."""
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+def _partial(b=2, r=16, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    return (torch.rand(b, 1, r, r, r, generator=g) < 0.2).float()
+
+
+# ---------------------------------------------------------------- selector
+@pytest.mark.parametrize("mode", ["straight_through", "literal"])
+def test_selector_keeps_exactly_k_in_place(mode):
+    torch.manual_seed(0)
+    sel = LatentSelector(64, 10, mode)
+    l = torch.randn(5, 64)
+    out, mask = sel(l)
+    assert out.shape == l.shape and mask.shape == l.shape
+    assert ((out != 0).sum(1) == 10).all()
+    assert (mask.sum(1) == 10).all()
+    # kept entries keep value and position; they are the top-K of the weight net
+    assert torch.equal(out, l * mask)
+    w = sel.weight_net(l)
+    top = torch.topk(w, 10, dim=1).indices
+    assert torch.equal(mask.gather(1, top), torch.ones(5, 10))
+
+
+def test_selector_straight_through_vs_literal_gradients():
+    torch.manual_seed(0)
+    st = LatentSelector(32, 4, "straight_through")
+    lit = LatentSelector(32, 4, "literal")
+    lit.load_state_dict(st.state_dict())
+    l = torch.randn(3, 32, requires_grad=True)
+    target = torch.randn(3, 32)
+    for sel in (st, lit):
+        out, _ = sel(l)
+        ((out - target) ** 2).sum().backward()
+    st_grad = sum(p.grad.abs().sum() for p in st.weight_net.parameters())
+    assert st_grad > 0
+    assert all(p.grad is None or p.grad.abs().sum() == 0 for p in lit.weight_net.parameters())
+    # same forward value in both modes
+    assert torch.equal(st(l)[0], lit(l)[0])
+
+
+# ---------------------------------------------------------------- generator
+def test_generator_demo_shapes_and_outputs():
+    torch.manual_seed(0)
+    g = build_completion_nets({"preset": "demo"})["generator"]
+    out = g(_partial(2))
+    assert isinstance(out, GeneratorOutput)
+    assert out.logits.shape == (2, 1, 64, 64, 64)
+    assert [tuple(s.shape) for s in out.stage_logits] == [(2, 1, 16, 16, 16)] * 2 + [(2, 1, 64, 64, 64)]
+    assert out.stage_logits[-1] is out.logits
+    assert out.keep_fraction.shape == () and out.keep_fraction.item() == pytest.approx(DEMO["k"] / DEMO["latent_dim"])
+    # stage inputs have 1, 2, 3 channels; the last stage gets the stage-1 global skips
+    assert [s.encoder[0][0][1].in_channels for s in g.stages] == [1, 2, 3]
+    assert g.use_global_skips
+
+
+def test_generator_global_skips_change_last_stage_decoder():
+    with_gs = CascadeGenerator(in_res=16, stages=2, enc_channels=(4, 8), up_channels=(4,), latent_dim=16, k=4,
+                               global_skips=True)
+    without = CascadeGenerator(in_res=16, stages=2, enc_channels=(4, 8), up_channels=(4,), latent_dim=16, k=4,
+                               global_skips=False)
+    # decoder level 0 input: fc map (8) + local skip (8) [+ global skip (8)]
+    assert with_gs.stages[-1].decoder[0].in_channels == 24
+    assert without.stages[-1].decoder[0].in_channels == 16
+    assert with_gs(_partial(1)).logits.shape == (1, 1, 32, 32, 32)
+
+
+ABLATIONS = [
+    {"stages": 1},
+    {"stages": 2},
+    {"selector": False},
+    {"selector_mode": "literal"},
+    {"k": 8},
+    {"attention": "generator"},
+    {"attention": "none"},
+    {"attention": "both"},
+    {"classifier": False},
+    {"critic_sigmoid": False},
+    {"critic_sigmoid": True},
+    {"global_skips": False},
+]
+
+
+@pytest.mark.parametrize("switch", ABLATIONS, ids=lambda d: ",".join(f"{k}={v}" for k, v in d.items()))
+def test_every_ablation_builds_and_runs_at_demo_scale(switch):
+    torch.manual_seed(0)
+    cfg = {"preset": "demo", **switch}
+    nets = build_completion_nets(cfg)
+    c = resolve_config(cfg)
+    g, d = nets["generator"], nets["critic"]
+    x = _partial(1)
+    out = g(x)
+    assert out.logits.shape == (1, 1, 64, 64, 64)
+    assert len(out.stage_logits) == c["stages"]
+    if c["selector"]:
+        assert out.keep_fraction.item() == pytest.approx(c["k"] / c["latent_dim"])
+        assert g.stages[0].latent_dim == c["latent_dim"]
+    else:
+        assert out.keep_fraction.item() == 1.0
+        assert all(s.selector is None and s.latent_dim == c["fixed_latent_dim"] for s in g.stages)
+    gen_attn = any(isinstance(m, SelfAttention3d) for m in g.modules())
+    assert gen_attn == (c["attention"] in ("generator", "both"))
+    assert (d.attn is not None) == (c["attention"] in ("discriminator", "both"))
+    score = d(x, torch.sigmoid(out.logits))
+    assert score.shape == (1,)
+    if c["critic_sigmoid"]:
+        assert ((score > 0) & (score < 1)).all()
+    assert ("classifier" in nets) == c["classifier"]
+    if c["classifier"]:
+        assert nets["classifier"](torch.sigmoid(out.logits)).shape == (1, 4)
+    # gradients reach the first encoder layer
+    (score.sum() + out.logits.mean()).backward()
+    assert g.stages[0].encoder[0][0][1].weight.grad.abs().sum() > 0
+
+
+def test_bad_config_is_rejected():
+    with pytest.raises(ValueError, match="unknown completion net config keys"):
+        build_completion_nets({"preset": "demo", "stagse": 2})
+    with pytest.raises(ValueError, match="out_res"):
+        build_completion_nets({"preset": "demo", "out_res": 128})
+    with pytest.raises(ValueError, match="stages"):
+        build_completion_nets({"preset": "demo", "stages": 4})
+
+
+# ---------------------------------------------------------------- self-attention
+def test_self_attention_gamma_zero_is_identity():
+    torch.manual_seed(0)
+    att = SelfAttention3d(16)
+    x = torch.randn(2, 16, 4, 4, 4)
+    assert att.gamma.item() == 0.0
+    assert torch.equal(att(x), x)
+
+
+def test_self_attention_sdpa_equals_explicit_softmax():
+    torch.manual_seed(0)
+    att = SelfAttention3d(16, reduction=4)
+    with torch.no_grad():
+        att.gamma.fill_(0.7)
+    x = torch.randn(2, 16, 4, 5, 3)
+    att.use_sdpa = True
+    a = att(x)
+    att.use_sdpa = False
+    b = att(x)
+    # independent reference: SAGAN eqs. 3.2-3.4 written out with einsum
+    f = att.f(x).flatten(2)
+    g = att.g(x).flatten(2)
+    h = att.h(x).flatten(2)
+    beta = torch.softmax(torch.einsum("bci,bcj->bji", f, g), dim=-1)  # beta[j, i]
+    o = att.v(torch.einsum("bji,bci->bcj", beta, h).reshape(2, -1, 4, 5, 3))
+    ref = 0.7 * o + x
+    torch.testing.assert_close(a, ref, rtol=1e-5, atol=1e-5)
+    torch.testing.assert_close(b, ref, rtol=1e-5, atol=1e-5)
+    torch.testing.assert_close(att.attention_map(x), beta, rtol=1e-5, atol=1e-6)
+    assert not torch.allclose(a, x)
+
+
+# ---------------------------------------------------------------- critic / classifier
+def test_critic_shapes_and_sigmoid_bound():
+    torch.manual_seed(0)
+    x = _partial(3)
+    y = torch.rand(3, 1, 64, 64, 64)
+    plain = Critic(64, (8, 8, 8, 8), attention_res=8, sigmoid=False)
+    assert plain.attn_after == 2  # 64 -> 32 -> 16 -> 8: attention after the third layer
+    with torch.no_grad():
+        plain.layers[-1][0].bias.fill_(50.0)
+    s = plain(x, y)
+    assert s.shape == (3,) and (s > 1).all()  # unbounded WGAN critic
+    sig = Critic(64, (8, 8, 8, 8), attention_res=8, sigmoid=True)
+    sig.load_state_dict(plain.state_dict())
+    t = sig(x, y)
+    assert t.shape == (3,) and ((t > 0) & (t <= 1)).all()
+    with pytest.raises(ValueError, match="no layer output"):
+        Critic(64, (8, 8), attention_res=8)
+
+
+def test_critic_sees_the_partial_input():
+    torch.manual_seed(0)
+    c = Critic(32, (4, 4, 4), use_attention=False)
+    y = torch.rand(2, 1, 32, 32, 32)
+    a = c(torch.zeros(2, 1, 8, 8, 8), y)
+    b = c(torch.ones(2, 1, 8, 8, 8), y)
+    assert not torch.allclose(a, b)
+
+
+def test_classifier_layers_fit_the_grid():
+    clf = ShapeClassifier(in_res=64, channels=(4, 4, 4, 4, 4, 4, 4), n_classes=4)
+    convs = [m for m in clf.features.modules() if isinstance(m, torch.nn.Conv3d)]
+    assert len(convs) == 4  # 64 -> 32 -> 16 -> 8 -> 4: the thesis's 7 layers do not fit
+    assert clf.head.in_features == 4 * 4**3
+    # input at 4x the grid is max-pooled: a single occupied voxel survives pooling
+    y = torch.zeros(2, 1, 256, 256, 256)
+    y[0, 0, 5, 5, 5] = 1
+    assert clf(y).shape == (2, 4)
+    pooled = torch.nn.functional.max_pool3d(y, 4)
+    assert pooled[0, 0, 1, 1, 1] == 1
