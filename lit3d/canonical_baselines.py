@@ -104,13 +104,14 @@ def nonmetric_mds(verts, faces, dim: int = 3, seed: int = 0, max_iter: int = 300
     return est.fit_transform(D, init=classical_mds(verts, faces, dim, D=D))
 
 
-def smacof_mds(verts, faces, dim: int = 3, seed: int = 0, max_iter: int = 300, D: np.ndarray | None = None) -> np.ndarray:
+def smacof_mds(verts, faces, dim: int = 3, seed: int = 0, max_iter: int = 300, D: np.ndarray | None = None,
+               eps: float = 1e-6) -> np.ndarray:
     """Least-squares MDS (SMACOF) of the geodesic distances, started from classical MDS."""
     D = geodesic_matrix(verts, faces) if D is None else D
     from sklearn.manifold import smacof
 
     init = classical_mds(verts, faces, dim, D=D)
-    kw = {"n_components": dim, "init": init, "n_init": 1, "max_iter": max_iter, "random_state": seed}
+    kw = {"n_components": dim, "init": init, "n_init": 1, "max_iter": max_iter, "random_state": seed, "eps": eps}
     if "metric" in inspect.signature(smacof).parameters:
         kw["metric"] = True
     X, _ = smacof(D, **{k: v for k, v in kw.items() if k in inspect.signature(smacof).parameters})[:2]
@@ -148,20 +149,68 @@ def gps_embedding(verts, faces, dim: int = 3) -> np.ndarray:
     return vecs[:, order] / np.sqrt(np.maximum(vals[order], 1e-12))
 
 
+METHODS = ("cmds", "smacof", "nmds", "gps", "posed")
+
+
+def canonical_form(v: np.ndarray, f: np.ndarray, method: str, D: np.ndarray | None = None,
+                   max_iter: int = 300, eps: float = 1e-6) -> np.ndarray:
+    """Embedded vertices ``(V, 3)`` of one (already simplified) mesh; ``posed`` returns it unchanged."""
+    if method == "cmds":
+        return classical_mds(v, f, D=D)
+    if method == "smacof":
+        return smacof_mds(v, f, D=D, max_iter=max_iter, eps=eps)
+    if method == "nmds":
+        return nonmetric_mds(v, f, D=D, max_iter=max_iter)
+    if method == "gps":
+        return gps_embedding(v, f)
+    if method == "posed":
+        return v
+    raise ValueError(f"unknown canonical baseline '{method}' ({', '.join(METHODS)})")
+
+
 def canonical_forms(meshes, method: str, max_vertices: int = 1500) -> list[tuple[np.ndarray, np.ndarray]]:
-    """``[(verts, faces)] -> [(embedded verts, faces)]`` for method in cmds, smacof, nmds, gps."""
-    out = []
+    """``[(verts, faces)] -> [(embedded verts, faces)]`` for method in cmds, smacof, nmds, gps, posed."""
+    return canonical_forms_multi(meshes, [method], max_vertices)[method]
+
+
+def canonical_forms_multi(meshes, methods, max_vertices: int = 1500, max_iter: int = 300,
+                          eps: float = 1e-6) -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
+    """Several baselines at once: each mesh is simplified once and its geodesic matrix computed
+    once (shared by cmds, smacof and nmds). Returns ``{method: [(embedded verts, faces), ...]}``."""
+    methods = list(methods)
+    bad = [m for m in methods if m not in METHODS]
+    if bad:
+        raise ValueError(f"unknown canonical baseline(s) {bad} ({', '.join(METHODS)})")
+    out: dict[str, list] = {m: [] for m in methods}
+    needs_geo = any(m in ("cmds", "smacof", "nmds") for m in methods)
     for v, f in meshes:
         v, f = simplify(np.asarray(v, float), np.asarray(f, np.int64), max_vertices)
-        if method == "cmds":
-            e = classical_mds(v, f)
-        elif method == "smacof":
-            e = smacof_mds(v, f)
-        elif method == "nmds":
-            e = nonmetric_mds(v, f)
-        elif method == "gps":
-            e = gps_embedding(v, f)
-        else:
-            raise ValueError(f"unknown canonical baseline '{method}' (cmds, smacof, nmds, gps)")
-        out.append((e, f))
+        D = geodesic_matrix(v, f) if needs_geo else None
+        for m in methods:
+            out[m].append((canonical_form(v, f, m, D=D, max_iter=max_iter, eps=eps), f))
+    return out
+
+
+def baseline_retrieval(meshes, labels, methods, cfg=None, max_vertices: int = 1000, max_iter: int = 300,
+                       eps: float = 1e-4) -> dict[str, dict]:
+    """Retrieval scores of non-learned canonical forms: each mesh ``(verts, faces)`` -> its canonical
+    form by every method -> the view-based descriptor (:mod:`lit3d.retrieval.descriptor`, config
+    ``cfg``) -> distance matrix -> :func:`lit3d.metrics.retrieval.retrieval_scores` with ``labels``
+    ``(n,)``. Returns ``{method: {"nn", "ft", "st", "e", "dcg", "seconds"}}``."""
+    import time
+
+    from lit3d.metrics.retrieval import retrieval_scores
+    from lit3d.retrieval.descriptor import DescriptorConfig, distance_matrix_from_meshes
+
+    cfg = cfg or DescriptorConfig()
+    labels = np.asarray(labels)
+    t0 = time.perf_counter()
+    forms = canonical_forms_multi(meshes, methods, max_vertices, max_iter, eps)
+    t_forms = (time.perf_counter() - t0) / max(len(list(methods)), 1)
+    out = {}
+    for m, fm in forms.items():
+        t1 = time.perf_counter()
+        scores = dict(retrieval_scores(distance_matrix_from_meshes(fm, cfg), labels))
+        scores["seconds"] = t_forms + time.perf_counter() - t1
+        out[m] = scores
     return out

@@ -76,7 +76,7 @@ def test_train_then_eval_writes_tables_and_figures(compose_cfg, data_dir, tmp_pa
     out = Path(ecfg.paths.output_dir)
     assert (out / "metrics.json").is_file() and "test/same/iou" in emetrics
     text = (out / "results.md").read_text()
-    assert "Table 3.2" in text and "3DCascade-GAN (thesis)" in text and "lit3d (ours)" in text
+    assert "Tables 3.1 / 3.2" in text and "(thesis 3.2)" in text and "lit3d, multi-category (ours)" in text
     assert list(out.glob("completion_*.png"))
 
     bad = compose_cfg([f"ckpt_path={best[0]}", "task=canonical"], config_name="eval", data_dir=data_dir)

@@ -52,10 +52,12 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
     datamodule = build_datamodule(data_cfg)
     trainer: pl.Trainer = instantiate(cfg.trainer, logger=False, enable_checkpointing=False,
                                       callbacks=[pl.callbacks.RichProgressBar()])
+    metrics: dict[str, float] = {}
     if getattr(task, "validate_before_test", False):
         trainer.validate(task, datamodule=datamodule)
+        metrics.update({k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("val/")})
     trainer.test(task, datamodule=datamodule)
-    metrics = {k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith(("test/", "val/"))}
+    metrics.update({k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("test/")})
     if trainer.is_global_zero:
         write_json(out_dir / "metrics.json", {"ckpt_path": str(cfg.ckpt_path), **metrics})
         report = report_module(task_cfg["name"])

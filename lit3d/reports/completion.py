@@ -12,26 +12,27 @@ import torch
 from PIL import Image
 
 from lit3d.reports.tables import fmt, markdown_table
-from lit3d.tasks.completion import SEEN, UNSEEN
-from lit3d.utils.io import atomic_write_text
+from lit3d.tasks.completion import SEEN, UNSEEN, split_key
+from lit3d.utils.io import atomic_write_bytes, atomic_write_text
 from lit3d.utils.voxel_images import panel
 
-# (table, title, split, categories, {method: [IoU per category]}) from SPEC.md / the thesis.
+# (title, split, categories, {thesis method: [IoU per category]}) from SPEC.md / the thesis.
+# lit3d trains one multi-category model, so its row sits beside both the thesis's
+# single-category (3.1, 3.3) and multi-category (3.2, 3.4) rows of the same view set.
 THESIS = [
-    ("3.1", "single-category training, same view", "same", SEEN,
-     {"3D-RecGAN++ (thesis)": [.580, .647, .753, .679], "3DCascade-GAN (thesis)": [.641, .701, .809, .698]}),
-    ("3.2", "multi-category training, same view", "same", SEEN,
-     {"3DCascade-GAN (thesis)": [.624, .669, .773, .682]}),
-    ("3.3", "single-category training, cross view", "cross", SEEN,
-     {"3DCascade-GAN (thesis)": [.585, .628, .680, .647]}),
-    ("3.4", "multi-category training, cross view", "cross", SEEN,
-     {"3DCascade-GAN (thesis)": [.574, .620, .673, .633]}),
-    ("3.5", "unseen categories, cross view", "unseen", UNSEEN,
-     {"3DCascade-GAN (thesis)": [.564, .537, .425, .455, .560, .394]}),
-    ("3.6", "unseen categories, same view", "unseen", UNSEEN,
-     {"3DCascade-GAN (thesis)": [.559, .541, .430, .455, .569, .395]}),
+    ("Tables 3.1 / 3.2: IoU, same view", "same", SEEN, {
+        "3D-RecGAN++, single-category (thesis 3.1)": [.580, .647, .753, .679],
+        "3DCascade-GAN, single-category (thesis 3.1)": [.641, .701, .809, .698],
+        "3DCascade-GAN, multi-category (thesis 3.2)": [.624, .669, .773, .682]}),
+    ("Tables 3.3 / 3.4: IoU, cross view", "cross", SEEN, {
+        "3DCascade-GAN, single-category (thesis 3.3)": [.585, .628, .680, .647],
+        "3DCascade-GAN, multi-category (thesis 3.4)": [.574, .620, .673, .633]}),
+    ("Tables 3.5 / 3.6: IoU, unseen categories (multi-category training)", "unseen", UNSEEN, {
+        "3DCascade-GAN, cross view (thesis 3.5)": [.564, .537, .425, .455, .560, .394],
+        "3DCascade-GAN, same view (thesis 3.6)": [.559, .541, .430, .455, .569, .395]}),
 ]
-OURS = (("lit3d (ours)", ""), ("input as prediction (ours)", "_input"), ("per-voxel prior (ours)", "_prior"))
+OURS = (("lit3d, multi-category (ours)", ""), ("input as prediction (ours)", "_input"),
+        ("per-voxel prior (ours)", "_prior"))
 
 
 def category_rows(metrics: dict, split: str, categories, kind: str = "iou") -> list[list[str]]:
@@ -56,12 +57,12 @@ def write_results(metrics: dict, out_dir: Path) -> Path:
         "Rows marked *(thesis)* are the thesis's published figures on the full 3D-RecGAN++ ShapeNet data; "
         "rows marked *(ours)* are measured in this run on this run's data. Compare them only when the data is the same.",
     ]
-    for number, title, split, cats, thesis in THESIS:
+    for title, split, cats, thesis in THESIS:
         ours = category_rows(metrics, split, cats)
         if not ours:
             continue
         rows = [[name] + [fmt(v) for v in vals] + ["–"] for name, vals in thesis.items()] + ours
-        parts += ["", f"## Table {number}: IoU, {title}", "", markdown_table(["method", *cats, "mean"], rows)]
+        parts += ["", f"## {title}", "", markdown_table(["method", *cats, "mean"], rows)]
     for split, cats in (("same", SEEN), ("cross", SEEN), ("unseen", UNSEEN)):
         ce = category_rows(metrics, split, cats, kind="ce")
         if ce:
@@ -73,7 +74,12 @@ def write_results(metrics: dict, out_dir: Path) -> Path:
 
 
 def write_figures(task, datamodule, out_dir: Path, n: int = 4) -> list[Path]:
-    """PNG per test split: rows of input | prediction | target (depth-shaded, two view axes)."""
+    """PNG per test split: rows of input | prediction | target (depth-shaded, two view axes).
+
+    The first sample of each split is also saved as voxel grids (``occupancy`` uint8 in
+    ``<split>_prediction.npz`` / ``<split>_target.npz``) so that ``lit3d-score`` can
+    compare them by rendering: ``lit3d-score same_target.npz same_prediction.npz``.
+    """
     out_dir = Path(out_dir)
     paths = []
     task.eval()
@@ -86,6 +92,9 @@ def write_figures(task, datamodule, out_dir: Path, n: int = 4) -> list[Path]:
         for batch in loader:
             with torch.no_grad():
                 probs = task(batch["input"].to(task.device)).cpu()
+            if not rows:
+                _save_voxels(out_dir / f"{split_key(name)}_prediction.npz", probs[0, 0] >= threshold)
+                _save_voxels(out_dir / f"{split_key(name)}_target.npz", batch["target"][0, 0] > 0.5)
             for i in range(batch["input"].shape[0]):
                 vols = [batch["input"][i, 0], probs[i, 0], batch["target"][i, 0]]
                 rows.append(panel(vols, threshold=threshold))
@@ -100,3 +109,12 @@ def write_figures(task, datamodule, out_dir: Path, n: int = 4) -> list[Path]:
             Image.fromarray(np.concatenate(rows[:-1], axis=0)).save(path)
             paths.append(path)
     return paths
+
+
+def _save_voxels(path: Path, occupancy: torch.Tensor) -> None:
+    """(D, H, W) bool grid -> compressed .npz with key ``occupancy`` (uint8 0/1), atomically."""
+    import io
+
+    buf = io.BytesIO()
+    np.savez_compressed(buf, occupancy=occupancy.cpu().numpy().astype(np.uint8))
+    atomic_write_bytes(path, buf.getvalue())

@@ -15,6 +15,16 @@ IoU), and the same with suffix ``_input`` for the posed-input baseline (the inpu
 its own canonical form). At test time with at least ``retrieval_min_subjects`` subjects:
 ``test/retrieval/<source>/<nn|ft|st|e|dcg>`` for source = model, input, target (true
 canonical, the ceiling) and chance.
+
+Baselines in the same run:
+- ``unet_baseline=True`` trains a plain U-Net (``arch=unet``'s net) beside the main net on the
+  same batches with the same loss and the same alpha/beta phases (disjoint parameters in one
+  Adam, so it is the same as training it alone); logged as ``*_unet`` and retrieval source
+  ``unet``. (``arch=unet`` alone trains the U-Net as the main model instead.)
+- ``mesh_baselines`` (e.g. ``[cmds, smacof, gps, posed]``): at test time the full meshes of the
+  test shapes (one per unique subject x pose, from ``trainer.datamodule.normalized_mesh``) get
+  the non-learned canonical forms of :mod:`lit3d.canonical_baselines` and the same descriptor:
+  ``test/retrieval/<method>/...``; ``posed`` = the posed full mesh, no canonicalisation.
 """
 from __future__ import annotations
 
@@ -30,6 +40,7 @@ from lit3d.losses_canonical import canonical_loss, composite_depth, per_sample_d
 from lit3d.nets.canonical import build_canonical_net, summarize
 
 METRICS = ("depth_mse", "iou", "depth_mse_input", "iou_input")
+UNET_METRICS = ("depth_mse_unet", "iou_unet")
 
 
 class CanonicalTask(pl.LightningModule):
@@ -55,6 +66,10 @@ class CanonicalTask(pl.LightningModule):
         retrieval: dict | None = None,
         retrieval_min_subjects: int = 2,
         chance_trials: int = 100,
+        unet_baseline: bool = False,
+        mesh_baselines: Sequence[str] | None = None,
+        baseline_max_vertices: int = 1000,
+        baseline_smacof_eps: float = 1e-4,
     ):
         super().__init__()
         self.save_hyperparameters()
@@ -63,10 +78,13 @@ class CanonicalTask(pl.LightningModule):
         if arch == "canonical":
             cfg.update(use_lfe=use_lfe, use_msfe=use_msfe)
         self.net = build_canonical_net(cfg)
+        # plain U-Net trained beside the main net on the same data and losses (a baseline)
+        self.unet = build_canonical_net({**dict(net or {}), "kind": "unet"}) if unet_baseline else None
         # set by LossPhases each epoch; constant weights when phases are off
         self.loss_alpha, self.loss_beta = float(alpha), float(beta)
-        self.val_metrics = torch.nn.ModuleDict({k: MeanMetric() for k in METRICS})
-        self.test_metrics = torch.nn.ModuleDict({k: MeanMetric() for k in METRICS})
+        names = METRICS + (UNET_METRICS if unet_baseline else ())
+        self.val_metrics = torch.nn.ModuleDict({k: MeanMetric() for k in names})
+        self.test_metrics = torch.nn.ModuleDict({k: MeanMetric() for k in names})
         self._test_store: list[dict] = []
         self.retrieval_results: dict = {}
 
@@ -94,13 +112,20 @@ class CanonicalTask(pl.LightningModule):
         bs = batch["depth"].shape[0]
         self.log_dict({"train/loss": losses["loss"], "train/depth_loss": losses["depth"],
                        "train/mask_loss": losses["mask"]}, on_step=True, on_epoch=True, batch_size=bs)
+        total = losses["loss"]
+        if self.unet is not None:
+            ou = self.unet(batch["depth"], batch["mask"])
+            lu = canonical_loss(ou.depth, ou.mask, batch["canon_depth"], batch["canon_mask"],
+                                self.loss_alpha, self.loss_beta, self.hparams.mask_loss, ou.mask_logits)
+            self.log("train/unet_loss", lu["loss"], on_step=False, on_epoch=True, batch_size=bs)
+            total = total + lu["loss"]
         if not self.hparams.use_phases:
             self.log_dict({"train/alpha": self.loss_alpha, "train/beta": self.loss_beta},
                           on_step=False, on_epoch=True, batch_size=bs)
-        return losses["loss"]
+        return total
 
     # ------------------------------------------------------------------ evaluation
-    def _update(self, metrics: torch.nn.ModuleDict, batch: dict, out) -> None:
+    def _update(self, metrics: torch.nn.ModuleDict, batch: dict, out, out_unet=None) -> None:
         thr = self.hparams.mask_threshold
         d, m = batch["canon_depth"], batch["canon_mask"]
         vals = {
@@ -109,12 +134,15 @@ class CanonicalTask(pl.LightningModule):
             "depth_mse_input": per_sample_depth_mse(batch["depth"], batch["mask"], d, m),
             "iou_input": per_sample_mask_iou(batch["mask"], m),
         }
+        if out_unet is not None:
+            vals["depth_mse_unet"] = per_sample_depth_mse(out_unet.depth, out_unet.mask, d, m, thr)
+            vals["iou_unet"] = per_sample_mask_iou(out_unet.mask, m, thr)
         for k, v in vals.items():
             metrics[k].update(v)
 
     def validation_step(self, batch: dict, batch_idx: int) -> None:
         out = self(batch["depth"], batch["mask"])
-        self._update(self.val_metrics, batch, out)
+        self._update(self.val_metrics, batch, out, self._unet_out(batch))
         loss = canonical_loss(out.depth, out.mask, batch["canon_depth"], batch["canon_mask"], 1.0, 1.0)
         self.log_dict({"val/depth_loss": loss["depth"], "val/mask_loss": loss["mask"]},
                       on_epoch=True, batch_size=batch["depth"].shape[0])
@@ -127,17 +155,25 @@ class CanonicalTask(pl.LightningModule):
             self.log(f"val/{k}", m.compute(), prog_bar=k in ("depth_mse", "iou"))
             m.reset()
 
+    def _unet_out(self, batch: dict):
+        return None if self.unet is None else self.unet(batch["depth"], batch["mask"])
+
     def on_test_epoch_start(self) -> None:
         self._test_store = []
 
     def test_step(self, batch: dict, batch_idx: int) -> None:
         out = self(batch["depth"], batch["mask"])
-        self._update(self.test_metrics, batch, out)
-        self._test_store.append({
+        out_u = self._unet_out(batch)
+        self._update(self.test_metrics, batch, out, out_u)
+        extra = {}
+        if out_u is not None:
+            extra = {"unet_depth": out_u.depth.detach().float().cpu(), "unet_mask": out_u.mask.detach().float().cpu()}
+        self._test_store.append({**extra,
             "pred_depth": out.depth.detach().float().cpu(), "pred_mask": out.mask.detach().float().cpu(),
             "depth": batch["depth"].cpu(), "mask": batch["mask"].cpu(),
             "canon_depth": batch["canon_depth"].cpu(), "canon_mask": batch["canon_mask"].cpu(),
             "subject_idx": torch.as_tensor(batch["subject_idx"]).cpu(),
+            "pose": torch.as_tensor(batch["pose"]).cpu(),
         })
 
     def on_test_epoch_end(self) -> None:
@@ -156,9 +192,12 @@ class CanonicalTask(pl.LightningModule):
                        "with 2+ items")
             return
         self.retrieval_results = self.retrieval_table(store, labels)
+        self.retrieval_results.update(self.mesh_baseline_table(store))
         for source, scores in self.retrieval_results.items():
             for k in ("nn", "ft", "st", "e", "dcg"):
                 self.log(f"test/retrieval/{source}/{k}", float(scores[k]), rank_zero_only=True)
+            if "seconds" in scores:
+                self.log(f"test/retrieval/{source}/seconds", float(scores["seconds"]), rank_zero_only=True)
 
     def retrieval_table(self, store: dict, labels: np.ndarray) -> dict[str, dict]:
         """Retrieval scores of the predicted canonical forms, the posed inputs and the true canonical
@@ -173,6 +212,8 @@ class CanonicalTask(pl.LightningModule):
             "input": (store["depth"], store["mask"]),
             "target": (store["canon_depth"], store["canon_mask"]),
         }
+        if "unet_depth" in store:
+            sources["unet"] = (store["unet_depth"], (store["unet_mask"] >= thr).float())
         out = {}
         for name, (d, m) in sources.items():
             dist = distance_matrix_from_depths(composite_depth(d, m)[:, 0].numpy(), m[:, 0].numpy(), cfg)
@@ -180,9 +221,34 @@ class CanonicalTask(pl.LightningModule):
         out["chance"] = chance_scores(labels, self.hparams.chance_trials, seed=0)
         return out
 
+    def mesh_baseline_table(self, store: dict) -> dict[str, dict]:
+        """Non-learned canonical forms (``mesh_baselines``) of the full test meshes, one per unique
+        (subject, pose) of the test items, through the same descriptor (empty when off, or when the
+        datamodule cannot give meshes)."""
+        methods = list(self.hparams.mesh_baselines or [])
+        dm = getattr(self.trainer, "datamodule", None) if self._trainer is not None else None
+        if not methods or dm is None or not hasattr(dm, "normalized_mesh"):
+            if methods:
+                self.print("mesh baselines skipped: the datamodule has no normalized_mesh()")
+            return {}
+        import time
+
+        from lit3d.canonical_baselines import baseline_retrieval
+        from lit3d.retrieval.descriptor import DescriptorConfig
+
+        names = {i: s for s, i in dm.subject_index.items()}
+        keys = sorted({(int(s), int(p)) for s, p in zip(store["subject_idx"], store["pose"])})
+        t0 = time.perf_counter()
+        meshes = [dm.normalized_mesh(names[s], p) for s, p in keys]
+        out = baseline_retrieval(meshes, [s for s, _ in keys], methods, DescriptorConfig(**(self.hparams.retrieval or {})),
+                                 self.hparams.baseline_max_vertices, eps=self.hparams.baseline_smacof_eps)
+        self.print(f"mesh baselines {methods} on {len(keys)} test shapes: {time.perf_counter() - t0:.0f}s")
+        return out
+
     # ------------------------------------------------------------------ images
-    def panel(self, batch: dict, out, n: int | None = None) -> np.ndarray:
-        """uint8 image: rows of input | predicted | target depth | |error|, one row per sample."""
+    def panel(self, batch: dict, out, n: int | None = None, out_unet=None) -> np.ndarray:
+        """uint8 image: rows of input | predicted | target depth | |error| (| U-Net prediction when
+        ``out_unet`` is given), one row per sample."""
         n = min(n or self.hparams.n_panel, batch["depth"].shape[0])
         thr = self.hparams.mask_threshold
         rows = []
@@ -191,6 +257,8 @@ class CanonicalTask(pl.LightningModule):
             tgt = batch["canon_depth"][i, 0].cpu()
             err = (pred - tgt).abs()
             tiles = [batch["depth"][i, 0].cpu(), pred, tgt, err]
+            if out_unet is not None:
+                tiles.append(composite_depth(out_unet.depth[i, 0], out_unet.mask[i, 0], thr).detach().float().cpu())
             rows.append(torch.cat([torch.nn.functional.pad(t, (1, 1, 1, 1), value=0.3) for t in tiles], 1))
         return (torch.cat(rows, 0).clamp(0, 1).numpy() * 255).astype(np.uint8)
 

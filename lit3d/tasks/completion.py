@@ -57,6 +57,7 @@ class CompletionTask(pl.LightningModule):
         zeta: float = 0.01,
         gp_lambda: float = 10.0,
         adversarial: bool = True,
+        adversarial_start_epoch: int = 0,
         categories: Sequence[str] = SEEN,
         unseen_categories: Sequence[str] = UNSEEN,
         prior_samples: int = 256,
@@ -135,6 +136,8 @@ class CompletionTask(pl.LightningModule):
         hp = self.hparams
         x, y = self._fmt(batch["input"]), self._fmt(batch["target"])
         opt_g, opt_d = self._optimizers()
+        if self.current_epoch < hp.adversarial_start_epoch:
+            opt_d = None  # warm-up: reconstruction (+ classifier) only
         logs: dict[str, torch.Tensor] = {}
         if opt_d is not None:
             for _ in range(hp.critic_steps):
