@@ -19,11 +19,11 @@ def one_thread():
     torch.set_num_threads(n)
 
 
-def _train(tmp_path, epochs, retrieval=None, **task_kw):
+def _train(tmp_path, epochs, retrieval=None, size=48, n=9, mesh_resolution=32, **task_kw):
     pl.seed_everything(0, workers=True)
-    dm = CanonicalDataModule(str(tmp_path / "data"), image_size=48, n_subjects=9, n_poses=9, mesh_resolution=32,
-                             n_folds=3, batch_size=8, kinds=["humanoid"], seed=0)
-    task = CanonicalTask(net=dict(TINY), retrieval=retrieval, chance_trials=20, **task_kw)
+    dm = CanonicalDataModule(str(tmp_path / "data"), image_size=size, n_subjects=n, n_poses=n,
+                             mesh_resolution=mesh_resolution, n_folds=3, batch_size=8, kinds=["humanoid"], seed=0)
+    task = CanonicalTask(net={**TINY, "image_size": size}, retrieval=retrieval, chance_trials=20, **task_kw)
     tr = pl.Trainer(max_epochs=epochs, logger=False, enable_checkpointing=False, enable_progress_bar=False,
                     enable_model_summary=False, accelerator="cpu", num_sanity_val_steps=0,
                     check_val_every_n_epoch=epochs, deterministic=True)
@@ -32,6 +32,7 @@ def _train(tmp_path, epochs, retrieval=None, **task_kw):
     return task, dm, res
 
 
+@pytest.mark.slow  # about 35 s on 2 shared cores; the unmarked twin below checks the wiring in a few seconds
 def test_short_training_beats_posed_input_on_held_out_subjects_and_poses(tmp_path, one_thread):
     t0 = time.time()
     task, dm, res = _train(tmp_path, epochs=20, mask_loss="bce",
@@ -43,6 +44,26 @@ def test_short_training_beats_posed_input_on_held_out_subjects_and_poses(tmp_pat
         assert 0 <= res[f"test/retrieval/{src}/dcg"] <= 1
     assert task.loss_alpha == 1000 and task.loss_beta == 100  # last phase reached
     print(f"train+test {time.time() - t0:.0f}s: {res}")
+
+
+def test_tiny_run_logs_unet_and_mesh_baselines_beside_the_model(tmp_path, one_thread):
+    """Fast twin of the test above: two epochs at 32^2 with the U-Net trained in the same run and the
+    non-learned mesh baselines computed at test time; checks what is logged, not the quality."""
+    task, dm, res = _train(tmp_path, epochs=2, size=32, n=6, mesh_resolution=20, mask_loss="bce",
+                           retrieval={"level": 0, "view_size": 32, "vocab": 16, "dense_step": 6},
+                           unet_baseline=True, mesh_baselines=["cmds", "smacof", "gps", "posed"],
+                           baseline_max_vertices=200)
+    assert task.unet is not None and type(task.unet).__name__ == "UNet"
+    for k in ("depth_mse", "iou", "depth_mse_input", "iou_input", "depth_mse_unet", "iou_unet"):
+        assert torch.isfinite(torch.tensor(res[f"test/{k}"])), k
+    for src in ("model", "unet", "input", "target", "chance", "cmds", "smacof", "gps", "posed"):
+        for k in ("nn", "ft", "st", "e", "dcg"):
+            assert 0 <= res[f"test/retrieval/{src}/{k}"] <= 1, (src, k)
+    assert res["test/retrieval/target/nn"] >= res["test/retrieval/chance/nn"]
+    assert res["test/retrieval/cmds/seconds"] > 0
+    # the mesh baselines rank one item per unique test (subject, pose)
+    n_shapes = len({(r["subject"], r["pose"]) for r in dm.splits["test"]})
+    assert task.retrieval_results["cmds"]["n_queries"] <= n_shapes
 
 
 def test_config_builds_task_and_data(compose_cfg):

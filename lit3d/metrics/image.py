@@ -93,6 +93,22 @@ def separable_filter(x: torch.Tensor, taps: torch.Tensor, padding: str = "symmet
     return ah @ x @ aw.transpose(0, 1)
 
 
+def halve(x: torch.Tensor) -> torch.Tensor:
+    """2x2 mean pooling of ``(..., 2h, 2w)`` (as ``F.avg_pool2d(x, 2)``, about 4x faster on CPU)."""
+    h, w = x.shape[-2] // 2 * 2, x.shape[-1] // 2 * 2
+    x = x[..., :h, :w]
+    return (x[..., 0::2, 0::2] + x[..., 1::2, 0::2] + x[..., 0::2, 1::2] + x[..., 1::2, 1::2]) * 0.25
+
+
+def zero_window(x: torch.Tensor, origin: tuple[int, int], rows: tuple[int, int], cols: tuple[int, int]) -> torch.Tensor:
+    """Rows ``[r0, r1)`` and columns ``[c0, c1)`` of a canvas that equals ``x`` ``(..., h, w)``
+    placed with its top-left pixel at ``origin = (y0, x0)`` and is 0 everywhere else."""
+    y0, x0 = origin
+    h, w = x.shape[-2:]
+    (r0, r1), (c0, c1) = rows, cols
+    return F.pad(x, (x0 - c0, c1 - (x0 + w), y0 - r0, r1 - (y0 + h)))  # negative pads crop
+
+
 # ---------------------------------------------------------------------- SSIM
 def _ssim_parts(a: torch.Tensor, b: torch.Tensor, window_size: int, sigma: float, data_range: float,
                 k1: float, k2: float, padding: str) -> tuple[torch.Tensor, torch.Tensor]:
@@ -139,8 +155,9 @@ def _as_mask(m: torch.Tensor) -> torch.Tensor:
 
 def erode3x3(mask: torch.Tensor) -> torch.Tensor:
     """Pixels whose whole 3x3 neighbourhood is in ``mask`` (outside the image counts as background)."""
-    m = _as_mask(mask).float()
-    return (-F.max_pool2d(-F.pad(m, (1, 1, 1, 1), value=0.0), 3, stride=1)) > 0.5
+    p = F.pad(_as_mask(mask).to(torch.uint8), (1, 1, 1, 1))
+    r = p[..., :-2, :] & p[..., 1:-1, :] & p[..., 2:, :]
+    return (r[..., :-2] & r[..., 1:-1] & r[..., 2:]).bool()
 
 
 def mask_ssim(a: torch.Tensor, b: torch.Tensor, mask_a: torch.Tensor, mask_b: torch.Tensor,
@@ -219,7 +236,7 @@ def _boxed_means(x: torch.Tensor, y: torch.Tensor, box, window_size: int, sigma:
 
 def ms_ssim(a: torch.Tensor, b: torch.Tensor, weights=MS_SSIM_WEIGHTS, window_size: int = 11,
             sigma: float = 1.5, data_range: float = 1.0, k1: float = 0.01, k2: float = 0.03,
-            padding: str = "valid", cs0: torch.Tensor | None = None, box=None) -> torch.Tensor:
+            padding: str = "valid", cs0: torch.Tensor | None = None, box=None, crop=None) -> torch.Tensor:
     """Multi-scale SSIM per image ``(B,)`` (Wang, Simoncelli & Bovik 2003).
 
     Scale ``j`` contributes ``mean(cs_j) ** w_j`` (``mean(l * cs) ** w`` at the last
@@ -231,10 +248,14 @@ def ms_ssim(a: torch.Tensor, b: torch.Tensor, weights=MS_SSIM_WEIGHTS, window_si
 
     Shortcuts (same result): ``cs0`` is the already known scale-0 mean
     contrast-structure ``(B,)``; ``box = (y0, y1, x0, x1)`` says both images are 0
-    outside it (not with ``padding="valid"``), so filtering is done near the box only.
+    outside it (not with ``padding="valid"``), so filtering is done near the box only;
+    ``crop = (y0, x0, H, W)`` says ``a``, ``b`` are only the window at ``(y0, x0)`` of
+    ``H x W`` canvases that are 0 outside it (the result is that of the full canvases).
     """
-    if box is not None and padding == "valid":
-        raise ValueError("box shortcut needs a same-size padding, not 'valid'")
+    if (box is not None or crop is not None) and padding == "valid":
+        raise ValueError("box/crop shortcut needs a same-size padding, not 'valid'")
+    if crop is not None:
+        return _ms_ssim_crop(a, b, crop, weights, window_size, sigma, data_range, k1, k2, padding, cs0)
     w = torch.tensor(weights, dtype=torch.float32, device=a.device)
     size = min(a.shape[-2:])
     scales = len(weights)
@@ -259,8 +280,59 @@ def ms_ssim(a: torch.Tensor, b: torch.Tensor, weights=MS_SSIM_WEIGHTS, window_si
     return torch.prod(v ** w, dim=1)
 
 
+def _ms_scales(size: int, weights, window_size: int, device) -> tuple[int, torch.Tensor]:
+    w = torch.tensor(weights, dtype=torch.float32, device=device)
+    scales = len(weights)
+    while scales > 1 and size < (window_size - 1) * 2 ** (scales - 1) + 1:
+        scales -= 1
+    return scales, w[:scales] / w[:scales].sum()
+
+
+def _ms_ssim_crop(a, b, crop, weights, window_size, sigma, data_range, k1, k2, padding, cs0):
+    """:func:`ms_ssim` of canvases given by their non-zero window (see ``crop`` there).
+
+    The crop is halved between scales (zero-padded to an even origin and size, so its
+    pixels are the canvas pyramid's); scale ``j`` filters only the crop's footprint
+    ``+ radius + 1`` (clipped to the floor-size canvas of that scale); the other
+    pixels see only zeros in both images and have ``l = cs = 1`` exactly.
+    """
+    y0, x0, hh, ww = (int(v) for v in crop)
+    scales, wt = _ms_scales(min(hh, ww), weights, window_size, a.device)
+    m = (window_size - 1) // 2 + 1
+    x, y = a.float(), b.float()
+    vals = []
+    for j in range(scales):
+        if j > 0:  # halve the crop itself, first aligning its origin and size to even
+            py, px = y0 % 2, x0 % 2
+            h, w = x.shape[-2:]
+            pad = (px, (w + px) % 2, py, (h + py) % 2)
+            if any(pad):
+                x, y = F.pad(x, pad), F.pad(y, pad)
+            x, y = halve(x), halve(y)
+            y0, x0 = (y0 - py) // 2, (x0 - px) // 2
+        if j == 0 and cs0 is not None and scales > 1:
+            vals.append(cs0)
+            continue
+        f = 2**j
+        h, w = x.shape[-2:]
+        hj, wj = hh // f, ww // f  # floor sizes of repeated halving
+        r0, r1 = max(y0 - m, 0), min(y0 + h + m, hj)
+        c0, c1 = max(x0 - m, 0), min(x0 + w + m, wj)
+        xs = zero_window(x, (y0, x0), (r0, r1), (c0, c1))
+        ys = zero_window(y, (y0, x0), (r0, r1), (c0, c1))
+        lum, cs = _ssim_parts(xs, ys, window_size, sigma, data_range, k1, k2, padding)
+        total = float(hj * wj)
+        outside = total - float((r1 - r0) * (c1 - c0))
+        if j == scales - 1:
+            vals.append(((lum * cs).flatten(1).sum(1) + outside) / total)
+        else:
+            vals.append((cs.flatten(1).sum(1) + outside) / total)
+    v = torch.stack(vals, 1).clamp_min(0.0)
+    return torch.prod(v**wt, dim=1)
+
+
 # ---------------------------------------------------------------------- FSIM
-@functools.lru_cache(maxsize=8)
+@functools.lru_cache(maxsize=64)
 def _fsim_filters(h: int, w: int, device: str, nscale: int = 4, norient: int = 4, min_wavelength: float = 6.0,
                   mult: float = 2.0, sigma_onf: float = 0.55, d_theta_on_sigma: float = 1.2):
     """Log-Gabor filter bank ``(O, S, H, W)`` and the per-orientation noise constants."""
@@ -298,33 +370,70 @@ def _fsim_filters(h: int, w: int, device: str, nscale: int = 4, norient: int = 4
     return bank, torch.tensor(em_n), torch.tensor(sum_an2), torch.tensor(sum_aiaj)
 
 
-def phase_congruency(img: torch.Tensor, k: float = 2.0, eps: float = 1e-4) -> torch.Tensor:
-    """Phase congruency ``(B, H, W)`` of grey images ``(B, H, W)`` (Kovesi; FSIM's ``phasecong2``)."""
+def phase_congruency(img: torch.Tensor, k: float = 2.0, eps: float = 1e-4,
+                     full_pixels: int | None = None) -> torch.Tensor:
+    """Phase congruency ``(B, H, W)`` of grey images ``(B, H, W)`` (Kovesi; FSIM's ``phasecong2``).
+
+    Per orientation: ``E = |sum_s eo_s| - sum_s |Im(eo_s conj(m))|`` with ``m`` the unit
+    mean phase (the same value as the MATLAB loop, in fewer passes), noise threshold
+    ``T`` from the median of the smallest-scale energy, ``PC = sum_o (E - T)+ / sum_o,s |eo|``.
+
+    ``full_pixels``: ``img`` is a crop of a larger canvas of this many pixels whose
+    responses outside the crop are taken as 0; the noise median is then that of the
+    whole canvas (rank shifted by the number of outside pixels; 0 when they are the
+    majority, which skips the selection).
+    """
     bsz, h, w = img.shape
     bank, em_n, sum_an2, sum_aiaj = _fsim_filters(h, w, str(img.device))
+    n = h * w
+    rank = (n + 1) // 2 if full_pixels is None else (int(full_pixels) + 1) // 2 - (int(full_pixels) - n)
     spec = torch.fft.fft2(img.float())
-    energy_all = torch.zeros_like(img, dtype=torch.float32)
+    energy_all = torch.zeros(bsz, h, w, dtype=torch.float32, device=img.device)
     an_all = torch.zeros_like(energy_all)
     for o in range(bank.shape[0]):
         eo = torch.fft.ifft2(spec[:, None] * bank[o][None])  # (B, S, H, W) complex
-        e, od, an = eo.real, eo.imag, eo.abs()
-        sum_e, sum_o = e.sum(1), od.sum(1)
-        xenergy = torch.sqrt(sum_e**2 + sum_o**2) + eps
-        mean_e, mean_o = sum_e / xenergy, sum_o / xenergy
-        energy = (e * mean_e[:, None] + od * mean_o[:, None] - (e * mean_o[:, None] - od * mean_e[:, None]).abs()).sum(1)
-        a2 = an[:, 0].flatten(1) ** 2
-        median = a2.kthvalue((a2.shape[1] + 1) // 2, dim=1).values  # MATLAB median (odd) / lower middle
-        mean_e2n = -median / math.log(0.5)
-        noise_power = mean_e2n / float(em_n[o])
-        est_noise2 = 2 * noise_power * float(sum_an2[o]) + 4 * noise_power * float(sum_aiaj[o])
-        tau = torch.sqrt(est_noise2 / 2)
-        t = (tau * math.sqrt(math.pi / 2) + k * torch.sqrt((2 - math.pi / 2) * tau**2)) / 1.7
-        energy_all += (energy - t[:, None, None]).clamp_min(0.0)
+        e, od = eo.real, eo.imag
+        an = torch.addcmul(e * e, od, od).sqrt_()  # |eo|, faster than complex abs
+        sum_eo = eo.sum(1)
+        xe = sum_eo.abs()
+        den = xe + eps
+        mean_e, mean_o = sum_eo.real / den, sum_eo.imag / den
+        # sum_s (e me + o mo) = |sum eo|^2 / (|sum eo| + eps); deviation term per scale
+        dev = torch.addcmul(od * mean_e[:, None], e, mean_o[:, None], value=-1.0).abs_().sum(1)
+        energy = xe * xe / den - dev
+        if rank >= 1:
+            a2 = an[:, 0].flatten(1).square()
+            median = a2.kthvalue(rank, dim=1).values  # MATLAB median (odd) / lower middle
+            mean_e2n = -median / math.log(0.5)
+            noise_power = mean_e2n / float(em_n[o])
+            est_noise2 = 2 * noise_power * float(sum_an2[o]) + 4 * noise_power * float(sum_aiaj[o])
+            tau = torch.sqrt(est_noise2 / 2)
+            t = (tau * math.sqrt(math.pi / 2) + k * torch.sqrt((2 - math.pi / 2) * tau**2)) / 1.7
+            energy = energy - t[:, None, None]
+        energy_all += energy.clamp_min_(0.0)
         an_all += an.sum(1)
     return energy_all / an_all.clamp_min(1e-12)
 
 
-def fsim(a: torch.Tensor, b: torch.Tensor, data_range: float = 1.0, downsample: int | None = None) -> torch.Tensor:
+FSIM_CROP_MARGIN = 8  # pixels at FSIM resolution around the foreground crop
+
+
+def _fsim_region(origin, hw, canvas, f: int, margin: int, multiple: int = 8):
+    """FSIM-resolution rows/cols ``[(r0, r1), (c0, c1)]`` covering a crop plus ``margin`` (clipped)."""
+    lo = (f - 1) // 2
+    out = []
+    for o, n, full in zip(origin, hw, canvas):
+        size = -(-full // f)
+        a0, a1 = max((o + lo) // f - margin, 0), min(-(-(o + n + lo) // f) + margin, size)
+        want = min(-(-(a1 - a0) // multiple) * multiple, size)  # round up: fewer filter banks
+        a1 = min(a0 + want, size)
+        a0 = a1 - want
+        out.append((a0, a1))
+    return out
+
+
+def fsim(a: torch.Tensor, b: torch.Tensor, data_range: float = 1.0, downsample: int | None = None,
+         crop=None, margin: int = FSIM_CROP_MARGIN) -> torch.Tensor:
     """Grey-level FSIM per image ``(B,)`` (Zhang et al. 2011), our own torch implementation.
 
     Follows the authors' MATLAB ``FeatureSIM``: images scaled to 0..255, averaged and
@@ -332,17 +441,43 @@ def fsim(a: torch.Tensor, b: torch.Tensor, data_range: float = 1.0, downsample: 
     congruency from a 4-scale x 4-orientation log-Gabor bank, Scharr gradients,
     ``T1 = 0.85``, ``T2 = 160``. Channels are averaged to grey first. Two flat
     images (no phase congruency anywhere) give 1.
+
+    ``crop = (y0, x0, H, W)``: ``a``, ``b`` are the window at ``(y0, x0)`` of ``H x W``
+    canvases that are 0 outside it (rendered views on a black background). Then FSIM
+    is computed on the window's footprint at FSIM resolution plus ``margin`` pixels
+    (rounded up to a multiple of 8, clipped to the canvas) — an approximation of the
+    full-canvas value: the log-Gabor responses are those of the (periodic) crop, phase
+    congruency outside it counts as 0 (far from the shape the responses are tiny and
+    their PC ratio is noise; the full-canvas value drifts with the amount of empty
+    background, like plain SSIM), and the noise threshold uses the full canvas's
+    median (see :func:`phase_congruency`). The subsampling and gradients are exact.
     """
-    x = a.float().mean(1) * (255.0 / data_range)
-    y = b.float().mean(1) * (255.0 / data_range)
-    f = max(1, round(min(x.shape[-2:]) / 256)) if downsample is None else int(downsample)
-    if f > 1:
-        # MATLAB: conv2(Y, ones(F)/F^2, 'same') then Y(1:F:end, 1:F:end)
-        def sub(z):
-            zp = F.pad(z[:, None], ((f - 1) // 2, f // 2, (f - 1) // 2, f // 2))
-            return F.avg_pool2d(zp, f, stride=1, divisor_override=f * f)[:, 0, ::f, ::f]
-        x, y = sub(x), sub(y)
-    pc = phase_congruency(torch.cat([x, y]))
+    f = None if downsample is None else int(downsample)
+    if crop is None:
+        h, w = a.shape[-2:]
+        origin, canvas = (0, 0), (h, w)
+    else:
+        origin, canvas = (int(crop[0]), int(crop[1])), (int(crop[2]), int(crop[3]))
+    if f is None:
+        f = max(1, round(min(canvas) / 256))
+    x = a.float().mean(1, keepdim=True) * (255.0 / data_range)
+    y = b.float().mean(1, keepdim=True) * (255.0 / data_range)
+    full_pixels = None
+    if crop is not None or f > 1:
+        # MATLAB: conv2(Y, ones(F)/F^2, 'same') then Y(1:F:end, 1:F:end) = F x F block means
+        # of rows/cols starting at i F - (F - 1) // 2 (zero outside the canvas)
+        rows, cols = _fsim_region(origin, x.shape[-2:], canvas, f, margin if crop is not None else 10**9)
+        lo = (f - 1) // 2
+        rr, cc = (rows[0] * f - lo, rows[1] * f - lo), (cols[0] * f - lo, cols[1] * f - lo)
+        x, y = zero_window(x, origin, rr, cc), zero_window(y, origin, rr, cc)
+        if f == 2:
+            x, y = halve(x), halve(y)
+        elif f > 2:
+            x, y = F.avg_pool2d(x, f), F.avg_pool2d(y, f)
+        if crop is not None:
+            full_pixels = (-(-canvas[0] // f)) * (-(-canvas[1] // f))
+    x, y = x[:, 0], y[:, 0]
+    pc = phase_congruency(torch.cat([x, y]), full_pixels=full_pixels)
     pc1, pc2 = pc.chunk(2)
     g = torch.cat([x, y])[:, None]
     gp = F.pad(g, (1, 1, 1, 1))  # conv2 'same' zero padding
@@ -391,6 +526,20 @@ def sre(a: torch.Tensor, b: torch.Tensor, max_db: float = PSNR_MAX_DB) -> torch.
     return val.clamp(-max_db, max_db)
 
 
+def _blur5(x: torch.Tensor) -> torch.Tensor:
+    """5-tap Gaussian (sigma 1) along H and W with reflect border, as shifted slices."""
+    h, w = x.shape[-2:]
+    k = gaussian_kernel1d(5, 1.0).tolist()
+    if min(h, w) < 3:
+        return separable_filter(x, gaussian_kernel1d(5, 1.0), "reflect")
+    p = F.pad(x, (2, 2, 2, 2), mode="reflect")
+    r = torch.add(p[..., 0:h, :], p[..., 4:h + 4, :]).mul_(k[0])
+    r.add_(torch.add(p[..., 1:h + 1, :], p[..., 3:h + 3, :]), alpha=k[1]).add_(p[..., 2:h + 2, :], alpha=k[2])
+    c = torch.add(r[..., 0:w], r[..., 4:w + 4]).mul_(k[0])
+    return c.add_(torch.add(r[..., 1:w + 1], r[..., 3:w + 3]), alpha=k[1]).add_(r[..., 2:w + 2], alpha=k[2])
+
+
+
 def canny_edges(img: torch.Tensor, low: float = 0.1, high: float = 0.2, hysteresis: bool = True) -> torch.Tensor:
     """Canny edge map ``(B, 1, H, W) bool`` of grey images ``(B, 1, H, W)``.
 
@@ -398,44 +547,45 @@ def canny_edges(img: torch.Tensor, low: float = 0.1, high: float = 0.2, hysteres
     sigma 1 and reflect border, unnormalised Sobel (as kornia 0.9: thresholds in its units)
     with replicate border, 8-direction
     non-maximum suppression with kornia's tie rule, double threshold, hysteresis
-    over 8-neighbours) but with matrix-product blurring and shifted slices, which is
-    several times faster on CPU. Agreement with kornia is checked in the tests.
+    over 8-neighbours) but several times faster on CPU: blurring and Sobel as shifted
+    slices, the direction from comparisons instead of ``atan2``, hysteresis by connected
+    components. Agreement with kornia is checked in the tests.
     """
     x = img.float()
     if x.shape[1] != 1:
         x = x.mean(1, keepdim=True)
-    x = separable_filter(x, gaussian_kernel1d(5, 1.0), "reflect")
+    x = _blur5(x)
     p = F.pad(x, (1, 1, 1, 1), mode="replicate")
     h, w = x.shape[-2:]
 
-    def s(dy, dx):
-        return p[..., 1 + dy: 1 + dy + h, 1 + dx: 1 + dx + w]
-
-    gx = (s(-1, 1) - s(-1, -1)) + 2 * (s(0, 1) - s(0, -1)) + (s(1, 1) - s(1, -1))
-    gy = (s(1, -1) - s(-1, -1)) + 2 * (s(1, 0) - s(-1, 0)) + (s(1, 1) - s(-1, 1))
+    # separable Sobel: gx = [1 2 1]^T (x) [-1 0 1], gy = [-1 0 1]^T (x) [1 2 1]
+    t = torch.add(p[..., 0:h, :], p[..., 2:h + 2, :]).add_(p[..., 1:h + 1, :], alpha=2.0)
+    gx = t[..., 2:] - t[..., :-2]
+    u = torch.add(p[..., 0:w], p[..., 2:w + 2]).add_(p[..., 1:w + 1], alpha=2.0)
+    gy = u[..., 2:, :] - u[..., :-2, :]
     eps = 1e-6
-    mag = torch.sqrt(gx * gx + gy * gy + eps)
-    mp = F.pad(mag, (1, 1, 1, 1), value=math.sqrt(eps))
-    d = torch.remainder(torch.round(torch.nan_to_num(torch.atan2(gy, gx)) * (4 / math.pi)), 8).long()
-    offs = ((0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1), (-1, 0), (-1, 1))
-    keep = torch.zeros_like(mag, dtype=torch.bool)
-    for k in range(4):  # direction pair (k, k + 4)
-        sel = (d == k) | (d == k + 4)
-        if not bool(sel.any()):
-            continue
-        (dy1, dx1), (dy2, dx2) = offs[k], offs[k + 4]
-        n1 = mp[..., 1 + dy1: 1 + dy1 + h, 1 + dx1: 1 + dx1 + w]
-        n2 = mp[..., 1 + dy2: 1 + dy2 + h, 1 + dx2: 1 + dx2 + w]
-        # kornia compares with the neighbour at offs[d] and at offs[(d + 4) % 8]; only
-        # directions 0 and 2 accept a tie. Both members of the pair (k, k + 4) reduce to:
-        ok = ((mag >= n1) if k in (0, 2) else (mag > n1)) & (mag > n2)
-        keep |= sel & ok
-    keep &= mag > math.sqrt(eps)
-    mag = mag * keep
-    strong = mag > high
+    mag = torch.addcmul(gx * gx, gy, gy).add_(eps).sqrt_()
+    mp = F.pad(mag, (1, 1, 1, 1), value=math.sqrt(eps))  # kornia: zero-padded conv of mag
+
+    def nb(dy, dx):
+        return mp[..., 1 + dy: 1 + dy + h, 1 + dx: 1 + dx + w]
+
+    # kornia quantises atan2(gy, gx) to 8 directions d = round(angle / 45 deg) mod 8 and
+    # compares with the neighbours at offsets d and d + 4; only d = 0, 2 (and their
+    # opposites) accept a tie with the first. The line k = d mod 4 follows from comparisons
+    # (no atan2): k = 0 within 22.5 deg of the x axis, 2 of the y axis, else 1 / 3 by sign.
+    ax, ay = gx.abs(), gy.abs()
+    tan22 = math.tan(math.pi / 8)
+    m0 = (mag >= nb(0, 1)) & (mag > nb(0, -1))
+    m2 = (mag >= nb(1, 0)) & (mag > nb(-1, 0))
+    m1 = mag > torch.maximum(nb(1, 1), nb(-1, -1))
+    m3 = mag > torch.maximum(nb(1, -1), nb(-1, 1))
+    keep = torch.where(ay <= tan22 * ax, m0,
+                       torch.where(ax <= tan22 * ay, m2, torch.where((gx * gy) > 0, m1, m3)))
+    cand = keep & (mag > max(low, math.sqrt(eps)))
+    strong = keep & (mag > max(high, math.sqrt(eps)))
     if not hysteresis:
-        return strong | (mag > low)
-    cand = mag > low
+        return strong | cand
     return _hysteresis(strong, cand)
 
 

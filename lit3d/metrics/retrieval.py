@@ -31,16 +31,10 @@ def _expected_gains(d: np.ndarray, rel: np.ndarray) -> np.ndarray:
     """Expected G_i at each rank (ties share their hits evenly). ``d``, ``rel``: (n-1,)."""
     order = np.argsort(d, kind="stable")
     ds, rs = d[order], rel[order].astype(float)
-    g = np.empty_like(rs)
-    start = 0
-    n = len(ds)
-    while start < n:
-        end = start + 1
-        while end < n and ds[end] == ds[start]:
-            end += 1
-        g[start:end] = rs[start:end].mean()
-        start = end
-    return g
+    if len(ds) == 0:
+        return rs
+    group = np.cumsum(np.r_[True, ds[1:] != ds[:-1]]) - 1  # runs of equal distances
+    return (np.bincount(group, weights=rs) / np.bincount(group))[group]
 
 
 def retrieval_scores(dist, labels: Sequence) -> dict[str, float]:
@@ -55,6 +49,9 @@ def retrieval_scores(dist, labels: Sequence) -> dict[str, float]:
         raise ValueError("distance matrix contains NaN")
     sums = dict.fromkeys(KEYS, 0.0)
     count = 0
+    k = min(E_K, n - 1)
+    disc = np.ones(max(n - 1, 0))
+    disc[1:] = 1.0 / np.log2(np.arange(2, n))
     for q in range(n):
         others = np.arange(n) != q
         rel = labels[others] == labels[q]
@@ -62,9 +59,6 @@ def retrieval_scores(dist, labels: Sequence) -> dict[str, float]:
         if r == 0:
             continue
         g = _expected_gains(dist[q, others], rel)
-        k = min(E_K, n - 1)
-        disc = np.ones(n - 1)
-        disc[1:] = 1.0 / np.log2(np.arange(2, n))
         sums["nn"] += g[0]
         sums["ft"] += g[:r].sum() / r
         sums["st"] += g[: 2 * r].sum() / r

@@ -37,7 +37,7 @@ from lit3d.render.convert import mesh_hash, to_mesh
 from lit3d.render.gbuffer import RenderConfig, render_gbuffers
 from lit3d.render.styles import apply_styles, resolve_styles
 
-FEATURE_VERSION = 1
+FEATURE_VERSION = 2
 IMAGE_MEASURES = ("mask_ssim", "mask_ssim_window", "mask_ssim_negative", "mask_ssim_merge", "ssim",
                   "ms_ssim", "fsim", "mse", "rmse", "psnr", "canny", "sre")
 MESH_MEASURES = ("chamfer", "hausdorff")
@@ -55,7 +55,7 @@ class FeatureConfig:
         mesh_measures: include Chamfer/Hausdorff.
         n_samples: surface samples per mesh for the 3-D measures.
         fsim_downsample: FSIM image reduction factor (2: 256 px renders -> 128 px).
-        chunk: images per batched measure call (memory bound; 0 = all at once).
+        chunk: styles per batched measure call (memory bound; 0 = all styles of a view at once).
     """
 
     render: RenderConfig = field(default_factory=RenderConfig)
@@ -64,7 +64,7 @@ class FeatureConfig:
     mesh_measures: bool = True
     n_samples: int = 20000
     fsim_downsample: int = 2
-    chunk: int = 24
+    chunk: int = 32
 
     def resolved_styles(self) -> list[str]:
         return resolve_styles(list(self.styles) if self.styles else None)
@@ -120,61 +120,82 @@ def _crop_box(masks: torch.Tensor, margin: int) -> tuple[int, int, int, int]:
             max(int(cols[0]) - margin, 0), min(int(cols[-1]) + margin + 1, w))
 
 
-def image_measures(a: torch.Tensor, b: torch.Tensor, mask_a: torch.Tensor, mask_b: torch.Tensor,
-                   measures=IMAGE_MEASURES, fsim_downsample: int = 2, crop: bool = True) -> dict[str, torch.Tensor]:
-    """Every image measure for a batch of grey image pairs.
+def pair_measures(a: torch.Tensor, b: torch.Tensor, mask_a: torch.Tensor, mask_b: torch.Tensor,
+                  crop: tuple[int, int, int, int], measures=IMAGE_MEASURES,
+                  fsim_downsample: int = 2) -> dict[str, torch.Tensor]:
+    """Every image measure for a batch of grey image pairs given as crops of larger canvases.
 
     Args:
-        a, b: ``(N, 1, H, W) float32`` reference and distorted images in ``[0, 1]``
-            (black background outside the masks).
-        mask_a, mask_b: ``(N, 1, H, W) bool`` foreground masks.
+        a, b: ``(N, 1, h, w) float32`` in ``[0, 1]``: the window at ``(y0, x0)`` of
+            ``H x W`` canvases that are 0 (black background) outside it.
+        mask_a, mask_b: ``(N, 1, h, w)`` or ``(1, 1, h, w)`` (shared by the batch) bool
+            foreground, inside the window; each mask
+            must be at least ``_CROP_MARGIN`` pixels from a window side that is not a
+            canvas side (the SSIM, error and Canny values are then exactly those of the
+            full canvases).
+        crop: ``(y0, x0, H, W)``.
         measures: subset of :data:`IMAGE_MEASURES`.
-        crop: use the exact bounding-box shortcut (see the module doc).
+        fsim_downsample: FSIM resolution factor (see :func:`lit3d.metrics.image.fsim`,
+            whose ``crop`` form is an approximation of the full-canvas FSIM).
 
     Returns:
         ``{measure: (N,) float32}``.
     """
     want = set(measures)
     out: dict[str, torch.Tensor] = {}
-    h, w = a.shape[-2:]
-    total = float(h * w)
-    box = None
-    if crop:
-        box = _crop_box(torch.cat([mask_a, mask_b]), 0)
-        y0, y1, x0, x1 = (max(box[0] - _CROP_MARGIN, 0), min(box[1] + _CROP_MARGIN, h),
-                          max(box[2] - _CROP_MARGIN, 0), min(box[3] + _CROP_MARGIN, w))
-        ca, cb = a[..., y0:y1, x0:x1], b[..., y0:y1, x0:x1]
-        cma, cmb = mask_a[..., y0:y1, x0:x1], mask_b[..., y0:y1, x0:x1]
-    else:
-        ca, cb, cma, cmb = a, b, mask_a, mask_b
-    outside = total - float(ca.shape[-1] * ca.shape[-2])
+    y0, x0, hh, ww = (int(v) for v in crop)
+    total = float(hh * ww)
+    outside = total - float(a.shape[-1] * a.shape[-2])
     need_map = want & {"mask_ssim", "mask_ssim_window", "mask_ssim_negative", "mask_ssim_merge", "ssim", "ms_ssim"}
     cs0 = None
     if need_map:
-        lum, cs = im._ssim_parts(ca, cb, 11, 1.5, 1.0, 0.01, 0.03, "symmetric")
-        smap = lum * cs
-        ms = im.mask_ssim_all(ca, cb, cma, cmb, smap=smap)
+        lum, cs = im._ssim_parts(a, b, 11, 1.5, 1.0, 0.01, 0.03, "symmetric")
+        smap = lum.mul_(cs)
+        ms = im.mask_ssim_all(a, b, mask_a, mask_b, smap=smap)
         ms["ssim"] = (smap.flatten(1).sum(1) + outside) / total
         cs0 = (cs.flatten(1).sum(1) + outside) / total
         out.update({k: v for k, v in ms.items() if k in want})
         del lum, cs, smap
     if "ms_ssim" in want:
-        out["ms_ssim"] = im.ms_ssim(a, b, padding="symmetric", cs0=cs0, box=box)
+        out["ms_ssim"] = im.ms_ssim(a, b, padding="symmetric", cs0=cs0, crop=crop)
     if "fsim" in want:
-        out["fsim"] = im.fsim(a, b, downsample=fsim_downsample)
+        out["fsim"] = im.fsim(a, b, downsample=fsim_downsample, crop=crop)
     if want & {"mse", "rmse", "psnr", "sre"}:
-        err = ((ca - cb) ** 2).flatten(1).sum(1) / total
-        mu2 = (ca.flatten(1).sum(1) / total) ** 2
+        err = ((a - b) ** 2).flatten(1).sum(1) / total
+        mu2 = (a.flatten(1).sum(1) / total) ** 2
         vals = {"mse": err, "rmse": err.sqrt(),
                 "psnr": (10.0 * torch.log10(1.0 / err.clamp_min(1e-30))).clamp(max=im.PSNR_MAX_DB),
                 "sre": (10.0 * torch.log10(mu2.clamp_min(1e-30) / err.clamp_min(1e-30))).clamp(
                     -im.PSNR_MAX_DB, im.PSNR_MAX_DB)}
         out.update({k: v for k, v in vals.items() if k in want})
     if "canny" in want:
-        ea = im.canny_edges(ca)
-        eb = im.canny_edges(cb)
+        e = im.canny_edges(torch.cat([a, b]))
+        ea, eb = e.chunk(2)
         out["canny"] = (ea ^ eb).float().flatten(1).sum(1) / total
     return out
+
+
+def image_measures(a: torch.Tensor, b: torch.Tensor, mask_a: torch.Tensor, mask_b: torch.Tensor,
+                   measures=IMAGE_MEASURES, fsim_downsample: int = 2, crop: bool = True) -> dict[str, torch.Tensor]:
+    """Every image measure for a batch of grey full-canvas image pairs.
+
+    Args:
+        a, b: ``(N, 1, H, W) float32`` reference and distorted images in ``[0, 1]``
+            (black background outside the masks).
+        mask_a, mask_b: ``(N, 1, H, W) bool`` foreground masks.
+        measures: subset of :data:`IMAGE_MEASURES`.
+        crop: use the bounding-box shortcut (see the module doc): exact for every
+            measure but FSIM, whose crop form is an approximation.
+
+    Returns:
+        ``{measure: (N,) float32}``.
+    """
+    h, w = a.shape[-2:]
+    if not crop:
+        return pair_measures(a, b, mask_a, mask_b, (0, 0, h, w), measures, fsim_downsample)
+    y0, y1, x0, x1 = _crop_box(torch.cat([mask_a, mask_b]), _CROP_MARGIN)
+    return pair_measures(a[..., y0:y1, x0:x1], b[..., y0:y1, x0:x1], mask_a[..., y0:y1, x0:x1],
+                         mask_b[..., y0:y1, x0:x1], (y0, x0, h, w), measures, fsim_downsample)
 
 
 def content_key(ref_hash: str, dist_hash: str, cfg: FeatureConfig) -> str:
@@ -241,29 +262,37 @@ def feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_dir: str
         except (OSError, ValueError, KeyError):
             pass  # unreadable cache entry: recompute and overwrite
     names = cfg.resolved_styles()
-    va = render_views(mref, cfg, device)
-    vb = render_views(mdist, cfg, device)
+    gba = render_gbuffers(mref, cfg.render)
+    gbb = render_gbuffers(mdist, cfg.render)
     feats: dict[str, float] = {}
     per_view: dict[str, np.ndarray] = {}
     for shading in cfg.render.shadings:
-        ia, ib = va.images[shading], vb.images[shading]  # (S, V, 1, H, W)
-        s, v = ia.shape[:2]
-        fa, fb = ia.reshape(s * v, *ia.shape[2:]), ib.reshape(s * v, *ib.shape[2:])
-        ma = va.masks[shading][None].expand(s, -1, -1, -1, -1).reshape(s * v, 1, *ia.shape[-2:])
-        mb = vb.masks[shading][None].expand(s, -1, -1, -1, -1).reshape(s * v, 1, *ia.shape[-2:])
-        step = cfg.chunk if cfg.chunk > 0 else s * v
-        parts: dict[str, list[torch.Tensor]] = {}
-        for i in range(0, s * v, step):
-            res = image_measures(fa[i:i + step], fb[i:i + step], ma[i:i + step], mb[i:i + step],
-                                 cfg.measures, cfg.fsim_downsample)
-            for k, t in res.items():
-                parts.setdefault(k, []).append(t.float().cpu())
-        for k, chunks in parts.items():
-            vals = torch.cat(chunks).view(s, v)
+        ga, gb = gba[shading], gbb[shading]
+        if device is not None:
+            ga, gb = ga.to(device), gb.to(device)
+        n_views, _, hh, ww = ga.mask.shape
+        parts: dict[str, torch.Tensor] = {}
+        for v in range(n_views):
+            y0, y1, x0, x1 = _crop_box(torch.cat([ga.mask[v:v + 1], gb.mask[v:v + 1]]), _CROP_MARGIN)
+            ma, mb = ga.mask[v:v + 1, :, y0:y1, x0:x1], gb.mask[v:v + 1, :, y0:y1, x0:x1]
+            # every style of this view, shaded on the view's crop only: (S, 1, h, w)
+            ia = apply_styles(ga.normals[v:v + 1, :, y0:y1, x0:x1], ma, names, grey=True)[:, 0]
+            ib = apply_styles(gb.normals[v:v + 1, :, y0:y1, x0:x1], mb, names, grey=True)[:, 0]
+            step = cfg.chunk if cfg.chunk > 0 else len(names)
+            for i in range(0, len(names), step):
+                j = min(i + step, len(names))
+                res = pair_measures(ia[i:j], ib[i:j], ma, mb, (y0, x0, hh, ww), cfg.measures,
+                                    cfg.fsim_downsample)
+                for k, t in res.items():
+                    parts.setdefault(k, torch.empty(len(names), n_views))[i:j, v] = t.float().cpu()
+        for k, vals in parts.items():
             for j, style in enumerate(names):
                 name = f"{k}/{style}/{shading}"
                 per_view[name] = vals[j].numpy()
                 feats[name] = float(vals[j].double().mean())
+    va = vb = None
+    if keep_views:
+        va, vb = render_views(mref, cfg, device), render_views(mdist, cfg, device)
     if cfg.mesh_measures:
         feats.update(chamfer_hausdorff(mref, mdist, cfg.n_samples))
     if path is not None:

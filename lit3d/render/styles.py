@@ -373,14 +373,25 @@ def _bake(names: tuple[str, ...], size: int, device: str) -> torch.Tensor:
     return torch.cat([STYLES[s](n).clamp(0.0, 1.0).float() for s in names], 0)  # (S, 3, T, T)
 
 
+@functools.lru_cache(maxsize=16)
+def _bake_grey(names: tuple[str, ...], size: int, device: str) -> torch.Tensor:
+    lut = _bake(names, size, device)
+    w = torch.tensor([0.299, 0.587, 0.114], device=lut.device).view(1, 3, 1, 1)
+    return (lut * w).sum(1, keepdim=True)
+
+
+@functools.lru_cache(maxsize=16)
+def _texel_table(names: tuple[str, ...], size: int, device: str, grey: bool) -> torch.Tensor:
+    """``(T * T, S * C)`` contiguous: one row per texel, so a look-up reads adjacent values."""
+    lut = _bake_grey(names, size, device) if grey else _bake(names, size, device)
+    return lut.flatten(0, 1).flatten(1).t().contiguous()
+
+
 def bake_luts(names: list[str] | None = None, size: int = LUT_SIZE, device=None, grey: bool = False) -> torch.Tensor:
     """MatCap images ``(S, 3, T, T)`` (``(S, 1, T, T)`` luma with ``grey``) of the named styles."""
     names = tuple(resolve_styles(names))
-    lut = _bake(names, size, str(torch.device(device) if device is not None else torch.device("cpu")))
-    if grey:
-        w = torch.tensor([0.299, 0.587, 0.114], device=lut.device).view(1, 3, 1, 1)
-        lut = (lut * w).sum(1, keepdim=True)
-    return lut
+    dev = str(torch.device(device) if device is not None else torch.device("cpu"))
+    return _bake_grey(names, size, dev) if grey else _bake(names, size, dev)
 
 
 def apply_styles(normals: torch.Tensor, mask: torch.Tensor, names: list[str] | None = None, *,
@@ -415,8 +426,9 @@ def apply_styles(normals: torch.Tensor, mask: torch.Tensor, names: list[str] | N
         return torch.stack(outs)
     if mode != "lut":
         raise ValueError(f"unknown style mode {mode!r}")
-    lut = bake_luts(names, lut_size, normals.device, grey)  # (S, C, T, T)
-    s, c, t = lut.shape[0], lut.shape[1], lut_size
+    c, t = (1 if grey else 3), lut_size
+    table = _texel_table(tuple(names), t, str(normals.device), grey)  # (T*T, S*C)
+    sc = table.shape[1]
     flat_mask = m.reshape(-1)  # (V*H*W,) foreground pixels only are looked up
     fg = flat_mask.nonzero().squeeze(1)
     nrm = normals[:, :2].permute(0, 2, 3, 1).reshape(-1, 2)[fg].float()
@@ -426,10 +438,10 @@ def apply_styles(normals: torch.Tensor, mask: torch.Tensor, names: list[str] | N
     fr = uv - i0
     i0 = i0.long()
     idx = i0[:, 1] * t + i0[:, 0]
-    fx, fy = fr[:, 0], fr[:, 1]
-    table = lut.reshape(s * c, t * t)
-    val = (table[:, idx] * ((1 - fx) * (1 - fy)) + table[:, idx + 1] * (fx * (1 - fy))
-           + table[:, idx + t] * ((1 - fx) * fy) + table[:, idx + t + 1] * (fx * fy))
-    out = torch.full((s * c, v * h * w), float(background), dtype=torch.float32, device=normals.device)
-    out[:, fg] = val
-    return out.view(s, c, v, h, w).transpose(1, 2)
+    fx, fy = fr[:, 0:1], fr[:, 1:2]
+    top = torch.lerp(table[idx], table[idx + 1], fx)  # (N, S*C) rows of adjacent texels
+    bot = torch.lerp(table[idx + t], table[idx + t + 1], fx)
+    val = torch.lerp(top, bot, fy)
+    out = torch.full((v * h * w, sc), float(background), dtype=torch.float32, device=normals.device)
+    out[fg] = val
+    return out.view(v, h, w, len(names), c).permute(3, 0, 4, 1, 2).contiguous()

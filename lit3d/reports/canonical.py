@@ -31,9 +31,16 @@ THESIS = {
         "Mesh Unfolding": (.88, .65, .86, .85), "Skeleton-based": (.78, .62, .85, .84), "Ours": (.91, .76, .80, .89)}),
 }
 ABLATION = {"Complete": (.91, .76, .80, .89), "without LFE": (.88, .62, .76, .84), "without MSFE": (.72, .48, .61, .73)}
-OURS = (("lit3d model (ours)", "model"), ("posed input, no canonicalisation (ours)", "input"),
-        ("true canonical depth, ceiling (ours)", "target"), ("classical MDS (ours)", "cmds"),
-        ("SMACOF (ours)", "smacof"), ("GPS (ours)", "gps"), ("chance: random distances (ours)", "chance"))
+OURS = (("lit3d model (ours)", "model"), ("plain U-Net, same data and losses (ours)", "unet"),
+        ("posed input depth, no canonicalisation (ours)", "input"),
+        ("true canonical depth, ceiling (ours)", "target"),
+        ("classical MDS, full mesh (ours)", "cmds"), ("SMACOF (least-squares MDS), full mesh (ours)", "smacof"),
+        ("non-metric MDS, full mesh (ours)", "nmds"), ("GPS, full mesh (ours)", "gps"),
+        ("posed full mesh, no canonicalisation (ours)", "posed"),
+        ("chance: random distances (ours)", "chance"))
+MESH_KEYS = ("cmds", "smacof", "nmds", "gps", "posed")
+# which thesis table a run's data belongs to (data.source)
+TABLE_OF_SOURCE = {"synth": "5.1", "shrec14": "5.1", "tosca": "5.3"}
 
 
 def retrieval_rows(metrics: dict) -> list[list[str]]:
@@ -46,29 +53,69 @@ def retrieval_rows(metrics: dict) -> list[list[str]]:
     return rows
 
 
+def _dataset_from_run_dir(out_dir: Path) -> str | None:
+    """``data.source`` from the run dir's config.yaml (written by lit3d-train / lit3d-eval), if any."""
+    path = Path(out_dir) / "config.yaml"
+    if not path.is_file():
+        return None
+    try:
+        import yaml
+
+        cfg = yaml.safe_load(path.read_text()) or {}
+        return (cfg.get("data") or {}).get("source")
+    except Exception:
+        return None
+
+
 def write_results(metrics: dict, out_dir: Path, dataset: str | None = None) -> Path:
-    """results.md: image metrics (model vs posed input), retrieval tables beside thesis tables 5.1-5.4."""
+    """results.md: image metrics (model, U-Net, posed input) and retrieval rows (model, U-Net, posed
+    input, true canonical, non-learned mesh baselines, chance) beside thesis tables 5.1-5.3; table 5.4.
+
+    ``dataset`` (data.source: synth, tosca, shrec14; default: read from ``out_dir/config.yaml``) puts
+    our rows into the matching thesis table only (synth/SHREC'14 -> 5.1, TOSCA -> 5.3); unknown ->
+    our rows in every table."""
     m = metrics
+    dataset = dataset or _dataset_from_run_dir(out_dir)
+    ours_in = TABLE_OF_SOURCE.get(dataset or "")
+    image_rows = [["lit3d model (ours)", fmt(m.get("test/depth_mse"), 4), fmt(m.get("test/iou"))]]
+    if m.get("test/depth_mse_unet") is not None:
+        image_rows.append(["plain U-Net, same data and losses (ours)", fmt(m.get("test/depth_mse_unet"), 4),
+                           fmt(m.get("test/iou_unet"))])
+    image_rows.append(["posed input as its own canonical form (ours)", fmt(m.get("test/depth_mse_input"), 4),
+                       fmt(m.get("test/iou_input"))])
     parts = ["# Canonical-form results", "",
-             "Rows marked *(ours)* are measured in this run on this run's test split (held-out subjects and poses); "
-             "thesis rows are the thesis's published figures on its data. Retrieval classes = subjects.", "",
+             "Rows marked *(ours)* are measured in this run on this run's test split (held-out subjects and poses"
+             + (f"; data: {dataset}" if dataset else "") + "); thesis rows are the thesis's published figures on "
+             "its data. Retrieval classes = subjects.", "",
              "## Canonical depth and mask (test)", "",
-             markdown_table(["prediction", "masked depth MSE (lower is better)", "mask IoU"], [
-                 ["lit3d model (ours)", fmt(m.get("test/depth_mse"), 4), fmt(m.get("test/iou"))],
-                 ["posed input as its own canonical form (ours)", fmt(m.get("test/depth_mse_input"), 4),
-                  fmt(m.get("test/iou_input"))]])]
+             markdown_table(["prediction", "masked depth MSE (lower is better)", "mask IoU"], image_rows)]
+    if m.get("test/depth_mse_unet") is not None:
+        parts += ["", "The plain U-Net is trained in the same run beside ours (`task.unet_baseline=true`): same "
+                      "batches, same loss and alpha/beta phases, its own parameters; `task.arch=unet` trains it alone."]
     ours = retrieval_rows(m)
     for number, (title, rows) in THESIS.items():
-        if dataset and dataset not in title.lower() and not (dataset == "synth" and number == "5.1"):
-            continue
-        table = [[f"{k} (thesis)"] + [fmt(v, 2) for v in vals] for k, vals in rows.items()] + ours
+        table = [[f"{k} (thesis)"] + [fmt(v, 2) for v in vals] for k, vals in rows.items()]
+        if ours_in is None or ours_in == number:
+            table += ours
         parts += ["", f"## Table {number}: retrieval, {title}", "", markdown_table(["method", "NN", "FT", "ST", "DCG"], table)]
+    notes = []
+    if any(m.get(f"test/retrieval/{k}/nn") is not None for k in MESH_KEYS):
+        secs = ", ".join(f"{k} {m[f'test/retrieval/{k}/seconds']:.1f}s" for k in MESH_KEYS
+                         if m.get(f"test/retrieval/{k}/seconds") is not None)
+        notes.append("*Full mesh* rows: the non-learned canonical forms of the test shapes' full meshes (one per "
+                     "subject x pose, simplified to task.baseline_max_vertices; geodesics by the heat method), then the same "
+                     "descriptor; the depth rows rank every test item (subject x pose x view). "
+                     + (f"Time per method (forms + descriptor): {secs}." if secs else ""))
+    if m.get("test/retrieval/model/e") is not None:
+        notes.append("E-measure (ours; F1 of the top min(32, n-1) results, so constant when every item is "
+                     "within 32 ranks): " + ", ".join(
+            f"{key} {fmt(m.get(f'test/retrieval/{key}/e'), 2)}" for _, key in OURS
+            if m.get(f"test/retrieval/{key}/e") is not None))
+    if notes:
+        parts += [""] + [f"{n}  " if i < len(notes) - 1 else n for i, n in enumerate(notes)]
     parts += ["", "## Table 5.4: ablation on TOSCA (thesis); run `+sweep=canonical_ablation` for ours", "",
               markdown_table(["model", "NN", "FT", "ST", "DCG"],
                              [[f"{k} (thesis)"] + [fmt(v, 2) for v in vals] for k, vals in ABLATION.items()])]
-    if m.get("test/retrieval/model/e") is not None:
-        parts += ["", f"E-measure (ours): model {fmt(m.get('test/retrieval/model/e'), 2)}, "
-                      f"input {fmt(m.get('test/retrieval/input/e'), 2)}, chance {fmt(m.get('test/retrieval/chance/e'), 2)}"]
     path = Path(out_dir) / "results.md"
     atomic_write_text(path, "\n".join(parts) + "\n")
     return path
@@ -81,7 +128,12 @@ def _png(path: Path, img: np.ndarray) -> Path:
 
 
 def write_figures(task, datamodule, out_dir: Path, n: int = 4) -> list[Path]:
-    """One contact sheet per test subject: rows of input | predicted canonical | true canonical | error."""
+    """One contact sheet per test subject ``canonical_<subject>.png``: rows (test poses/views) of
+    input | predicted canonical | true canonical | |error| (| U-Net prediction when the run trained
+    one). Also rewrites ``results.md`` for the datamodule's source when ``metrics.json`` is in
+    ``out_dir`` (lit3d-eval writes them before the figures, without knowing the data source)."""
+    import json
+
     out_dir = Path(out_dir)
     task.eval()
     datamodule.setup("test")
@@ -91,10 +143,33 @@ def write_figures(task, datamodule, out_dir: Path, n: int = 4) -> list[Path]:
         by_subject.setdefault(r["subject"], []).append(i)
     paths = []
     dev = next(task.parameters()).device
+    unet = getattr(task, "unet", None)
     for subject, idx in sorted(by_subject.items()):
         items = [ds[i] for i in idx[:n]]
         batch = {k: torch.stack([it[k] for it in items]).to(dev) for k in ("depth", "mask", "canon_depth", "canon_mask")}
         with torch.no_grad():
             out = task(batch["depth"], batch["mask"])
-        paths.append(_png(out_dir / f"canonical_{subject}.png", task.panel(batch, out, n=len(items))))
+            out_u = unet(batch["depth"], batch["mask"]) if unet is not None else None
+        paths.append(_png(out_dir / f"canonical_{subject}.png", task.panel(batch, out, n=len(items), out_unet=out_u)))
+    mpath = out_dir / "metrics.json"
+    source = getattr(getattr(datamodule, "hparams", None), "get", lambda k: None)("source")
+    if mpath.is_file() and source:
+        write_results(json.loads(mpath.read_text()), out_dir, dataset=source)
     return paths
+
+
+def main(argv: list[str] | None = None) -> None:
+    """``python -m lit3d.reports.canonical RUN_DIR [SOURCE]``: results.md from a run's metrics.json
+    (e.g. after ``lit3d-train``, which writes metrics.json but no report)."""
+    import json
+    import sys
+
+    args = sys.argv[1:] if argv is None else argv
+    if not args:
+        raise SystemExit("usage: python -m lit3d.reports.canonical RUN_DIR [synth|tosca|shrec14]")
+    run = Path(args[0])
+    print(write_results(json.loads((run / "metrics.json").read_text()), run, args[1] if len(args) > 1 else None))
+
+
+if __name__ == "__main__":
+    main()
