@@ -18,14 +18,38 @@ from lit3d.reports.tables import fmt, markdown_table
 from lit3d.utils.io import atomic_write_text
 
 
+def _override_key(override: str) -> str:
+    return override.split("=", 1)[0].lstrip("+~")
+
+
+def _normalise_override(override: str) -> str:
+    """``key=True`` -> ``key=true``: Hydra writes YAML booleans of a sweep as Python's."""
+    key, sep, value = override.partition("=")
+    return f"{key}{sep}{value.lower()}" if value in ("True", "False") else override
+
+
 def job_label(job_dir: Path, ignore: Sequence[str] = ("hydra.", "+sweep", "experiment")) -> str:
-    """The job's sweep overrides, e.g. ``task.nets.top_k=50`` (from .hydra/overrides.yaml)."""
+    """The job's swept settings, e.g. ``task.nets.k=50, task.nets.attention=none``.
+
+    Read from ``.hydra/overrides.yaml``; only the keys of the sweep's
+    ``hydra.sweeper.params`` (from ``.hydra/hydra.yaml``) are kept, so the fixed
+    command-line overrides shared by every job do not clutter the row. Without a
+    sweeper record, every override but ``ignore`` is kept.
+    """
     path = job_dir / ".hydra" / "overrides.yaml"
     if not path.is_file():
         return job_dir.name
-    overrides = yaml.safe_load(path.read_text()) or []
-    kept = [o for o in overrides if not any(o.lstrip("+~").startswith(p.lstrip("+")) for p in ignore)]
-    return ", ".join(kept) or "(defaults)"
+    overrides = [str(o) for o in (yaml.safe_load(path.read_text()) or [])]
+    hydra_path = job_dir / ".hydra" / "hydra.yaml"
+    swept: set[str] = set()
+    if hydra_path.is_file():
+        hydra_cfg = (yaml.safe_load(hydra_path.read_text()) or {}).get("hydra", {})
+        swept = {k.lstrip("+~") for k in ((hydra_cfg.get("sweeper") or {}).get("params") or {})}
+    if swept:
+        kept = [o for o in overrides if _override_key(o) in swept]
+    else:
+        kept = [o for o in overrides if not any(o.lstrip("+~").startswith(p.lstrip("+")) for p in ignore)]
+    return ", ".join(_normalise_override(o) for o in kept) or "(defaults)"
 
 
 def collect(sweep_dir: str | Path, metrics: Sequence[str] | None = None,

@@ -95,6 +95,9 @@ def run_cli(fn, cfg: DictConfig) -> Any:
     from datamodules.cache import DataError
 
     try:
+        missing = sorted(OmegaConf.missing_keys(cfg))
+        if missing:  # before any work or logging: the one line is all the user sees
+            raise UserError(f"missing value for {missing[0]}: set {missing[0]}=... on the command line")
         return fn(cfg)
     except (UserError, DataError, MissingMandatoryValue) as exc:
         if os.environ.get("HYDRA_FULL_ERROR") == "1" or cfg.get("debug", False):

@@ -580,8 +580,11 @@ def canny_edges(img: torch.Tensor, low: float = 0.1, high: float = 0.2, hysteres
     m2 = (mag >= nb(1, 0)) & (mag > nb(-1, 0))
     m1 = mag > torch.maximum(nb(1, 1), nb(-1, -1))
     m3 = mag > torch.maximum(nb(1, -1), nb(-1, 1))
-    keep = torch.where(ay <= tan22 * ax, m0,
-                       torch.where(ax <= tan22 * ay, m2, torch.where((gx * gy) > 0, m1, m3)))
+    k0 = ay <= tan22 * ax
+    k2 = (ax <= tan22 * ay) & ~k0
+    diag = ~(k0 | k2)
+    same = (gx * gy) > 0
+    keep = (k0 & m0) | (k2 & m2) | (diag & ((same & m1) | (~same & m3)))  # bool ops: faster than where
     cand = keep & (mag > max(low, math.sqrt(eps)))
     strong = keep & (mag > max(high, math.sqrt(eps)))
     if not hysteresis:

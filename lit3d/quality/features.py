@@ -25,7 +25,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -56,6 +56,7 @@ class FeatureConfig:
         n_samples: surface samples per mesh for the 3-D measures.
         fsim_downsample: FSIM image reduction factor (2: 256 px renders -> 128 px).
         chunk: styles per batched measure call (memory bound; 0 = all styles of a view at once).
+        workers: CPU threads measuring views in parallel (0 = ``torch.get_num_threads()``).
     """
 
     render: RenderConfig = field(default_factory=RenderConfig)
@@ -65,6 +66,7 @@ class FeatureConfig:
     n_samples: int = 20000
     fsim_downsample: int = 2
     chunk: int = 32
+    workers: int = 0
 
     def resolved_styles(self) -> list[str]:
         return resolve_styles(list(self.styles) if self.styles else None)
@@ -74,7 +76,8 @@ class FeatureConfig:
         d["render"] = self.render.as_dict()
         d["styles"] = self.resolved_styles()
         d["measures"] = list(self.measures)
-        d.pop("chunk")  # does not change the numbers
+        d.pop("chunk")  # neither changes the numbers
+        d.pop("workers")
         d["version"] = FEATURE_VERSION
         return d
 
@@ -198,6 +201,26 @@ def image_measures(a: torch.Tensor, b: torch.Tensor, mask_a: torch.Tensor, mask_
                          mask_b[..., y0:y1, x0:x1], (y0, x0, h, w), measures, fsim_downsample)
 
 
+def _view_measures(ga, gb, v: int, names: list[str], cfg: FeatureConfig) -> dict[str, torch.Tensor]:
+    """Every measure of every style for view ``v`` of two G-buffers: ``{measure: (S,) float32 cpu}``.
+
+    The styles are shaded on the view's crop only (union of both masks + ``_CROP_MARGIN``).
+    """
+    hh, ww = ga.mask.shape[-2:]
+    y0, y1, x0, x1 = _crop_box(torch.cat([ga.mask[v:v + 1], gb.mask[v:v + 1]]), _CROP_MARGIN)
+    ma, mb = ga.mask[v:v + 1, :, y0:y1, x0:x1], gb.mask[v:v + 1, :, y0:y1, x0:x1]
+    ia = apply_styles(ga.normals[v:v + 1, :, y0:y1, x0:x1], ma, names, grey=True)[:, 0]  # (S, 1, h, w)
+    ib = apply_styles(gb.normals[v:v + 1, :, y0:y1, x0:x1], mb, names, grey=True)[:, 0]
+    step = cfg.chunk if cfg.chunk > 0 else len(names)
+    out: dict[str, list[torch.Tensor]] = {}
+    for i in range(0, len(names), step):
+        j = min(i + step, len(names))
+        res = pair_measures(ia[i:j], ib[i:j], ma, mb, (y0, x0, hh, ww), cfg.measures, cfg.fsim_downsample)
+        for k, t in res.items():
+            out.setdefault(k, []).append(t.float().cpu())
+    return {k: torch.cat(t) for k, t in out.items()}
+
+
 def content_key(ref_hash: str, dist_hash: str, cfg: FeatureConfig) -> str:
     """Cache key: SHA-256 of both mesh hashes and the feature configuration."""
     blob = json.dumps({"ref": ref_hash, "dist": dist_hash, "cfg": cfg.key_dict()}, sort_keys=True)
@@ -262,34 +285,46 @@ def feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_dir: str
         except (OSError, ValueError, KeyError):
             pass  # unreadable cache entry: recompute and overwrite
     names = cfg.resolved_styles()
-    gba = render_gbuffers(mref, cfg.render)
-    gbb = render_gbuffers(mdist, cfg.render)
     feats: dict[str, float] = {}
     per_view: dict[str, np.ndarray] = {}
-    for shading in cfg.render.shadings:
-        ga, gb = gba[shading], gbb[shading]
-        if device is not None:
-            ga, gb = ga.to(device), gb.to(device)
-        n_views, _, hh, ww = ga.mask.shape
-        parts: dict[str, torch.Tensor] = {}
-        for v in range(n_views):
-            y0, y1, x0, x1 = _crop_box(torch.cat([ga.mask[v:v + 1], gb.mask[v:v + 1]]), _CROP_MARGIN)
-            ma, mb = ga.mask[v:v + 1, :, y0:y1, x0:x1], gb.mask[v:v + 1, :, y0:y1, x0:x1]
-            # every style of this view, shaded on the view's crop only: (S, 1, h, w)
-            ia = apply_styles(ga.normals[v:v + 1, :, y0:y1, x0:x1], ma, names, grey=True)[:, 0]
-            ib = apply_styles(gb.normals[v:v + 1, :, y0:y1, x0:x1], mb, names, grey=True)[:, 0]
-            step = cfg.chunk if cfg.chunk > 0 else len(names)
-            for i in range(0, len(names), step):
-                j = min(i + step, len(names))
-                res = pair_measures(ia[i:j], ib[i:j], ma, mb, (y0, x0, hh, ww), cfg.measures,
-                                    cfg.fsim_downsample)
-                for k, t in res.items():
-                    parts.setdefault(k, torch.empty(len(names), n_views))[i:j, v] = t.float().cpu()
-        for k, vals in parts.items():
-            for j, style in enumerate(names):
-                name = f"{k}/{style}/{shading}"
-                per_view[name] = vals[j].numpy()
-                feats[name] = float(vals[j].double().mean())
+    on_cpu = device is None or torch.device(device).type == "cpu"
+    workers = (cfg.workers if cfg.workers > 0 else torch.get_num_threads()) if on_cpu else 1
+    pool = None
+    prev_threads = torch.get_num_threads()
+    if workers > 1:
+        from concurrent.futures import ThreadPoolExecutor
+
+        # coarse-grained parallelism: each worker measures whole views with one intra-op
+        # thread (per-op OpenMP teams on small crops stall badly on a busy machine)
+        pool = ThreadPoolExecutor(workers, initializer=torch.set_num_threads, initargs=(1,))
+    try:
+        pending = []
+        for shading in cfg.render.shadings:
+            # render shading by shading, so the workers measure while the next pass rasterises
+            one = replace(cfg.render, shadings=(shading,))
+            ga, gb = render_gbuffers(mref, one)[shading], render_gbuffers(mdist, one)[shading]
+            if device is not None:
+                ga, gb = ga.to(device), gb.to(device)
+            for v in range(ga.mask.shape[0]):
+                args = (ga, gb, v, names, cfg)
+                pending.append((shading, v, pool.submit(_view_measures, *args) if pool else _view_measures(*args)))
+        parts: dict[tuple[str, str], torch.Tensor] = {}
+        n_views = {}
+        for shading, v, res in pending:
+            res = res.result() if pool else res
+            n_views[shading] = max(n_views.get(shading, 0), v + 1)
+            for k, t in res.items():
+                parts.setdefault((shading, k), {})[v] = t
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True)
+            torch.set_num_threads(prev_threads)
+    for (shading, k), by_view in parts.items():
+        vals = torch.stack([by_view[v] for v in range(n_views[shading])], 1)  # (S, V)
+        for j, style in enumerate(names):
+            name = f"{k}/{style}/{shading}"
+            per_view[name] = vals[j].numpy()
+            feats[name] = float(vals[j].double().mean())
     va = vb = None
     if keep_views:
         va, vb = render_views(mref, cfg, device), render_views(mdist, cfg, device)

@@ -41,18 +41,54 @@ def import_pyrender():
     return pyrender
 
 
-@functools.lru_cache(maxsize=8)
-def offscreen_renderer(width: int, height: int):
-    """A cached ``pyrender.OffscreenRenderer`` of the given size (one per process).
+def _keep_display(renderer) -> None:
+    """Stop ``renderer`` from terminating the process-wide EGL display when it is deleted.
 
-    Creating an EGL context costs tens of milliseconds, so callers that render
-    many views share one renderer per image size.
+    pyrender's EGL platform calls ``eglTerminate`` on ``eglGetDisplay(EGL_DEFAULT_DISPLAY)``
+    when a renderer is deleted or garbage collected. That display is shared by every
+    renderer of the process, so one deleted renderer invalidates all the others
+    (``eglMakeCurrent`` then fails with ``EGL_BAD_DISPLAY``, error 12296). We destroy only
+    the renderer's own context.
+    """
+    platform = getattr(renderer, "_platform", None)
+    if platform is None or not hasattr(platform, "_egl_display"):
+        return
+
+    def delete_context_only():
+        from OpenGL.EGL import eglDestroyContext  # noqa: PLC0415
+
+        if platform._egl_display is not None and platform._egl_context is not None:
+            eglDestroyContext(platform._egl_display, platform._egl_context)
+        platform._egl_context = None
+        platform._egl_display = None
+
+    platform.delete_context = delete_context_only
+
+
+def new_offscreen_renderer(width: int, height: int):
+    """A fresh ``pyrender.OffscreenRenderer`` that leaves the shared EGL display alone on deletion.
+
+    Raises:
+        RenderBackendError: when no EGL context can be created.
     """
     pyrender = import_pyrender()
     try:
-        return pyrender.OffscreenRenderer(viewport_width=width, viewport_height=height)
+        renderer = pyrender.OffscreenRenderer(viewport_width=width, viewport_height=height)
     except Exception as exc:  # pragma: no cover - depends on the machine
         raise RenderBackendError(
             f"could not create an EGL context ({exc}); on CPU install `{EGL_PACKAGES}`, "
             "on a GPU check the NVIDIA driver"
         ) from exc
+    _keep_display(renderer)
+    return renderer
+
+
+@functools.cache
+def offscreen_renderer(width: int, height: int):
+    """A cached ``pyrender.OffscreenRenderer`` of the given size (one per size and process).
+
+    Creating an EGL context costs tens of milliseconds, so callers that render
+    many views share one renderer per image size. The cache never evicts: an
+    evicted renderer would be garbage collected mid-session.
+    """
+    return new_offscreen_renderer(width, height)

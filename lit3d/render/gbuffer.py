@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from lit3d.render.convert import normalise as normalise_mesh
-from lit3d.render.egl import import_pyrender, offscreen_renderer
+from lit3d.render.egl import import_pyrender, new_offscreen_renderer
 from lit3d.render.views import camera_poses, dodecahedron_directions
 
 SHADINGS = ("flat", "smooth")
@@ -94,7 +94,7 @@ def _pyrender_mesh(mesh, shading: str):
     return pyrender.Mesh([prim])
 
 
-@functools.lru_cache(maxsize=4)
+@functools.cache
 def _gbuffer_renderer(size: int):
     """A cached single-sample (no MSAA) offscreen renderer of ``size`` x ``size`` pixels.
 
@@ -105,7 +105,7 @@ def _gbuffer_renderer(size: int):
     import_pyrender()
     import pyrender.renderer as prr
 
-    renderer = offscreen_renderer.__wrapped__(size, size)
+    renderer = new_offscreen_renderer(size, size)
     orig = getattr(prr, "glRenderbufferStorageMultisample", None)
     inner = getattr(renderer, "_renderer", None)
     platform = getattr(renderer, "_platform", None)
