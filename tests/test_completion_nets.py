@@ -92,6 +92,21 @@ def test_generator_global_skips_change_last_stage_decoder():
     assert with_gs(_partial(1)).logits.shape == (1, 1, 32, 32, 32)
 
 
+
+def test_input_skip_feeds_the_stage_input_to_the_up_sampling():
+    kw = dict(in_res=16, stages=3, enc_channels=(4, 8), up_channels=(4, 2), latent_dim=16, k=4)
+    skip, plain = CascadeGenerator(**kw, input_skip=True), CascadeGenerator(**kw, input_skip=False)
+    # first up layer: up_channels[0] decoder channels [+ the 3-channel last-stage input]
+    assert skip.stages[-1].up[0].in_channels == 4 + 3 and plain.stages[-1].up[0].in_channels == 4
+    assert all(not st.input_skip for st in skip.stages[:-1])
+    # the skip is a real path: the partial input reaches the output even with the decoder zeroed
+    for p in skip.stages[-1].decoder.parameters():
+        torch.nn.init.zeros_(p)
+    x = _partial(1).requires_grad_(True)
+    skip(x).logits.sum().backward()
+    assert x.grad.abs().sum() > 0
+
+
 ABLATIONS = [
     {"stages": 1},
     {"stages": 2},
@@ -105,6 +120,7 @@ ABLATIONS = [
     {"critic_sigmoid": False},
     {"critic_sigmoid": True},
     {"global_skips": False},
+    {"input_skip": False},
 ]
 
 

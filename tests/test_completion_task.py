@@ -60,3 +60,16 @@ def test_summary_rows_on_meta_device_paper_scale():
     assert tuple(gen["input"]) == (1, 1, 64, 64, 64) and tuple(gen["output"]) == (1, 1, 256, 256, 256)
     assert gen["params"] > 100_000_000
     assert DEMO["out_res"] == 64
+
+
+def test_stage_bce_is_weighted_bce_of_the_pooled_target():
+    from lit3d.losses import weighted_bce_with_logits
+
+    task = CompletionTask(nets={"preset": "demo"}, stage_weight=0.5)
+    g = torch.Generator().manual_seed(1)
+    target = (torch.rand(2, 1, 64, 64, 64, generator=g) < 0.1).float()
+    logits = [torch.randn(2, 1, 16, 16, 16, generator=g) for _ in range(2)]
+    # hand-pooled: a coarse voxel is occupied when any of its 4^3 cell is
+    small = (target.reshape(2, 1, 16, 4, 16, 4, 16, 4).amax(dim=(3, 5, 7)))
+    want = (weighted_bce_with_logits(logits[0], small, 0.35) + weighted_bce_with_logits(logits[1], small, 0.35)) / 2
+    assert torch.allclose(task._stage_bce(logits, target), want)

@@ -59,6 +59,7 @@ PAPER: dict = dict(
     k=100,                        # K
     fixed_latent_dim=2000,
     global_skips=True,            # stage-1 encoder -> last-stage decoder
+    input_skip=True,              # last stage: its r^3 input (partial + earlier stages) -> first up-sampling layer
     attention="discriminator",    # where the 3D self-attention goes: discriminator|generator|both|none
     generator_attention_res=16,
     critic_channels=[32, 64, 128, 256, 512, 512, 512],  # 7 x Conv3d k=4 s=2: 256^3 -> 2^3
@@ -172,6 +173,7 @@ class CascadeStage(nn.Module):
         up_channels: Sequence[int] = (),
         global_skip_channels: Sequence[int] | None = None,
         attention_res: int | None = None,
+        input_skip: bool = False,
     ):
         super().__init__()
         enc = list(enc_channels)
@@ -213,6 +215,10 @@ class CascadeStage(nn.Module):
             self.decoder.append(_up(cin, cout))
             cur = cout
         self.up = nn.ModuleList()
+        # input skip: the stage input at r^3 joins the first up-sampling layer (needs up layers)
+        self.input_skip = bool(input_skip) and bool(self.up_channels)
+        if self.input_skip:
+            cur += in_channels
         for i in range(len(self.up_channels)):
             cout = self.up_channels[i + 1] if i + 1 < len(self.up_channels) else 1
             self.up.append(_up(cur, cout))
@@ -247,6 +253,8 @@ class CascadeStage(nn.Module):
             h = deconv(torch.cat(parts, 1))
             if j < last or self.up:
                 h = F.relu(h)
+        if self.input_skip:
+            h = torch.cat([h, x], 1)
         for i, up in enumerate(self.up):
             h = up(h)
             if i < len(self.up) - 1:
@@ -273,6 +281,7 @@ class CascadeGenerator(nn.Module):
         selector_mode: str = "straight_through",
         fixed_latent_dim: int = 2000,
         global_skips: bool = True,
+        input_skip: bool = False,
         attention: str = "none",
         attention_res: int = 16,
     ):
@@ -292,6 +301,7 @@ class CascadeGenerator(nn.Module):
                 up_channels=up_channels if is_last else (),
                 global_skip_channels=enc_channels if (is_last and self.use_global_skips) else None,
                 attention_res=attention_res if attention == "generator" else None,
+                input_skip=input_skip and is_last,
             ))
         self.out_res = self.stages[-1].out_res
 
@@ -425,6 +435,7 @@ def generator_kwargs(cfg: dict) -> dict:
         up_channels=list(c["up_channels"]), latent_dim=c["latent_dim"], selector=bool(c["selector"]),
         k=c["k"], selector_mode=c["selector_mode"], fixed_latent_dim=c["fixed_latent_dim"],
         global_skips=bool(c["global_skips"]),
+        input_skip=bool(c["input_skip"]),
         attention="generator" if c["attention"] in ("generator", "both") else "none",
         attention_res=c["generator_attention_res"],
     )

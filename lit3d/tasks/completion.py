@@ -56,6 +56,7 @@ class CompletionTask(pl.LightningModule):
         gamma: float = 0.8,
         zeta: float = 0.01,
         gp_lambda: float = 10.0,
+        stage_weight: float = 0.0,
         adversarial: bool = True,
         adversarial_start_epoch: int = 0,
         categories: Sequence[str] = SEEN,
@@ -159,6 +160,9 @@ class CompletionTask(pl.LightningModule):
             bce = weighted_bce_with_logits(out.logits, y, hp.alpha)
             loss_g = hp.gamma * bce if opt_d is not None else bce
             terms = {"bce": bce}
+            if hp.stage_weight > 0 and len(out.stage_logits) > 1:
+                terms["bce_stages"] = self._stage_bce(out.stage_logits[:-1], y)
+                loss_g = loss_g + hp.stage_weight * terms["bce_stages"]
             if opt_d is not None:
                 terms["adv"] = generator_adv_loss(self.critic(x, probs))
                 loss_g = loss_g + (1 - hp.gamma) * terms["adv"]
@@ -177,6 +181,12 @@ class CompletionTask(pl.LightningModule):
         self.log_dict({f"train/{k}": v.detach().float() for k, v in logs.items()},
                       prog_bar=False, on_step=True, on_epoch=True, batch_size=x.shape[0])
         self.log("train/generator_steps", float(self.generator_steps), on_step=True, on_epoch=False)
+
+    def _stage_bce(self, stage_logits: list[torch.Tensor], target: torch.Tensor) -> torch.Tensor:
+        """Mean weighted BCE of the intermediate stages' (B, 1, r, r, r) logits against the
+        target max-pooled to r^3 (a voxel of the coarse grid is occupied if any of its cell is)."""
+        small = F.adaptive_max_pool3d(target.float(), stage_logits[0].shape[-3:])
+        return torch.stack([weighted_bce_with_logits(lg, small, self.hparams.alpha) for lg in stage_logits]).mean()
 
     # ------------------------------------------------------------------ priors
     def _ensure_prior(self) -> None:
