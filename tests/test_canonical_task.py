@@ -32,7 +32,7 @@ def _train(tmp_path, epochs, retrieval=None, size=48, n=9, mesh_resolution=32, *
     return task, dm, res
 
 
-@pytest.mark.slow  # about 35 s on 2 shared cores; the unmarked twin below checks the wiring in a few seconds
+# about 35 s on 2 cores: in the default suite (the task's beat-the-baseline run)
 def test_short_training_beats_posed_input_on_held_out_subjects_and_poses(tmp_path, one_thread):
     t0 = time.time()
     task, dm, res = _train(tmp_path, epochs=20, mask_loss="bce",
