@@ -14,8 +14,11 @@
 Manifest layout (``manifest.json``)::
 
     {"generator": str, "version": str, "config": {...}, "config_hash": sha256,
-     "items": [{"file": "items/...npz", "split": ..., ...}, ...],
+     "items": [{"file": "items/...npz", "sha256": of the file's bytes, "split": ..., ...}, ...],
      "manifest_hash": sha256 of the canonical JSON of "items", ...extra}
+
+Because every item carries the hash of its bytes, two preparations have the same
+``manifest_hash`` exactly when they wrote the same files (same seed -> same hash).
 """
 from __future__ import annotations
 
@@ -32,17 +35,16 @@ from typing import Any
 
 import numpy as np
 
-from lit3d.utils.io import atomic_write_bytes, write_json
+from lit3d.utils.io import TMP_SUFFIX, atomic_write_bytes, file_sha256, remove_temp_files, write_json
 
 log = logging.getLogger("lit3d.data")
 
 MANIFEST = "manifest.json"
 MARKER = "prepare.json"
-TMP_SUFFIX = ".tmp"
 
 __all__ = [
     "MANIFEST", "MARKER", "CacheBuilder", "DataError", "atomic_save_npz", "atomic_write_bytes",
-    "clean_temp_files", "read_manifest", "stable_hash", "stable_seed", "write_json",
+    "clean_temp_files", "file_sha256", "read_manifest", "stable_hash", "stable_seed", "write_json",
 ]
 
 
@@ -85,17 +87,7 @@ def atomic_save_npz(path: str | os.PathLike, compress: bool = True, **arrays: np
     return path
 
 
-def clean_temp_files(root: str | os.PathLike) -> int:
-    """Remove leftover temp files (``.*.tmp``) under ``root``; returns how many."""
-    n = 0
-    root = Path(root)
-    if not root.exists():
-        return 0
-    for p in root.rglob(f".*{TMP_SUFFIX}"):
-        if p.is_file():
-            p.unlink(missing_ok=True)
-            n += 1
-    return n
+clean_temp_files = remove_temp_files  # leftover ``.*.tmp`` files of interrupted writes
 
 
 def read_manifest(root: str | os.PathLike) -> dict | None:
@@ -188,10 +180,12 @@ class CacheBuilder:
                                      "config_hash": self.config_hash, "config": self.config})
 
     def finish(self, items: list[dict], extra: dict | None = None) -> dict:
-        """Check every item file exists, then write the manifest atomically (the marker stays)."""
+        """Check every item file exists, record its sha256, then write the manifest atomically
+        (the marker stays)."""
         missing = [it["file"] for it in items if not self.has(it["file"])]
         if missing:
             raise DataError(f"{self.root}: {len(missing)} item file(s) missing after preparation, e.g. {missing[0]}")
+        items = [{**it, "sha256": file_sha256(self.root / it["file"])} for it in items]
         manifest = {
             "generator": self.generator, "version": self.version, "config": self.config,
             "config_hash": self.config_hash, "items": items, "manifest_hash": stable_hash(items),

@@ -18,9 +18,16 @@ Batches (``B`` samples, ``S = image_size``):
     canon_depth, canon_mask  (B, 1, S, S) float32   canonical target
     subject (list[str]), subject_idx (B,) int64, pose (B,) int64, view (B,) int64
 
-Cache: ``data_dir/manifest.json`` (generator version + config hash) and one ``<subject>.npz``
-per subject (depth as float16, masks packed bits), written atomically; an interrupted
-``prepare_data`` resumes with the subjects still missing.
+Cache: ``data_dir/manifest.json`` (generator version + config hash; when complete also one
+item per subject file with its sha256 and ``manifest_hash`` over them, so the same seed gives
+the same hash) and one ``<subject>.npz`` per subject (depth as float16, masks packed bits),
+written atomically; an interrupted ``prepare_data`` resumes with the subjects still missing.
+
+Bad input: every depth image is checked when rendered and when the cache is read (finite,
+``image_size`` square, not all background: :func:`depth_image_problem`); a bad one raises
+:class:`DataError` naming the file (or subject, pose and view) and the problem. With
+``skip_bad=True`` a bad posed image or mesh drops that pose and a bad canonical image drops
+the subject, each with a logged warning, counted in ``describe()["skipped_bad_files"]``.
 
 Splits (``split``):
     subject_pose  subjects and poses are each dealt into ``n_folds`` groups (seeded); fold f
@@ -37,6 +44,7 @@ import hashlib
 import io
 import json
 import logging
+import zipfile
 from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
@@ -46,8 +54,9 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 
+from datamodules.cache import DataError, stable_hash
 from lit3d.retrieval.depthcam import render_depth
-from lit3d.utils.io import atomic_write_bytes, write_json
+from lit3d.utils.io import atomic_write_bytes, file_sha256, write_json
 
 log = logging.getLogger("lit3d")
 
@@ -55,8 +64,8 @@ DATA_VERSION = "canonical-data-1"
 SPLITS = ("train", "val", "test")
 
 
-class DataError(ValueError):
-    """A problem with the canonical data (missing root, bad mesh, empty split...)."""
+__all__ = ["CanonicalDataModule", "DataError", "depth_image_problem", "read_subject", "split_pose",
+           "split_subject_pose"]
 
 
 # ----------------------------------------------------------------------------------- geometry
@@ -65,6 +74,64 @@ def normalize_mesh(verts: np.ndarray, scale: float | None = None) -> tuple[np.nd
     lo, hi = verts.min(0), verts.max(0)
     s = scale if scale is not None else 1.0 / max(float((hi - lo).max()), 1e-12)
     return (verts - (lo + hi) / 2) * s, s
+
+
+# ----------------------------------------------------------------------------------- depth images
+def depth_image_problem(depth: np.ndarray, mask: np.ndarray | None, size: int) -> str | None:
+    """What is wrong with one depth image ``(S, S)`` and its mask ``(S, S)``, or None.
+
+    Checked: both ``size`` x ``size``, depth finite, something in view (mask and depth not all
+    background)."""
+    if depth.shape != (size, size):
+        return f"depth image has shape {tuple(depth.shape)}, expected ({size}, {size}) (data.image_size={size})"
+    if mask is None or mask.shape != (size, size):
+        return f"mask missing or not {size} x {size}"
+    if not np.isfinite(depth).all():
+        return "depth image contains NaN or inf"
+    if not mask.any() or not (depth > 0).any():
+        return "depth image is all background (nothing in view)"
+    return None
+
+
+def unpack_mask(packed: np.ndarray | None, size: int) -> np.ndarray | None:
+    """``np.packbits`` of an ``(S, S)`` bool mask -> ``(S, S)`` bool; None when absent or of another size."""
+    if packed is None or packed.size != (size * size + 7) // 8:
+        return None
+    return np.unpackbits(packed)[: size * size].reshape(size, size).astype(bool)
+
+
+def read_subject(path: Path, size: int, n_views: int) -> tuple[dict | None, list[str]]:
+    """One subject's cache file -> (``{"depth", "mask", "poses"}`` of its valid images, problems).
+
+    A pose with a bad or missing view is left out of ``poses``; a bad canonical view gives
+    ``None`` (the subject cannot be used). Each problem names the file and the image.
+
+    Raises:
+        DataError: the file is missing or not a readable ``.npz``.
+    """
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise DataError(f"{path}: unreadable cached subject ({type(exc).__name__}: {exc}); "
+                        "delete it and run lit3d-data again") from exc
+    depth, mask, problems = {}, {}, []
+    listed = ["canonical"] + [str(p) for p in arrays.get("poses", [])]
+    for key in (f"{p}_{v}" for p in listed for v in range(n_views)):
+        if f"depth_{key}" not in arrays:
+            problems.append(f"{path}: depth_{key}: depth image missing")
+            continue
+        d = arrays[f"depth_{key}"].astype(np.float32)
+        m = unpack_mask(arrays.get(f"mask_{key}"), size)
+        problem = depth_image_problem(d, m, size)
+        if problem:
+            problems.append(f"{path}: depth_{key}: {problem}")
+        else:
+            depth[key], mask[key] = d, m.astype(np.float32)
+    complete = [p for p in listed if all(f"{p}_{v}" in depth for v in range(n_views))]
+    if "canonical" not in complete:
+        return None, problems
+    return {"depth": depth, "mask": mask, "poses": [int(p) for p in complete[1:]]}, problems
 
 
 # ----------------------------------------------------------------------------------- sources
@@ -275,7 +342,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         fold: int = 0,
         val_per_subject: int = 1,
         max_val_items: int | None = 64,
-        on_error: str = "raise",
+        skip_bad: bool = False,
     ):
         super().__init__()
         self.save_hyperparameters()
@@ -293,6 +360,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         self.splits: dict[str, list[dict]] = {}
         self.datasets: dict[str, PairDataset] = {}
         self.subject_index: dict[str, int] = {}
+        self.skipped: list[str] = []  # bad inputs skipped (skip_bad=True), rendering + loading
 
     # ------------------------------------------------------------------ configuration
     @property
@@ -319,6 +387,8 @@ class CanonicalDataModule(pl.LightningDataModule):
             keys += ["root", "classes", "canonical_pose", "up_axis", "cla"]
         cfg = {k: (list(hp[k]) if isinstance(hp[k], (list, tuple)) else hp[k]) for k in keys}
         cfg["version"] = DATA_VERSION
+        if hp.skip_bad:  # a cache rendered while skipping may lack poses; only added when set (old hashes hold)
+            cfg["skip_bad"] = True
         return hashlib.sha256(json.dumps(cfg, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
     @property
@@ -344,28 +414,47 @@ class CanonicalDataModule(pl.LightningDataModule):
         v, _ = normalize_mesh(v, scale)
         return v, f
 
-    def _render_subject(self, subject: str) -> dict[str, np.ndarray]:
+    def _render_pose(self, subject: str, pose) -> dict[str, np.ndarray]:
+        """Depth (float16) and packed mask of every view of one pose; DataError for a bad image."""
         hp = self.hparams
+        v, f = self.normalized_mesh(subject, pose)
+        out = {}
+        for vi, az in enumerate(hp.azimuths):
+            d, m = render_depth(v, f, hp.image_size, az)
+            problem = depth_image_problem(d, m, hp.image_size)
+            if problem:
+                raise DataError(f"view {vi}: rendered {problem} (mesh outside the view?)")
+            out[f"depth_{pose}_{vi}"] = d.astype(np.float16)
+            out[f"mask_{pose}_{vi}"] = np.packbits(m)
+        return out
+
+    def _render_subject(self, subject: str) -> dict[str, np.ndarray]:
+        """Arrays of one subject's cache file; ``skipped`` lists the poses dropped by ``skip_bad``."""
         arrays: dict[str, np.ndarray] = {}
-        poses = ["canonical"] + list(self.source.poses(subject))
-        skipped = []
+        poses, skipped = ["canonical"] + list(self.source.poses(subject)), []
         for p in poses:
             try:
-                v, f = self.normalized_mesh(subject, p)
+                arrays.update(self._render_pose(subject, p))
             except Exception as exc:
-                if hp.on_error == "skip" and p != "canonical":
-                    log.warning("skipping %s pose %s: %s", subject, p, exc)
-                    skipped.append(p)
-                    continue
-                raise DataError(f"{subject} pose {p}: {exc}") from exc
-            for vi, az in enumerate(hp.azimuths):
-                d, m = render_depth(v, f, hp.image_size, az)
-                if not m.any():
-                    raise DataError(f"{subject} pose {p} view {vi}: empty rendering (mesh outside the view?)")
-                arrays[f"depth_{p}_{vi}"] = d.astype(np.float16)
-                arrays[f"mask_{p}_{vi}"] = np.packbits(m)
-        arrays["poses"] = np.array([str(p) for p in poses if p not in skipped and p != "canonical"])
+                msg = f"{subject} pose {p}: {exc}"
+                if not self.hparams.skip_bad or p == "canonical":
+                    raise DataError(msg) from exc
+                log.warning("skipping: %s", msg)
+                skipped.append(msg)
+        kept = [p for p in poses[1:] if f"depth_{p}_0" in arrays]
+        arrays["poses"] = np.array([str(p) for p in kept])
+        arrays["skipped"] = np.array(skipped, dtype=str)
         return arrays
+
+    def _manifest_items(self, subjects: Sequence[str]) -> tuple[list[dict], list[str]]:
+        """One item per subject file (with its sha256) and the problems skipped while rendering."""
+        items, skipped = [], []
+        for s in subjects:
+            path = self.data_dir / f"{s}.npz"
+            items.append({"file": path.name, "subject": s, "sha256": file_sha256(path)})
+            with np.load(path, allow_pickle=False) as z:
+                skipped += [str(m) for m in z["skipped"]] if "skipped" in z.files else []
+        return items, skipped
 
     def prepare_data(self) -> None:
         """Render every subject once into ``data_dir`` (resumable, atomic); no-op when cached."""
@@ -396,25 +485,29 @@ class CanonicalDataModule(pl.LightningDataModule):
             buf = io.BytesIO()
             np.savez_compressed(buf, **arrays)
             atomic_write_bytes(path, buf.getvalue())
-        write_json(self.manifest_path, {**base, "complete": True})
+        items, skipped = self._manifest_items(subjects)
+        write_json(self.manifest_path, {**base, "complete": True, "items": items,
+                                        "manifest_hash": stable_hash(items), "skipped": skipped})
 
     # ------------------------------------------------------------------ loading and splits
     def _load_cache(self) -> None:
         man = self._manifest()
         if not man or not man.get("complete") or man.get("config_hash") != self.config_hash():
             raise DataError(f"{self.data_dir}: no complete cache for this config; run prepare_data() (lit3d-data)")
-        S = self.hparams.image_size
+        hp = self.hparams
         self.manifest = man
+        self.skipped = list(man.get("skipped", []))
         for s in man["subjects"]:
-            with np.load(self.data_dir / f"{s}.npz") as z:
-                depth, mask = {}, {}
-                for k in z.files:
-                    if k.startswith("depth_"):
-                        depth[k[6:]] = z[k].astype(np.float32)
-                    elif k.startswith("mask_"):
-                        mask[k[5:]] = np.unpackbits(z[k])[: S * S].reshape(S, S).astype(np.float32)
-                poses = [int(p) for p in z["poses"]]
-            self.cache[s] = {"depth": depth, "mask": mask, "poses": poses}
+            entry, problems = read_subject(self.data_dir / f"{s}.npz", hp.image_size, len(hp.azimuths))
+            if problems and not hp.skip_bad:
+                raise DataError(problems[0])
+            for msg in problems:
+                log.warning("skipping: %s", msg)
+            self.skipped += problems
+            if entry is not None:
+                self.cache[s] = entry
+        if not self.cache:
+            raise DataError(f"{self.data_dir}: no usable subject left ({len(self.skipped)} bad images skipped)")
         self.subject_index = {s: i for i, s in enumerate(man["subjects"])}
 
     def setup(self, stage: str | None = None) -> None:
@@ -466,7 +559,9 @@ class CanonicalDataModule(pl.LightningDataModule):
             self.setup()
         cats = self.manifest.get("categories", {})
         out = {"source": self.hparams.source, "image_size": self.hparams.image_size,
-               "manifest_hash": self.manifest["config_hash"], "generator_version": self.manifest["generator_version"],
+               "manifest_hash": self.manifest.get("manifest_hash", self.manifest["config_hash"]),
+               "config_hash": self.manifest["config_hash"], "generator_version": self.manifest["generator_version"],
+               "skipped_bad_files": len(self.skipped),
                "split_mode": self.hparams.split, "fold": self.hparams.fold, "n_folds": self.hparams.n_folds,
                "subjects": len(self.cache)}
         for k in SPLITS:

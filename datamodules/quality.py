@@ -43,6 +43,7 @@ import torch
 import trimesh
 from torch.utils.data import DataLoader, Dataset
 
+from datamodules.cache import DataError
 from lit3d.quality.distortions import DISTORTIONS, LEVELS, distort, severity, stable_seed
 from lit3d.quality.protocol import FeatureMatrix, TargetScaling, clip_nonfinite
 from lit3d.utils.io import atomic_write_bytes, atomic_write_text, write_json
@@ -230,7 +231,7 @@ class QualityDataModule(pl.LightningDataModule):
         sheet: str | int | None = None,
         score_range: Sequence[float | None] | None = None,
         higher_is_better: bool | None = None,
-        on_error: str = "raise",
+        skip_bad: bool = False,
         # features
         feature_fn: str | None = None,
         feature_options: Mapping[str, Any] | None = None,
@@ -251,6 +252,7 @@ class QualityDataModule(pl.LightningDataModule):
         self.scaling: TargetScaling | None = None
         self.splits: dict[str, FeatureMatrix] = {}
         self.sources: dict[str, dict] = {}
+        self.skipped: list[str] = []  # bad rows / pairs skipped (skip_bad=True)
 
     # ------------------------------------------------------------ config
     def _levels(self) -> dict[str, list[float]]:
@@ -319,9 +321,11 @@ class QualityDataModule(pl.LightningDataModule):
 
         hp = self.hparams
         if not hp.root:
-            raise FileNotFoundError(f"data source '{self.source}' needs data.root=PATH (the unpacked dataset folder)")
+            raise DataError(f"data source '{self.source}' needs data.root=PATH (the unpacked dataset folder)")
         ds = read_mos_dataset(hp.root, self.source, spreadsheet=hp.spreadsheet, sheet=hp.sheet,
-                              score_range=tuple(hp.score_range) if hp.score_range else None, on_error=hp.on_error)
+                              score_range=tuple(hp.score_range) if hp.score_range else None,
+                              on_error="skip" if hp.skip_bad else "raise")
+        self.skipped += ds.skipped
         for p in ds.unrated:
             warnings.warn(f"{p}: mesh not rated in {ds.spreadsheet.name} (ignored)", stacklevel=2)
         lo, hi = ds.score_range()
@@ -341,7 +345,7 @@ class QualityDataModule(pl.LightningDataModule):
             scaling = TargetScaling(0.0, 1.0, False, SEVERITY_NAME)
         else:
             pairs, scaling = self._real_pairs()
-        tables = self._feature_tables(pairs)
+        tables, pairs = self._feature_tables(pairs)
         shapes = [p["shape"] for p in pairs]
         items = [p["item"] for p in pairs]
         raw = np.array([p["score"] for p in pairs], dtype=np.float64)
@@ -357,29 +361,37 @@ class QualityDataModule(pl.LightningDataModule):
         write_json(self.cache_dir / "manifest.json", {
             "generator_version": GENERATOR_VERSION, "config": self.manifest_config(), "config_hash": self.config_hash,
             "scaling": scaling.to_dict(), "target_name": scaling.name, "n_pairs": len(pairs),
-            "n_features": len(fm.names), "dataset": self.name})
+            "n_features": len(fm.names), "dataset": self.name, "skipped": self.skipped})
 
-    def _feature_tables(self, pairs: list[dict]) -> list[dict]:
+    def _feature_path(self, item: str) -> Path:
+        return self.cache_dir / "features" / (item.replace("/", "__") + ".json")
+
+    def _feature_tables(self, pairs: list[dict]) -> tuple[list[dict], list[dict]]:
+        """Feature table of every pair (computed unless cached) and the pairs kept.
+
+        Each table is written atomically as soon as it is computed, so an interrupted run
+        resumes with the pairs still missing. A pair whose meshes fail raises :class:`DataError`
+        (naming the item and the file), or is skipped with a warning when ``skip_bad``.
+        """
         hp = self.hparams
-        feat_dir = self.cache_dir / "features"
-        jobs = []
-        for p in pairs:
-            out = feat_dir / (p["item"].replace("/", "__") + ".json")
-            if not out.is_file():
-                jobs.append((p["item"], p["reference"], p["distorted"], str(out), hp.feature_fn,
-                             dict(hp.feature_options or {})))
-        if jobs:
-            workers = int(hp.feature_workers)
-            if workers > 1:
-                with ProcessPoolExecutor(workers) as ex:
-                    results = list(ex.map(_feature_job, jobs))
-            else:
-                results = [_feature_job(j) for j in jobs]
-            errors = [(i, e) for i, e in results if e]
-            if errors:
-                i, e = errors[0]
-                raise RuntimeError(f"feature extraction failed for {len(errors)} pair(s); first: {i}: {e}")
-        return [json.loads((feat_dir / (p["item"].replace("/", "__") + ".json")).read_text()) for p in pairs]
+        jobs = [(p["item"], p["reference"], p["distorted"], str(self._feature_path(p["item"])), hp.feature_fn,
+                 dict(hp.feature_options or {})) for p in pairs if not self._feature_path(p["item"]).is_file()]
+        workers = int(hp.feature_workers)
+        if jobs and workers > 1:
+            with ProcessPoolExecutor(workers) as ex:
+                results = list(ex.map(_feature_job, jobs))
+        else:
+            results = [_feature_job(j) for j in jobs]
+        errors = {i: f"{i}: {e}" for i, e in results if e}
+        if errors and not hp.skip_bad:
+            raise DataError(f"feature extraction failed for {len(errors)} pair(s); first: {next(iter(errors.values()))}")
+        for msg in errors.values():
+            warnings.warn(f"skipping pair {msg}", stacklevel=2)
+        self.skipped += list(errors.values())
+        kept = [p for p in pairs if p["item"] not in errors]
+        if not kept:
+            raise DataError(f"{self.cache_dir}: no pair left after skipping {len(errors)} bad one(s)")
+        return [json.loads(self._feature_path(p["item"]).read_text()) for p in kept], kept
 
     # ------------------------------------------------------------ setup
     def load_matrix(self) -> FeatureMatrix:
@@ -390,6 +402,7 @@ class QualityDataModule(pl.LightningDataModule):
             fm = FeatureMatrix(clip_nonfinite(z["X"]), [str(n) for n in z["names"]], z["shapes"], z["target"],
                                [str(i) for i in z["items"]], self.name)
         manifest = json.loads((self.cache_dir / "manifest.json").read_text())
+        self.skipped = list(manifest.get("skipped", []))
         self.scaling = TargetScaling.from_dict(manifest["scaling"])
         fm.target_name = self.scaling.name
         self.sources = {p["item"]: p for p in json.loads((self.cache_dir / "pairs.json").read_text())}
@@ -451,6 +464,7 @@ class QualityDataModule(pl.LightningDataModule):
             "target_note": ("ordinal severity of the distortion level within its type, (level+1)/n_levels; "
                             "NOT a human opinion score") if self.source == "synth" else "mean opinion score, scaled to [0,1], higher = more distorted",
             "pairs": len(fm), "features": len(fm.names), "manifest_hash": self.config_hash,
+            "skipped_bad_files": len(self.skipped),
             "cache_dir": str(self.cache_dir),
             "splits": {k: {"pairs": len(v), "shapes": v.shape_names} for k, v in self.splits.items()},
             "pairs_per_shape": {s: int((fm.shapes == s).sum()) for s in fm.shape_names},

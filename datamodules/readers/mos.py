@@ -44,6 +44,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from datamodules.cache import DataError
+
 MESH_EXTS = (".obj", ".ply", ".off", ".stl")
 SHEET_EXTS = (".xlsx", ".xlsm", ".xls", ".csv")
 # most specific first: a sheet with "Object" and "Distorted model" names the pair by the latter
@@ -54,7 +56,7 @@ SHAPE_HEADERS = ("shape", "reference", "ref", "original", "source", "referencemo
 REF_HINTS = ("ref", "original", "orig")
 
 
-class MosDataError(ValueError):
+class MosDataError(DataError):
     """A dataset file is missing or malformed (the message names the file and the problem)."""
 
 

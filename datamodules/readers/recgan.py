@@ -129,10 +129,12 @@ def load_grid(path: str | os.PathLike) -> np.ndarray:
     """One release ``.npz`` -> (Dx, Dy, Dz) bool.
 
     Raises:
-        DataError: naming the file: unreadable, no ``arr_0``, wrong ndim, empty.
+        DataError: naming the file: unreadable, no ``arr_0``, wrong ndim, size 0,
+            wrong dtype or values (see :func:`occupancy_problem`). An all-empty grid is
+            returned (:func:`convert_pair` rejects it after comparing the pair's shapes).
     """
     try:
-        with np.load(path) as z:
+        with np.load(path, allow_pickle=False) as z:
             if "arr_0" not in z.files:
                 raise DataError(f"{path}: missing key 'arr_0' (keys: {z.files})")
             arr = z["arr_0"]
@@ -146,7 +148,23 @@ def load_grid(path: str | os.PathLike) -> np.ndarray:
         raise DataError(f"{path}: arr_0 has shape {arr.shape}, expected (Dx, Dy, Dz, 1) or (Dx, Dy, Dz)")
     if arr.size == 0:
         raise DataError(f"{path}: arr_0 is empty {arr.shape}")
+    problem = occupancy_problem(arr)
+    if problem:
+        raise DataError(f"{path}: arr_0 {problem}")
     return arr > 0
+
+
+def occupancy_problem(arr: np.ndarray) -> str | None:
+    """Why ``arr`` is not an occupancy grid (bool, or int/float holding only 0 and 1), or None."""
+    if arr.dtype.kind not in "biuf":
+        return f"has dtype {arr.dtype}, expected int8 occupancy in {{0, 1}}"
+    if arr.dtype.kind != "b":
+        if arr.dtype.kind == "f" and not np.isfinite(arr).all():
+            return f"has dtype {arr.dtype} with NaN or inf, expected int8 occupancy in {{0, 1}}"
+        lo, hi = arr.min(), arr.max()
+        if lo < 0 or hi > 1 or (arr.dtype.kind == "f" and not np.isin(arr, (0, 1)).all()):
+            return f"has dtype {arr.dtype} with values in [{lo:g}, {hi:g}], expected int8 occupancy in {{0, 1}}"
+    return None
 
 
 def centre_fit(grid: np.ndarray, size: int) -> np.ndarray:
@@ -179,13 +197,17 @@ def convert_pair(pair: RecganPair, raw_res: int = 256, target_res: int = 256,
     """Load, check, pad/crop and pool one pair -> (input (input_res^3) bool, target (target_res^3) bool).
 
     Raises:
-        DataError: naming the file: see :func:`load_grid`, or input/target shapes differ.
+        DataError: naming the file: see :func:`load_grid`, input/target shapes differ, or
+            a grid without any occupied voxel.
     """
     inp = load_grid(pair.input_path)
     tgt = load_grid(pair.target_path)
     if inp.shape != tgt.shape:
         raise DataError(f"{pair.input_path}: shape {inp.shape} differs from its target "
                         f"{pair.target_path} {tgt.shape}")
+    for path, grid in ((pair.input_path, inp), (pair.target_path, tgt)):
+        if not grid.any():
+            raise DataError(f"{path}: arr_0 is an all-empty grid (no occupied voxel)")
     if max(inp.shape) > raw_res + 8:
         raise DataError(f"{pair.input_path}: grid {inp.shape} is much larger than raw_res={raw_res}")
     inp, tgt = centre_fit(inp, raw_res), centre_fit(tgt, raw_res)

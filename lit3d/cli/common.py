@@ -1,15 +1,32 @@
-"""Pieces shared by the Hydra entry points: config dir, task building, loggers, metadata."""
+"""Pieces shared by the Hydra entry points: config dir, task building, loggers, metadata, errors.
+
+Heavy libraries (torch, Lightning) are imported inside the functions that need them, so
+that a bad command line (unknown experiment, missing ``data.root``) is answered in about a
+second instead of after ten seconds of imports.
+
+Errors the user can act on end the process with one line on stderr (see :func:`run_cli`):
+
+========================================================  =====  =========================================
+what                                                       exit   line
+========================================================  =====  =========================================
+bad option/file (UserError, DataError, ShapeError, ???)    2      ``error: <file or option>: <problem>``
+NaN/Inf loss (FloatingPointError)                          1      ``error: non-finite loss at ... step``
+SIGTERM during training (last.ckpt saved)                  143    ``error: <run dir>: stopped by SIGTERM``
+========================================================  =====  =========================================
+
+``--debug`` on the command line or ``HYDRA_FULL_ERROR=1`` shows the traceback instead.
+"""
 from __future__ import annotations
 
 import importlib
 import logging
+import os
+import signal
 import sys
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-import lightning.pytorch as pl
-import torch
-from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 log = logging.getLogger("lit3d")
@@ -17,11 +34,19 @@ log = logging.getLogger("lit3d")
 CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
 # keys of a task config read by the CLI and not passed to the LightningModule
 CLI_TASK_KEYS = ("_target_", "name", "monitor", "monitor_mode")
-META_KEY = "lit3d"
+EXIT_USER = 2        # a problem with the command line, a config or an input file
+EXIT_DIVERGED = 1    # training stopped on a NaN/Inf loss
+EXIT_SIGTERM = 128 + signal.SIGTERM
 
 
 class UserError(Exception):
     """A problem the user can fix (bad path, missing option): printed as one line."""
+
+
+class Interrupted(Exception):
+    """Training was stopped by a signal after saving ``last.ckpt``; the message says how to resume."""
+
+    exit_code = EXIT_SIGTERM
 
 
 def import_object(path: str) -> Any:
@@ -44,66 +69,141 @@ def task_kwargs(task_cfg: DictConfig | dict) -> dict:
     return {k: v for k, v in to_plain(task_cfg).items() if k not in CLI_TASK_KEYS}
 
 
-def build_task(task_cfg: DictConfig | dict) -> pl.LightningModule:
+def build_task(task_cfg: DictConfig | dict):
     """Instantiate the LightningModule named by ``task_cfg._target_`` with plain kwargs."""
     cls = import_object(task_cfg["_target_"])
     return cls(**task_kwargs(task_cfg))
 
 
-def build_datamodule(data_cfg: DictConfig | dict) -> pl.LightningDataModule:
+def build_datamodule(data_cfg: DictConfig | dict):
     """Instantiate a DataModule from its config (plain values only)."""
+    from hydra.utils import instantiate
+
     return instantiate(OmegaConf.create(to_plain(data_cfg)), _convert_="all")
 
 
 def read_checkpoint_meta(ckpt_path: str | Path) -> dict:
     """The lit3d metadata stored in a checkpoint (task, data config, W&B id).
 
-    Loads with ``weights_only=True`` (memory-mapped so large checkpoints are cheap).
+    Loads with ``weights_only=True`` (memory-mapped so large checkpoints are cheap): a
+    checkpoint that pickles arbitrary objects is refused, never executed.
     """
+    import torch
+
+    from lit3d.callbacks.metadata import META_KEY
+
     path = Path(ckpt_path)
     if not path.is_file():
         raise UserError(f"{path}: checkpoint not found")
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
-    except Exception as exc:  # corrupt or not a torch file
-        raise UserError(f"{path}: not a readable checkpoint ({type(exc).__name__}: {exc})") from exc
-    meta = ckpt.get(META_KEY)
+    except Exception as exc:  # corrupt, not a torch file, or pickled objects weights_only refuses
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        raise UserError(f"{path}: not a readable checkpoint ({type(exc).__name__}: {first})") from exc
+    meta = ckpt.get(META_KEY) if isinstance(ckpt, dict) else None
     if not isinstance(meta, dict):
         raise UserError(f"{path}: not a lit3d checkpoint (no '{META_KEY}' metadata)")
     return meta
 
 
-class MetadataCallback(pl.Callback):
-    """Stores what evaluation needs in every checkpoint: task, data config, W&B run id."""
+# ------------------------------------------------------------------ command line
+def config_groups(conf_dir: str = CONF_DIR) -> dict[str, list[str]]:
+    """Config groups of ``conf/`` (Hydra's own ``hydra/`` excluded) -> their option names."""
+    groups = {}
+    for d in sorted(Path(conf_dir).iterdir()):
+        if d.is_dir() and d.name != "hydra":
+            groups[d.name] = sorted(p.stem for p in d.glob("*.yaml"))
+    return groups
 
-    def __init__(self, task_cfg: dict, data_cfg: dict, wandb_id: str | None):
-        self.meta = {"task": task_cfg, "data": data_cfg, "wandb_id": wandb_id}
 
-    def on_save_checkpoint(self, trainer, pl_module, checkpoint: dict) -> None:
-        checkpoint[META_KEY] = self.meta
+def check_group_overrides(args: Sequence[str], conf_dir: str = CONF_DIR) -> None:
+    """Raise :class:`UserError` when an override picks an option a config group does not have.
 
-
-def run_cli(fn, cfg: DictConfig) -> Any:
-    """Run ``fn(cfg)``; a :class:`UserError` becomes one line on stderr and exit 2.
-
-    ``HYDRA_FULL_ERROR=1`` or ``debug=true`` shows the traceback instead.
+    ``experiment=nope`` -> ``experiment=nope: no such experiment config; known: ...``. Sweep
+    lists (``task=a,b``) are checked item by item; sweep functions (``choice(...)``,
+    ``glob(...)``), interpolations and ``null`` are left to Hydra.
     """
-    import os
+    groups = config_groups(conf_dir)
+    for arg in args:
+        if arg.startswith("-") or "=" not in arg:
+            continue
+        key, value = arg.split("=", 1)
+        key = key.lstrip("+~").split("@", 1)[0]
+        if key not in groups or value in ("", "null") or any(c in value for c in "()*[]{}$"):
+            continue
+        for option in value.split(","):
+            if option not in groups[key]:
+                known = ", ".join(groups[key]) or "(none)"
+                raise UserError(f"{key}={option}: no such {key} config (conf/{key}/{option}.yaml); known: {known}")
 
+
+def _debug_requested() -> bool:
+    return os.environ.get("HYDRA_FULL_ERROR") == "1"
+
+
+def fail(exc: BaseException, code: int) -> None:
+    """Print ``error: <first line of exc>`` on stderr and exit with ``code``."""
+    text = str(exc).strip()
+    line = text.splitlines()[0] if text else type(exc).__name__
+    print(f"error: {line}", file=sys.stderr, flush=True)
+    sys.exit(code)
+
+
+def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None) -> Any:
+    """Console-script wrapper of a ``@hydra.main`` function.
+
+    ``--debug`` is taken off the command line and turns on ``HYDRA_FULL_ERROR=1``
+    (tracebacks); unknown config-group options (``experiment=``, ``task=``, ``data=`` ...)
+    stop with one line and exit 2 before Hydra composes anything.
+    """
+    args = list(sys.argv[1:] if argv is None else argv)
+    if "--debug" in args:
+        args = [a for a in args if a != "--debug"]
+        os.environ["HYDRA_FULL_ERROR"] = "1"
+    try:
+        check_group_overrides(args)
+    except UserError as exc:
+        if _debug_requested():
+            raise
+        fail(exc, EXIT_USER)
+    sys.argv = [sys.argv[0], *args]
+    return hydra_main()
+
+
+def exit_code_for(exc: BaseException) -> int | None:
+    """Exit status for an exception that ends as one line, or None (let it propagate)."""
     from omegaconf.errors import MissingMandatoryValue
 
     from datamodules.cache import DataError
+    from lit3d.render.convert import ShapeError
+
+    if isinstance(exc, Interrupted):
+        return exc.exit_code
+    if isinstance(exc, (UserError, DataError, ShapeError, MissingMandatoryValue)):
+        return EXIT_USER
+    if isinstance(exc, FloatingPointError):  # NaN/Inf loss: the message names the step and the term
+        return EXIT_DIVERGED
+    return None
+
+
+def run_cli(fn: Callable[[DictConfig], Any], cfg: DictConfig) -> Any:
+    """Run ``fn(cfg)``; errors the user can act on become one line on stderr (see module doc).
+
+    ``HYDRA_FULL_ERROR=1`` (or ``--debug``, or ``debug=true`` in the config) shows the
+    traceback instead.
+    """
+    from omegaconf.errors import MissingMandatoryValue
 
     try:
         missing = sorted(OmegaConf.missing_keys(cfg))
         if missing:  # before any work or logging: the one line is all the user sees
             raise UserError(f"missing value for {missing[0]}: set {missing[0]}=... on the command line")
         return fn(cfg)
-    except (UserError, DataError, MissingMandatoryValue) as exc:
-        if os.environ.get("HYDRA_FULL_ERROR") == "1" or cfg.get("debug", False):
+    except Exception as exc:
+        code = exit_code_for(exc)
+        if code is None or _debug_requested() or cfg.get("debug", False):
             raise
         if isinstance(exc, MissingMandatoryValue):
             key = getattr(exc, "full_key", "") or "a required option"
             exc = UserError(f"missing value for {key}: set {key}=... on the command line")
-        print(f"error: {exc}", file=sys.stderr)
-        sys.exit(2)
+        fail(exc, code)

@@ -13,7 +13,7 @@ from pathlib import Path
 import hydra
 from omegaconf import DictConfig
 
-from lit3d.cli.common import CONF_DIR, build_datamodule, run_cli
+from lit3d.cli.common import CONF_DIR, build_datamodule, cli_main, run_cli
 
 
 def prepare(cfg: DictConfig) -> dict:
@@ -52,8 +52,8 @@ def _hydra_main(cfg: DictConfig) -> None:
 
 
 def main() -> None:
-    sys.argv = [sys.argv[0], *_argv_show_to_override(sys.argv[1:])]
-    _hydra_main()
+    """Console script ``lit3d-data`` (``--debug``: tracebacks instead of one-line errors)."""
+    cli_main(_hydra_main, _argv_show_to_override(sys.argv[1:]))
 
 
 if __name__ == "__main__":

@@ -12,8 +12,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import hydra
-import lightning.pytorch as pl
-import torch
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
@@ -21,6 +19,7 @@ from lit3d.cli.common import (
     CONF_DIR,
     UserError,
     build_datamodule,
+    cli_main,
     import_object,
     log,
     read_checkpoint_meta,
@@ -32,20 +31,28 @@ from lit3d.tasks.registry import report_module
 from lit3d.utils.io import write_json
 
 
+def checkpoint_meta_for(cfg: DictConfig) -> dict:
+    """The checkpoint's lit3d metadata; refuses a checkpoint of another task than ``task=NAME``."""
+    meta = read_checkpoint_meta(cfg.ckpt_path)
+    have = (meta.get("task") or {}).get("name")
+    wanted = cfg.get("task")
+    if wanted is not None and wanted.get("name") != have:
+        raise UserError(f"{cfg.ckpt_path}: checkpoint is for task '{have}', not '{wanted.get('name')}'")
+    return meta
+
+
 def evaluate(cfg: DictConfig) -> dict[str, float]:
+    meta = checkpoint_meta_for(cfg)  # before the heavy imports: a wrong checkpoint fails fast
+    import lightning.pytorch as pl
+    import torch
+
     out_dir = Path(cfg.paths.output_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     pl.seed_everything(cfg.seed, workers=True)
     torch.set_float32_matmul_precision(cfg.matmul_precision)
-    meta = read_checkpoint_meta(cfg.ckpt_path)
     task_cfg = meta["task"]
-    wanted = cfg.get("task")
-    if wanted is not None and wanted.get("name") != task_cfg.get("name"):
-        raise UserError(
-            f"{cfg.ckpt_path}: checkpoint is for task '{task_cfg.get('name')}', not '{wanted.get('name')}'"
-        )
     task_cls = import_object(task_cfg["_target_"])
-    task = task_cls.load_from_checkpoint(cfg.ckpt_path, map_location="cpu")
+    task = task_cls.load_from_checkpoint(cfg.ckpt_path, map_location="cpu", weights_only=True)
     data_cfg = to_plain(cfg.data) if cfg.get("data") is not None else dict(meta["data"])
     if hasattr(task, "adapt_data_config"):
         data_cfg = task.adapt_data_config(data_cfg)
@@ -69,8 +76,13 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
 
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="eval")
-def main(cfg: DictConfig) -> None:
+def hydra_main(cfg: DictConfig) -> None:
     run_cli(evaluate, cfg)
+
+
+def main() -> None:
+    """Console script ``lit3d-eval`` (``--debug``: tracebacks instead of one-line errors)."""
+    cli_main(hydra_main)
 
 
 if __name__ == "__main__":

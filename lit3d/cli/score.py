@@ -111,19 +111,21 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(args) -> int:
-    from lit3d.quality.features import FeatureConfig, default_cache_dir, feature_table
     from lit3d.render.convert import to_mesh
-    from lit3d.render.gbuffer import RenderConfig
-    from lit3d.render.styles import resolve_styles
 
     if args.ckpt:
         raise NotImplementedError(f"{args.ckpt}: --ckpt (learned MOS prediction) is not yet supported; "
                                   "run without it for the mean Mask-SSIM score")
     if not 16 <= args.size <= 4096:
         raise ValueError(f"--size {args.size}: expected 16..4096 pixels")
-    cfg = FeatureConfig(render=RenderConfig(size=args.size), styles=tuple(resolve_styles(args.styles)))
+    # shapes first: a bad file is reported before torch and the renderer are imported (about 1 s, not 10)
     ref = to_mesh(args.ref)
     dist = to_mesh(args.dist)
+    from lit3d.quality.features import FeatureConfig, default_cache_dir, feature_table
+    from lit3d.render.gbuffer import RenderConfig
+    from lit3d.render.styles import resolve_styles
+
+    cfg = FeatureConfig(render=RenderConfig(size=args.size), styles=tuple(resolve_styles(args.styles)))
     t0 = time.perf_counter()
     table = feature_table(ref, dist, cfg, cache_dir=None if args.no_cache else default_cache_dir(),
                           device=args.device)

@@ -5,14 +5,16 @@ Nets are built on the meta device, so paper-scale configs cost no memory.
 from __future__ import annotations
 
 import hydra
-import torch
 from omegaconf import DictConfig
 
-from lit3d.cli.common import CONF_DIR, import_object, run_cli, task_kwargs
-from lit3d.nets.summary import format_summary_table
+from lit3d.cli.common import CONF_DIR, cli_main, import_object, run_cli, task_kwargs
 
 
 def summary(cfg: DictConfig) -> str:
+    import torch
+
+    from lit3d.nets.summary import format_summary_table
+
     task_cls = import_object(cfg.task["_target_"])
     with torch.device("meta"):
         rows = task_cls.summary_rows(task_kwargs(cfg.task))
@@ -22,8 +24,13 @@ def summary(cfg: DictConfig) -> str:
 
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="train")
-def main(cfg: DictConfig) -> None:
+def hydra_main(cfg: DictConfig) -> None:
     run_cli(summary, cfg)
+
+
+def main() -> None:
+    """Console script ``lit3d-summary`` (``--debug``: tracebacks instead of one-line errors)."""
+    cli_main(hydra_main)
 
 
 if __name__ == "__main__":

@@ -14,23 +14,24 @@ import uuid
 from pathlib import Path
 
 import hydra
-import lightning.pytorch as pl
-import torch
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from lit3d.cli.common import (
     CONF_DIR,
-    MetadataCallback,
+    Interrupted,
     UserError,
     build_datamodule,
     build_task,
+    cli_main,
     log,
     read_checkpoint_meta,
     run_cli,
     to_plain,
 )
 from lit3d.utils.io import atomic_write_text, write_json
+
+# torch and Lightning are imported inside train(): a bad command line is answered in about a second
 
 
 def resolve_ckpt_path(ckpt_path: str | None, output_dir: Path) -> str | None:
@@ -77,11 +78,39 @@ def finish_wandb(loggers: list) -> None:
 
 
 def scalar_metrics(metrics: dict) -> dict[str, float]:
+    import torch
+
     return {k: float(v) for k, v in metrics.items() if torch.as_tensor(v).numel() == 1}
+
+
+def checkpoint_plugins(trainer_cfg: DictConfig) -> dict:
+    """``plugins=[AtomicCheckpointIO()]`` unless the trainer config sets its own plugins."""
+    if trainer_cfg.get("plugins") is not None:
+        return {}
+    from lit3d.callbacks.resume import AtomicCheckpointIO
+
+    return {"plugins": [AtomicCheckpointIO()]}
+
+
+def fit(trainer, task, datamodule, ckpt_path: str | None, output_dir: Path) -> None:
+    """``trainer.fit``; a SIGTERM (after ``last.ckpt`` is saved) becomes :class:`Interrupted`."""
+    from lightning.pytorch.utilities.exceptions import SIGTERMException
+
+    try:
+        trainer.fit(task, datamodule=datamodule, ckpt_path=ckpt_path)
+    except SIGTERMException as exc:
+        raise Interrupted(
+            f"{output_dir}: stopped by SIGTERM at epoch {trainer.current_epoch}; resume with the same "
+            f"overrides plus hydra.run.dir={output_dir} ckpt_path=last") from exc
 
 
 def train(cfg: DictConfig) -> float | None:
     """Fit, then test the best checkpoint. Returns the monitored metric value."""
+    import lightning.pytorch as pl
+    import torch
+
+    from lit3d.callbacks.metadata import MetadataCallback
+
     output_dir = Path(cfg.paths.output_dir)
     output_dir.mkdir(parents=True, exist_ok=True)
     pl.seed_everything(cfg.seed, workers=True)
@@ -95,11 +124,12 @@ def train(cfg: DictConfig) -> float | None:
     loggers = build_loggers(cfg, wandb_id)
     callbacks = [instantiate(c) for c in (cfg.get("callbacks") or {}).values() if c is not None]
     callbacks.append(MetadataCallback(to_plain(cfg.task), to_plain(cfg.data), wandb_id))
-    trainer: pl.Trainer = instantiate(cfg.trainer, callbacks=callbacks, logger=loggers or False)
+    trainer: pl.Trainer = instantiate(cfg.trainer, callbacks=callbacks, logger=loggers or False,
+                                      **checkpoint_plugins(cfg.trainer))
     for lg in loggers:
         lg.log_hyperparams(to_plain(cfg))
     try:
-        trainer.fit(task, datamodule=datamodule, ckpt_path=ckpt_path)
+        fit(trainer, task, datamodule, ckpt_path, output_dir)
         fit_metrics = scalar_metrics(trainer.callback_metrics)
         monitored = _monitored_value(trainer, cfg.task.monitor, fit_metrics)
         test_metrics: dict[str, float] = {}
@@ -116,7 +146,7 @@ def train(cfg: DictConfig) -> float | None:
         finish_wandb(loggers)
 
 
-def _monitored_value(trainer: pl.Trainer, monitor: str, metrics: dict[str, float]) -> float | None:
+def _monitored_value(trainer, monitor: str, metrics: dict[str, float]) -> float | None:
     cb = trainer.checkpoint_callback
     if cb is not None and cb.best_model_score is not None:
         return float(cb.best_model_score)
@@ -124,8 +154,13 @@ def _monitored_value(trainer: pl.Trainer, monitor: str, metrics: dict[str, float
 
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="train")
-def main(cfg: DictConfig) -> float | None:
+def hydra_main(cfg: DictConfig) -> float | None:
     return run_cli(train, cfg)
+
+
+def main() -> None:
+    """Console script ``lit3d-train`` (``--debug``: tracebacks instead of one-line errors)."""
+    cli_main(hydra_main)
 
 
 if __name__ == "__main__":

@@ -56,23 +56,41 @@ def _border_index(i: int, n: int, padding: str) -> int | None:
     return i if i < n else period - i  # d c b | a b c d | c b a   (torch 'reflect', kornia)
 
 
-@functools.lru_cache(maxsize=64)
+@functools.lru_cache(maxsize=512)  # sizes <= canvas side: bounded
 def _filter_matrix_cached(n: int, taps: tuple, padding: str, device: str, dtype: torch.dtype) -> torch.Tensor:
+    import numpy as np
+
     k = len(taps)
     r = (k - 1) // 2
+    t = np.asarray(taps, dtype=np.float64)
     if padding == "valid":
-        m = torch.zeros(max(n - k + 1, 0), n, dtype=torch.float64)
-        for o in range(m.shape[0]):
-            for t in range(k):
-                m[o, o + t] += taps[t]
+        m = np.zeros((max(n - k + 1, 0), n))
+        o = np.arange(m.shape[0])
+        for i in range(k):
+            m[o, o + i] += t[i]
     else:
-        m = torch.zeros(n, n, dtype=torch.float64)
-        for o in range(n):
-            for t in range(k):
-                j = _border_index(o + t - r, n, padding)
-                if j is not None:
-                    m[o, j] += taps[t]
-    return m.to(device=device, dtype=dtype)
+        m = np.zeros((n, n))
+        # virtual source index of every (output o, tap i), accumulated in (o, i) order
+        rows = np.repeat(np.arange(n), k)
+        vals = np.tile(t, n)
+        src = rows + np.tile(np.arange(k), n) - r
+        inside = (src >= 0) & (src < n)
+        if padding == "zeros":
+            rows, vals, cols = rows[inside], vals[inside], src[inside]
+        elif padding == "replicate":
+            cols = np.clip(src, 0, n - 1)
+        else:
+            period = 2 * n if padding == "symmetric" else 2 * n - 2
+            if period <= 0:
+                cols = np.where(inside, src, 0)
+            else:
+                q = src % period
+                cols = np.where(q < n, q, (period - 1 - q) if padding == "symmetric" else (period - q))
+        np.add.at(m, (rows, cols), vals)
+    np_dtype = {torch.float32: np.float32, torch.float64: np.float64}.get(dtype)
+    if np_dtype is not None:  # numpy cast: torch's threaded cast stalls on a busy CPU (ms per matrix)
+        return torch.from_numpy(m.astype(np_dtype)).to(device=device)
+    return torch.from_numpy(m).to(device=device, dtype=dtype)
 
 
 def filter_matrix(n: int, taps: torch.Tensor, padding: str = "symmetric", device=None, dtype=torch.float32) -> torch.Tensor:
@@ -85,12 +103,52 @@ def filter_matrix(n: int, taps: torch.Tensor, padding: str = "symmetric", device
     return _filter_matrix_cached(n, tuple(float(t) for t in taps), padding, dev, dtype)
 
 
+_BAND_BLOCK = 32  # output rows/cols per block of the banded products on CPU
+_BAND_MIN = 128  # axes at least this long use the blocked product on CPU (measured: 2-2.4x at 150-256 px)
+
+
+@functools.lru_cache(maxsize=512)
+def _band_blocks(n: int, taps: tuple, padding: str, device: str, dtype: torch.dtype, block: int):
+    """Blocks ``(o0, o1, s0, s1, M[o0:o1, s0:s1], its transpose)`` of the filter matrix: output
+    rows ``[o0, o1)`` read only input ``[s0, s1)`` (the non-zero columns of those rows)."""
+    m = _filter_matrix_cached(n, taps, padding, device, dtype)
+    nz = m != 0
+    out = []
+    for o0 in range(0, m.shape[0], block):
+        o1 = min(o0 + block, m.shape[0])
+        cols = nz[o0:o1].any(0).nonzero().squeeze(1)
+        s0, s1 = (int(cols[0]), int(cols[-1]) + 1) if cols.numel() else (0, 1)
+        sub = m[o0:o1, s0:s1]
+        out.append((o0, o1, s0, s1, sub.contiguous(), sub.t().contiguous()))
+    return tuple(out)
+
+
 def separable_filter(x: torch.Tensor, taps: torch.Tensor, padding: str = "symmetric") -> torch.Tensor:
-    """Filter ``(..., H, W)`` with ``taps`` along H and W (two matrix products)."""
+    """Filter ``(..., H, W)`` with ``taps`` along H and W (two matrix products).
+
+    On CPU, axes of at least ``_BAND_MIN`` pixels multiply only the band of the filter
+    matrix, in blocks of ``_BAND_BLOCK`` outputs (the dense product spends most of its
+    time on zeros); the result is the same up to float rounding.
+    """
     h, w = x.shape[-2:]
-    ah = filter_matrix(h, taps, padding, x.device, x.dtype)
-    aw = filter_matrix(w, taps, padding, x.device, x.dtype)
-    return ah @ x @ aw.transpose(0, 1)
+    if x.device.type != "cpu" or max(h, w) < _BAND_MIN:
+        ah = filter_matrix(h, taps, padding, x.device, x.dtype)
+        aw = filter_matrix(w, taps, padding, x.device, x.dtype)
+        return ah @ x @ aw.transpose(0, 1)
+    t = tuple(float(v) for v in taps)
+    dev = str(x.device)
+    if h >= _BAND_MIN:
+        y = torch.cat([sub @ x[..., s0:s1, :] for _, _, s0, s1, sub, _ in
+                       _band_blocks(h, t, padding, dev, x.dtype, _BAND_BLOCK)], -2)
+    else:
+        y = filter_matrix(h, taps, padding, x.device, x.dtype) @ x
+    if w < _BAND_MIN:
+        return y @ filter_matrix(w, taps, padding, x.device, x.dtype).transpose(0, 1)
+    lead = y.shape[:-1]
+    y2 = y.reshape(-1, y.shape[-1])
+    z = torch.cat([y2[:, s0:s1] @ subt for _, _, s0, s1, _, subt in
+                   _band_blocks(w, t, padding, dev, x.dtype, _BAND_BLOCK)], -1)
+    return z.reshape(*lead, z.shape[-1])
 
 
 def halve(x: torch.Tensor) -> torch.Tensor:
@@ -198,13 +256,39 @@ def mask_ssim(a: torch.Tensor, b: torch.Tensor, mask_a: torch.Tensor, mask_b: to
     return torch.where(n > 0, s / n.clamp_min(1.0), fallback)
 
 
+_CPU_CHUNK_PIXELS = 1 << 19  # image pixels per chunk for the SSIM family on CPU (8 images at 256^2)
+
+
+def _cpu_chunk(x: torch.Tensor) -> int:
+    """Images per chunk for batched per-pixel work on CPU (the whole batch elsewhere)."""
+    if x.device.type != "cpu" or x.dim() < 3:
+        return max(int(x.shape[0]), 1)
+    return max(1, _CPU_CHUNK_PIXELS // max(int(x[0].numel()), 1))
+
+
+def _rows(m: torch.Tensor, sl: slice) -> torch.Tensor:
+    """Rows ``sl`` of a per-image tensor, or the tensor itself when it is shared by the batch (dim 0 = 1)."""
+    return m if m.shape[0] == 1 else m[sl]
+
+
 def mask_ssim_all(a: torch.Tensor, b: torch.Tensor, mask_a: torch.Tensor, mask_b: torch.Tensor,
                   smap: torch.Tensor | None = None, **ssim_kw) -> dict[str, torch.Tensor]:
     """All four Mask-SSIM variants and plain SSIM from one SSIM map: ``{name: (B,)}``.
 
     Keys: ``mask_ssim``, ``mask_ssim_window``, ``mask_ssim_negative``,
     ``mask_ssim_merge``, ``ssim``.
+
+    On CPU a large batch is processed in chunks of about ``_CPU_CHUNK_PIXELS`` pixels
+    (same numbers; 2-3x faster than one pass over a batch that does not fit in cache).
     """
+    step = _cpu_chunk(a)
+    if step < a.shape[0]:
+        parts = []
+        for i in range(0, a.shape[0], step):
+            sl = slice(i, i + step)
+            parts.append(mask_ssim_all(a[sl], b[sl], _rows(mask_a, sl), _rows(mask_b, sl),
+                                       smap=None if smap is None else smap[sl], **ssim_kw))
+        return {k: torch.cat([p[k] for p in parts]) for k in parts[0]}
     c = ssim_map(a, b, **ssim_kw) if smap is None else smap
     out = {("mask_ssim" if v == "plain" else f"mask_ssim_{v}"): mask_ssim(a, b, mask_a, mask_b, v, smap=c)
            for v in ("plain", "window", "negative")}
@@ -384,16 +468,36 @@ def phase_congruency(img: torch.Tensor, k: float = 2.0, eps: float = 1e-4,
     majority, which skips the selection).
     """
     bsz, h, w = img.shape
-    bank, em_n, sum_an2, sum_aiaj = _fsim_filters(h, w, str(img.device))
     n = h * w
     rank = (n + 1) // 2 if full_pixels is None else (int(full_pixels) + 1) // 2 - (int(full_pixels) - n)
-    spec = torch.fft.fft2(img.float())
+    # images are independent: chunks whose (chunk, scales, H, W) complex responses stay in cache
+    # run about 1.3x faster on CPU than one big batch (same numbers)
+    step = bsz if img.device.type != "cpu" else max(1, _PC_CHUNK_ELEMS // (4 * n))
+    if step >= bsz:
+        return _phase_congruency(img, k, eps, rank)
+    return torch.cat([_phase_congruency(x, k, eps, rank) for x in img.split(step)])
+
+
+_PC_CHUNK_ELEMS = 1 << 18  # complex responses per chunk on CPU (2 MB)
+
+
+@functools.lru_cache(maxsize=64)
+def _fsim_filters_complex(h: int, w: int, device: str):
+    bank, em_n, sum_an2, sum_aiaj = _fsim_filters(h, w, device)
+    # complex x complex products are about 4x faster on CPU than complex x real (no promotion copy)
+    return bank.to(torch.complex64), em_n.tolist(), sum_an2.tolist(), sum_aiaj.tolist()
+
+
+def _phase_congruency(img: torch.Tensor, k: float, eps: float, rank: int) -> torch.Tensor:
+    bsz, h, w = img.shape
+    bank, em_n, sum_an2, sum_aiaj = _fsim_filters_complex(h, w, str(img.device))
+    spec = torch.fft.fft2(img.float())[:, None]
     energy_all = torch.zeros(bsz, h, w, dtype=torch.float32, device=img.device)
     an_all = torch.zeros_like(energy_all)
     for o in range(bank.shape[0]):
-        eo = torch.fft.ifft2(spec[:, None] * bank[o][None])  # (B, S, H, W) complex
+        eo = torch.fft.ifft2(spec * bank[o])  # (B, S, H, W) complex
         e, od = eo.real, eo.imag
-        an = torch.addcmul(e * e, od, od).sqrt_()  # |eo|, faster than complex abs
+        an2 = torch.addcmul(e * e, od, od)  # |eo|^2
         sum_eo = eo.sum(1)
         xe = sum_eo.abs()
         den = xe + eps
@@ -402,16 +506,15 @@ def phase_congruency(img: torch.Tensor, k: float = 2.0, eps: float = 1e-4,
         dev = torch.addcmul(od * mean_e[:, None], e, mean_o[:, None], value=-1.0).abs_().sum(1)
         energy = xe * xe / den - dev
         if rank >= 1:
-            a2 = an[:, 0].flatten(1).square()
-            median = a2.kthvalue(rank, dim=1).values  # MATLAB median (odd) / lower middle
+            median = an2[:, 0].flatten(1).kthvalue(rank, dim=1).values  # MATLAB median (odd) / lower middle
             mean_e2n = -median / math.log(0.5)
-            noise_power = mean_e2n / float(em_n[o])
-            est_noise2 = 2 * noise_power * float(sum_an2[o]) + 4 * noise_power * float(sum_aiaj[o])
+            noise_power = mean_e2n / em_n[o]
+            est_noise2 = 2 * noise_power * sum_an2[o] + 4 * noise_power * sum_aiaj[o]
             tau = torch.sqrt(est_noise2 / 2)
             t = (tau * math.sqrt(math.pi / 2) + k * torch.sqrt((2 - math.pi / 2) * tau**2)) / 1.7
             energy = energy - t[:, None, None]
         energy_all += energy.clamp_min_(0.0)
-        an_all += an.sum(1)
+        an_all += an2.sqrt_().sum(1)
     return energy_all / an_all.clamp_min(1e-12)
 
 

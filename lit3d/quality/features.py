@@ -65,7 +65,7 @@ class FeatureConfig:
     mesh_measures: bool = True
     n_samples: int = 20000
     fsim_downsample: int = 2
-    chunk: int = 32
+    chunk: int = 8
     workers: int = 0
 
     def resolved_styles(self) -> list[str]:
@@ -291,11 +291,15 @@ def feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_dir: str
     workers = (cfg.workers if cfg.workers > 0 else torch.get_num_threads()) if on_cpu else 1
     pool = None
     prev_threads = torch.get_num_threads()
+    if on_cpu:
+        # coarse-grained parallelism only: whole views per worker thread, one intra-op thread
+        # each (also with workers=1). Per-op OpenMP teams on small crops stall badly on a busy
+        # machine: measured on a loaded 2-core CPU, workers=1 with 2 intra-op threads took
+        # 18-88 s for the 256^2 table that takes about 5 s with one thread.
+        torch.set_num_threads(1)
     if workers > 1:
         from concurrent.futures import ThreadPoolExecutor
 
-        # coarse-grained parallelism: each worker measures whole views with one intra-op
-        # thread (per-op OpenMP teams on small crops stall badly on a busy machine)
         pool = ThreadPoolExecutor(workers, initializer=torch.set_num_threads, initargs=(1,))
     try:
         pending = []
@@ -318,7 +322,7 @@ def feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_dir: str
     finally:
         if pool is not None:
             pool.shutdown(wait=True)
-            torch.set_num_threads(prev_threads)
+        torch.set_num_threads(prev_threads)
     for (shading, k), by_view in parts.items():
         vals = torch.stack([by_view[v] for v in range(n_views[shading])], 1)  # (S, V)
         for j, style in enumerate(names):

@@ -85,10 +85,13 @@ def validate_mesh(mesh, label: str):
     if len(f) == 0:
         raise ShapeError(f"{label}: mesh has no faces ({len(v)} vertices)")
     if f.min() < 0 or f.max() >= len(v):
-        raise ShapeError(f"{label}: face indices out of range")
+        raise ShapeError(f"{label}: face indices out of range (a face names vertex {int(f.max()) + 1} "
+                         f"of {len(v)})")
     used = v[np.unique(f)]
-    if np.ptp(used, axis=0).max() <= 0 or not float(mesh.area) > 0:
-        raise ShapeError(f"{label}: degenerate mesh (zero area or zero extent)")
+    if np.ptp(used, axis=0).max() <= 0:
+        raise ShapeError(f"{label}: degenerate mesh (all vertices identical: zero-size bounding box)")
+    if not float(mesh.area) > 0:
+        raise ShapeError(f"{label}: degenerate mesh (zero surface area)")
     return mesh
 
 
@@ -133,6 +136,8 @@ def _load_path(path: Path, label: str, point_resolution: int):
                          f"(use {' '.join(sorted(MESH_SUFFIXES | POINT_SUFFIXES | GRID_SUFFIXES))})")
     try:
         loaded = trimesh.load(str(path), force=None, process=False)
+    except IndexError as exc:  # trimesh's OBJ reader indexes the vertex list with the face indices
+        raise ShapeError(f"{label}: face indices out of range ({exc})") from exc
     except Exception as exc:
         msg = str(exc).splitlines()[0] if str(exc) else ""
         raise ShapeError(f"{label}: unreadable {suffix[1:]} file ({type(exc).__name__}: {msg})") from exc

@@ -9,6 +9,9 @@ resumed run continues in its phase. ``mask_loss``: "mse" (thesis) or "bce" (from
 measured here: at demo scale the MSE version collapses to an all-background mask, the BCE
 version does not).
 
+A NaN/Inf loss term stops training with the step and the term named
+(``on_nonfinite="raise"``) or skips that step (``"skip"``, counted in ``skipped_steps``).
+
 Logged: ``train/loss|depth_loss|mask_loss|alpha|beta``; ``val/`` and ``test/`` ``depth_mse``
 (masked depth error, see :func:`lit3d.losses_canonical.per_sample_depth_mse`), ``iou`` (mask
 IoU), and the same with suffix ``_input`` for the posed-input baseline (the input taken as
@@ -38,6 +41,8 @@ from torchmetrics import MeanMetric
 from lit3d.callbacks.loss_phases import THESIS_FRACTIONS, LossPhases
 from lit3d.losses_canonical import canonical_loss, composite_depth, per_sample_depth_mse, per_sample_mask_iou
 from lit3d.nets.canonical import build_canonical_net, summarize
+from lit3d.tasks.nonfinite import MODES as NONFINITE_MODES
+from lit3d.tasks.nonfinite import check_losses, nonfinite_terms
 
 METRICS = ("depth_mse", "iou", "depth_mse_input", "iou_input")
 UNET_METRICS = ("depth_mse_unet", "iou_unet")
@@ -70,9 +75,12 @@ class CanonicalTask(pl.LightningModule):
         mesh_baselines: Sequence[str] | None = None,
         baseline_max_vertices: int = 1000,
         baseline_smacof_eps: float = 1e-4,
+        on_nonfinite: str = "raise",
     ):
         super().__init__()
         self.save_hyperparameters()
+        if on_nonfinite not in NONFINITE_MODES:
+            raise ValueError(f"task.on_nonfinite must be one of {NONFINITE_MODES}, got {on_nonfinite!r}")
         cfg = dict(net or {})
         cfg["kind"] = arch
         if arch == "canonical":
@@ -87,6 +95,7 @@ class CanonicalTask(pl.LightningModule):
         self.test_metrics = torch.nn.ModuleDict({k: MeanMetric() for k in names})
         self._test_store: list[dict] = []
         self.retrieval_results: dict = {}
+        self.skipped_steps = 0  # training steps skipped for a NaN/Inf loss (on_nonfinite=skip)
 
     # ------------------------------------------------------------------ model
     def forward(self, depth: torch.Tensor, mask: torch.Tensor):
@@ -102,21 +111,34 @@ class CanonicalTask(pl.LightningModule):
         return torch.optim.Adam(self.parameters(), lr=self.hparams.lr, betas=tuple(self.hparams.betas))
 
     # ------------------------------------------------------------------ training
-    def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
-        out = self(batch["depth"], batch["mask"])
-        losses = canonical_loss(out.depth, out.mask, batch["canon_depth"], batch["canon_mask"],
-                                self.loss_alpha, self.loss_beta, self.hparams.mask_loss, out.mask_logits)
-        if not torch.isfinite(losses["loss"]):
-            raise FloatingPointError(f"non-finite canonical loss at epoch {self.current_epoch}, batch {batch_idx}: "
-                                     f"depth {losses['depth'].item()}, mask {losses['mask'].item()}")
+    def _loss(self, net, batch: dict) -> dict[str, torch.Tensor]:
+        out = net(batch["depth"], batch["mask"])
+        return canonical_loss(out.depth, out.mask, batch["canon_depth"], batch["canon_mask"],
+                              self.loss_alpha, self.loss_beta, self.hparams.mask_loss, out.mask_logits)
+
+    def _losses_finite(self, terms: dict[str, torch.Tensor], batch_idx: int) -> bool:
+        """False (skip the step, counted) or raise when a loss term is NaN/Inf (``on_nonfinite``)."""
+        where = f"step {self.global_step} (epoch {self.current_epoch}, batch {batch_idx})"
+        if check_losses(terms, where, self.hparams.on_nonfinite):
+            return True
+        self.skipped_steps += 1
+        self.print(f"warning: non-finite loss at {where}: {', '.join(nonfinite_terms(terms))}; "
+                   f"step skipped ({self.skipped_steps} so far)")
+        return False
+
+    def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor | None:
+        losses = self._loss(self.net, batch)
+        terms = {"depth": losses["depth"], "mask": losses["mask"]}
+        lu = self._loss(self.unet, batch) if self.unet is not None else None
+        if lu is not None:
+            terms.update(unet_depth=lu["depth"], unet_mask=lu["mask"])
+        if not self._losses_finite(terms, batch_idx):
+            return None  # no backward, no optimizer step
         bs = batch["depth"].shape[0]
         self.log_dict({"train/loss": losses["loss"], "train/depth_loss": losses["depth"],
                        "train/mask_loss": losses["mask"]}, on_step=True, on_epoch=True, batch_size=bs)
         total = losses["loss"]
-        if self.unet is not None:
-            ou = self.unet(batch["depth"], batch["mask"])
-            lu = canonical_loss(ou.depth, ou.mask, batch["canon_depth"], batch["canon_mask"],
-                                self.loss_alpha, self.loss_beta, self.hparams.mask_loss, ou.mask_logits)
+        if lu is not None:
             self.log("train/unet_loss", lu["loss"], on_step=False, on_epoch=True, batch_size=bs)
             total = total + lu["loss"]
         if not self.hparams.use_phases:
@@ -270,6 +292,13 @@ class CanonicalTask(pl.LightningModule):
         for lg in loggers:
             lg.log_image(key="val/panels", images=[image], caption=["input | predicted | true canonical | error"],
                          step=self.global_step)
+
+    # ------------------------------------------------------------------ state
+    def on_save_checkpoint(self, checkpoint: dict) -> None:
+        checkpoint["skipped_steps"] = self.skipped_steps
+
+    def on_load_checkpoint(self, checkpoint: dict) -> None:
+        self.skipped_steps = int(checkpoint.get("skipped_steps", 0))
 
     # ------------------------------------------------------------------ summary
     @staticmethod

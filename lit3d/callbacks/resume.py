@@ -1,0 +1,125 @@
+"""Interruption safety for ``lit3d-train``: a usable ``last.ckpt`` at any moment, with the RNG state.
+
+:class:`ResumeState` (in ``conf/callbacks/default.yaml``):
+
+- saves ``<dirpath>/last.ckpt`` every ``every_n_train_batches`` training batches, mid-epoch,
+  so a hard kill (SIGKILL, OOM killer, power loss) loses at most that many batches;
+- saves ``last.ckpt`` when the run is stopped by SIGTERM (Lightning finishes the current
+  batch, then raises ``SIGTERMException``) or Ctrl-C;
+- carries the Python, NumPy and torch (CPU and CUDA) RNG states in its checkpoint state
+  and restores them on resume, so the resumed run continues the random streams of the
+  saved one instead of restarting them from the seed.
+
+``lit3d-train ... ckpt_path=last`` then resumes at the saved epoch and batch with the
+weights, optimizer (and LR scheduler) states, loop counters and callback states (e.g. the
+canonical task's loss phase). Lightning resumes a mid-epoch checkpoint by running the
+remaining batches of that epoch from a fresh shuffle (the batches of the interrupted epoch
+are not replayed one for one; the train loaders are not resumable samplers).
+
+:class:`AtomicCheckpointIO` makes every checkpoint write atomic (temp file in the same folder
++ ``os.replace``), so a kill during a save leaves the previous ``last.ckpt`` intact, never
+half a file. Lightning's own writer moves a temp file from ``/tmp``, which is a copy (not
+atomic) when ``/tmp`` is another file system.
+"""
+from __future__ import annotations
+
+import io
+import random
+from pathlib import Path
+from typing import Any
+
+import lightning.pytorch as pl
+import numpy as np
+import torch
+from lightning.pytorch.plugins.io import TorchCheckpointIO
+from lightning.pytorch.trainer.states import TrainerFn
+from lightning.pytorch.utilities.exceptions import SIGTERMException
+
+from lit3d.utils.io import atomic_write_bytes, remove_temp_files
+
+
+# ------------------------------------------------------------------ RNG state
+def rng_state() -> dict[str, Any]:
+    """Python, NumPy and torch RNG states as checkpoint-safe values (tuples, ints, tensors)."""
+    kind, keys, pos, has_gauss, gauss = np.random.get_state()
+    state = {
+        "python": random.getstate(),
+        "numpy": {"kind": kind, "keys": torch.from_numpy(keys.astype(np.int64)), "pos": int(pos),
+                  "has_gauss": int(has_gauss), "gauss": float(gauss)},
+        "torch": torch.get_rng_state(),
+    }
+    if torch.cuda.is_available() and torch.cuda.is_initialized():
+        state["cuda"] = torch.cuda.get_rng_state_all()
+    return state
+
+
+def set_rng_state(state: dict[str, Any]) -> None:
+    """Restore what :func:`rng_state` returned (also after ``torch.load(weights_only=True)``)."""
+    version, internal, gauss = state["python"]
+    random.setstate((version, tuple(internal), gauss))
+    n = state["numpy"]
+    np.random.set_state((n["kind"], n["keys"].numpy().astype(np.uint32), n["pos"], n["has_gauss"], n["gauss"]))
+    torch.set_rng_state(state["torch"])
+    if "cuda" in state and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(state["cuda"])
+
+
+# ------------------------------------------------------------------ checkpoint IO
+class AtomicCheckpointIO(TorchCheckpointIO):
+    """``torch.save`` into memory, then temp file next to the target + ``os.replace``."""
+
+    def save_checkpoint(self, checkpoint: dict[str, Any], path, storage_options: Any | None = None) -> None:
+        if storage_options is not None:
+            raise TypeError(f"{type(self).__name__} does not take storage_options")
+        buf = io.BytesIO()
+        torch.save(checkpoint, buf)
+        atomic_write_bytes(path, buf.getvalue())
+
+
+# ------------------------------------------------------------------ callback
+class ResumeState(pl.Callback):
+    """Keeps ``<dirpath>/<filename>`` current (every N batches, on SIGTERM/Ctrl-C) and carries the RNG state.
+
+    Args:
+        dirpath: checkpoint folder (``${paths.output_dir}/checkpoints``).
+        every_n_train_batches: save after every N training batches (0: only on SIGTERM/Ctrl-C).
+        filename: the file ``ckpt_path=last`` resumes from.
+    """
+
+    def __init__(self, dirpath: str, every_n_train_batches: int = 100, filename: str = "last.ckpt"):
+        if every_n_train_batches < 0:
+            raise ValueError(f"every_n_train_batches must be >= 0, got {every_n_train_batches}")
+        self.dirpath = Path(dirpath)
+        self.every_n_train_batches = int(every_n_train_batches)
+        self.filename = filename
+        self.saves = 0
+
+    @property
+    def path(self) -> Path:
+        return self.dirpath / self.filename
+
+    def _save(self, trainer: pl.Trainer) -> None:
+        if trainer.fast_dev_run or trainer.sanity_checking:
+            return
+        trainer.save_checkpoint(self.path)
+        self.saves += 1
+
+    def setup(self, trainer, pl_module, stage: str) -> None:
+        if stage == "fit" and trainer.is_global_zero:
+            remove_temp_files(self.dirpath)  # a save cut short by SIGKILL leaves only a temp file
+
+    def on_train_batch_end(self, trainer, pl_module, outputs, batch, batch_idx: int) -> None:
+        n = self.every_n_train_batches
+        if n and (batch_idx + 1) % n == 0:
+            self._save(trainer)
+
+    def on_exception(self, trainer, pl_module, exception: BaseException) -> None:
+        if isinstance(exception, (SIGTERMException, KeyboardInterrupt)) and trainer.state.fn == TrainerFn.FITTING:
+            self._save(trainer)
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"rng": rng_state()}
+
+    def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        if "rng" in state_dict:
+            set_rng_state(state_dict["rng"])
