@@ -138,21 +138,11 @@ FeatureFn = Callable[[Path, Path], Mapping[str, float]]
 
 
 def feature_config(options: Mapping[str, Any] | None = None):
-    """``lit3d.quality.features.FeatureConfig`` from plain options:
-    ``size``, ``extent``, ``shadings``, ``styles``, ``measures``, ``mesh_measures``,
-    ``n_samples``, ``fsim_downsample``, ``chunk`` (missing -> the renderer's defaults)."""
-    from lit3d.quality.features import FeatureConfig
-    from lit3d.render.gbuffer import RenderConfig
+    """``lit3d.quality.features.FeatureConfig`` from plain options (see
+    :func:`lit3d.quality.features.feature_config`; imported lazily: the renderer is heavy)."""
+    from lit3d.quality.features import feature_config as from_options
 
-    o = dict(options or {})
-    render_kw = {k: o.pop(k) for k in ("size", "extent", "distance") if k in o}
-    if "shadings" in o:
-        render_kw["shadings"] = tuple(o.pop("shadings"))
-    o.pop("cache_dir", None)
-    for k in ("styles", "measures"):
-        if k in o and o[k] is not None:
-            o[k] = tuple(o[k])
-    return FeatureConfig(render=RenderConfig(**render_kw), **o)
+    return from_options(options)
 
 
 def resolve_feature_fn(spec: str | None, options: Mapping[str, Any] | None = None) -> FeatureFn:

@@ -66,10 +66,129 @@ def test_bad_inputs_one_line_no_traceback(pair, tmp_path, capsys):
         assert len(err.splitlines()) == 1 and str(bad) in err and "Traceback" not in err, (name, err)
 
 
-def test_ckpt_not_supported_yet(pair, capsys):
+# ---------------------------------------------------------------- --ckpt: a trained quality model
+QUALITY_OPTIONS = {"size": 32, "styles": ["toon"], "measures": ["mask_ssim", "mse"], "n_samples": 500}
+
+
+@pytest.fixture(scope="module")
+def quality_ckpt(tmp_path_factory):
+    """A quality checkpoint saved by ``lit3d-train``'s own ``train()`` (MetadataCallback included):
+    3 procedural shapes x 2 distortions x 2 levels, 32 px renders of one style, SFS <= 2 features,
+    2 epochs (about 5 s)."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+    from omegaconf import open_dict
+
+    from lit3d.cli.common import CONF_DIR
+    from lit3d.cli.train import train
+
+    root = tmp_path_factory.mktemp("quality_ckpt")
+    opts = ",".join(f"{k}:{v}" for k, v in QUALITY_OPTIONS.items()).replace("'", "")
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        cfg = compose(config_name="train", overrides=[
+            "experiment=quality_demo", "logger=none", "callbacks.progress_bar=null", "test_after_fit=false",
+            "+trainer.enable_progress_bar=false", "data.shapes=[blob,bumpy,torus]", "+data.distortions=[noise,taubin]",
+            "data.n_levels=2", "data.subdivisions=2", f"data.feature_options={{{opts}}}", "task.sfs.epochs=2",
+            "task.sfs.max_features=2", "task.cv=false", "trainer.max_epochs=2"])
+    GlobalHydra.instance().clear()
+    with open_dict(cfg):
+        cfg.paths.output_dir = str(root / "run")
+        cfg.paths.data_dir = str(root / "data")
+        cfg.paths.log_dir = str(root / "logs")
+    train(cfg)
+    return next((root / "run" / "checkpoints").glob("best-*.ckpt"))
+
+
+def _edited(ckpt, out, edit):
+    """A copy of ``ckpt`` with ``edit(dict)`` applied (plain torch.save, as Lightning writes it)."""
+    import torch
+
+    raw = torch.load(ckpt, map_location="cpu", weights_only=True)
+    edit(raw)
+    torch.save(raw, out)
+    return out
+
+
+def _by_hand(ckpt, features: dict) -> float:
+    """The model's output for the selected columns of a feature table, via the task's own forward."""
+    import torch
+
+    from lit3d.tasks.quality import QualityTask
+
+    task = QualityTask.load_from_checkpoint(ckpt, map_location="cpu").eval()
+    x = torch.tensor([[features[f] for f in task.features]], dtype=torch.float32)  # (1, F)
+    with torch.no_grad():
+        return float(task(x)[0])
+
+
+def test_ckpt_predicts_with_training_feature_options(pair, quality_ckpt, capsys, tmp_path):
+    import torch
+
+    from lit3d.callbacks.metadata import META_KEY
+    from lit3d.quality import predict
+
+    assert predict.META_KEY == META_KEY
+    raw = torch.load(quality_ckpt, map_location="cpu", weights_only=True)
+    selected = raw["quality"]["features"]
+    assert raw[META_KEY]["task"]["name"] == "quality" and 1 <= len(selected) <= 2
     ref, dist = pair
-    assert main([str(ref), str(dist), *FAST, "--ckpt", "model.ckpt"]) != 0
-    assert "not yet supported" in capsys.readouterr().err
+    # --size/--styles differ from training: the checkpoint's options win, and the output says so
+    assert main([str(ref), str(dist), "--size", "64", "--styles", "toon,jade", "--ckpt", str(quality_ckpt),
+                 "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["config"]["render"]["size"] == 32 and data["config"]["styles"] == ["toon"]
+    assert data["config"]["measures"] == ["mask_ssim", "mse"] and data["config"]["n_samples"] == 500
+    assert any("--size 64 ignored" in n for n in data["notes"]) and any("--styles" in n for n in data["notes"])
+    assert not any(k.startswith("mse/jade") for k in data["features"])
+    src = data["score_source"]
+    assert src["model"] == str(quality_ckpt) and src["features"] == selected and src["dataset"] == "synth"
+    # synthetic data: ordinal severity on 0..1, higher = more distorted -> score = model output
+    expected = _by_hand(quality_ckpt, data["features"])
+    assert data["predicted_score"] == pytest.approx(expected, abs=1e-6)
+    assert src["distortion"] == pytest.approx(expected, abs=1e-6) and src["score_range"] == [0.0, 1.0]
+    # a MOS-like scale (0..10, higher = better) maps the output back: 10 * (1 - output)
+    def mos(raw):
+        raw["quality"]["scaling"] = {"lo": 0.0, "hi": 10.0, "higher_is_better": True, "name": "MOS"}
+    mos_ckpt = _edited(quality_ckpt, tmp_path / "mos.ckpt", mos)
+    assert main([str(ref), str(dist), "--ckpt", str(mos_ckpt)]) == 0
+    out = capsys.readouterr().out
+    line = next(ln for ln in out.splitlines() if ln.startswith("predicted quality"))
+    assert line == f"predicted quality (model {mos_ckpt}): {10 * (1 - expected):.4f}"
+    assert "range 0..10, higher = better" in out and "note:" not in out
+
+
+def test_ckpt_refuses_other_tasks_and_non_checkpoints(pair, quality_ckpt, capsys, tmp_path):
+    import torch
+
+    ref, dist = pair
+
+    def canonical(raw):  # what a canonical-task checkpoint carries: lit3d metadata, no quality entry
+        raw["lit3d"]["task"] = {"_target_": "lit3d.tasks.canonical.CanonicalTask", "name": "canonical"}
+        del raw["quality"]
+
+    def renamed(raw):  # a selected feature the checkpoint's options do not render
+        raw["quality"]["features"][0] = "mse/jade/flat"
+
+    def custom_features(raw):  # trained on a custom feature function, not the renderer's table
+        raw["lit3d"]["data"]["feature_fn"] = "test_quality_task.fake_features"
+
+    (tmp_path / "notes.ckpt").write_text("not a checkpoint\n")
+    torch.save({"state_dict": {}, "epoch": 3}, tmp_path / "plain.ckpt")
+    cases = {
+        _edited(quality_ckpt, tmp_path / "canonical.ckpt", canonical):
+            "checkpoint is a canonical model, expected a quality model",
+        _edited(quality_ckpt, tmp_path / "custom.ckpt", custom_features): "features of data.feature_fn=",
+        tmp_path / "notes.ckpt": "not a readable checkpoint",
+        tmp_path / "plain.ckpt": "not a lit3d quality checkpoint",
+        tmp_path / "missing.ckpt": "checkpoint not found",
+        _edited(quality_ckpt, tmp_path / "renamed.ckpt", renamed): "lacks 1 of the",
+    }
+    for path, msg in cases.items():
+        code = main([str(ref), str(dist), "--ckpt", str(path)])
+        err = capsys.readouterr().err
+        assert code == 2, (path, err)
+        assert err.count("\n") == 1 and err.startswith(f"lit3d-score: error: {path}: ") and msg in err, err
 
 
 def test_console_entry_point_subprocess(tmp_path):

@@ -12,8 +12,9 @@ run length:
 
 At ``on_train_epoch_start`` the callback sets ``pl_module.loss_alpha`` and
 ``pl_module.loss_beta`` from ``trainer.current_epoch`` and logs them
-(``train/alpha``, ``train/beta``, ``train/phase``). Its state (the phase list,
-unit and last applied phase) is saved in checkpoints and restored on resume.
+(``train/alpha``, ``train/beta``, ``train/phase``); ``on_train_start`` sets them too, for a
+run resumed mid-epoch (Lightning skips ``on_train_epoch_start`` of that epoch). Its state (the
+phase list, unit and last applied phase) is saved in checkpoints and restored on resume.
 """
 from __future__ import annotations
 
@@ -73,6 +74,11 @@ class LossPhases(pl.Callback):
         i, a, b = self.weights_at(trainer.current_epoch, trainer.max_epochs)
         pl_module.loss_alpha, pl_module.loss_beta = a, b
         self.current_phase, self.last_epoch = i, trainer.current_epoch
+
+    def on_train_start(self, trainer, pl_module) -> None:
+        # a run resumed mid-epoch does not get on_train_epoch_start for that epoch (Lightning):
+        # without this its remaining batches would use the module's constant alpha/beta
+        self.apply(trainer, pl_module)
 
     def on_train_epoch_start(self, trainer, pl_module) -> None:
         self.apply(trainer, pl_module)

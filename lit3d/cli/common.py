@@ -21,8 +21,10 @@ from __future__ import annotations
 import importlib
 import logging
 import os
+import pickle
 import signal
 import sys
+import zipfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -95,9 +97,16 @@ def read_checkpoint_meta(ckpt_path: str | Path) -> dict:
     path = Path(ckpt_path)
     if not path.is_file():
         raise UserError(f"{path}: checkpoint not found")
+    if not zipfile.is_zipfile(path):  # torch.save writes a zip archive; torch.load's own error here is about mmap
+        raise UserError(f"{path}: not a readable checkpoint (not a torch.save zip archive)")
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
-    except Exception as exc:  # corrupt, not a torch file, or pickled objects weights_only refuses
+    except pickle.UnpicklingError as exc:  # pickled objects that weights_only refuses (never executed)
+        refused = [ln.strip() for ln in str(exc).splitlines() if "Unsupported" in ln]
+        detail = refused[0].split(". ")[0] if refused else "UnpicklingError"
+        raise UserError(f"{path}: not a readable checkpoint: refused to load pickled Python objects "
+                        f"({detail})") from exc
+    except Exception as exc:  # corrupt archive, not a torch file
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
         raise UserError(f"{path}: not a readable checkpoint ({type(exc).__name__}: {first})") from exc
     meta = ckpt.get(META_KEY) if isinstance(ckpt, dict) else None

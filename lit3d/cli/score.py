@@ -5,10 +5,17 @@ Examples::
     lit3d-score bunny.obj bunny_noisy.ply                 # summary + overall score
     lit3d-score target.npz prediction.npz --json          # every feature as JSON
     lit3d-score a.obj b.obj --styles jade,toon --size 128 --save-views out/
+    lit3d-score ref.obj dist.ply --ckpt logs/quality/runs/X/checkpoints/best-059.ckpt
 
 The overall score is the mean Mask-SSIM over styles, shadings and the 12 views
-(1 = identical renders). ``--ckpt`` (a trained quality model) is not supported
-yet. Bad inputs end with one line naming the file and exit status 2.
+(1 = identical renders). With ``--ckpt`` (a quality model saved by
+``lit3d-train task=quality``) the overall score is the model's prediction instead:
+the features are computed with the render size, styles, measures and shadings the
+model was trained on (``--size``/``--styles`` are then ignored, with a note), its
+SFS-selected features feed the MLP, and the [0, 1] output is mapped back to the
+training dataset's score range and direction (e.g. MOS 0-10 for LIRIS/EPFL; the
+built-in synthetic set gives an ordinal severity in [0, 1], not an opinion score).
+Bad inputs end with one line naming the file and exit status 2.
 """
 from __future__ import annotations
 
@@ -19,25 +26,31 @@ import time
 from pathlib import Path
 
 EXIT_USER = 2
+DEFAULT_SIZE = 256
 
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="lit3d-score", description=__doc__.split("\n\n")[0],
+                                epilog="\n\n".join(__doc__.split("\n\n")[1:]).replace("``", "'"),
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("ref", help="reference shape (.obj .off .ply .stl .glb, points .xyz, voxel/SDF .npz)")
     p.add_argument("dist", help="distorted / predicted shape (same formats)")
-    p.add_argument("--size", type=int, default=256, help="render size in pixels (default 256)")
-    p.add_argument("--styles", default="all", help="'all' or comma-separated style names")
+    p.add_argument("--size", type=int, default=None,
+                   help=f"render size in pixels (default {DEFAULT_SIZE}; with --ckpt: the model's)")
+    p.add_argument("--styles", default=None,
+                   help="'all' (default) or comma-separated style names (with --ckpt: the model's)")
     p.add_argument("--json", action="store_true", help="print every feature as JSON on stdout")
     p.add_argument("--save-views", metavar="DIR", help="write contact sheets (views, styles, SSIM maps) here")
-    p.add_argument("--ckpt", metavar="PATH", help="trained quality model (not supported yet)")
+    p.add_argument("--ckpt", metavar="PATH",
+                   help="quality model checkpoint (lit3d-train task=quality): print its predicted score")
     p.add_argument("--no-cache", action="store_true", help="do not read or write the feature cache")
     p.add_argument("--device", default=None, help="torch device for the measures (default cpu)")
     p.add_argument("--debug", action="store_true", help="show full tracebacks")
     return p
 
 
-def _summary(table, ref: str, dist: str, seconds: float) -> str:
+def _summary(table, ref: str, dist: str, seconds: float, prediction: dict | None = None,
+             notes: list[str] = ()) -> str:
     from lit3d.reports.tables import markdown_table
 
     feats = table.features
@@ -55,7 +68,15 @@ def _summary(table, ref: str, dist: str, seconds: float) -> str:
         if k in feats:
             lines.append(f"{k}: {feats[k]:.5f}")
     lines.append(f"features: {len(feats)}  ({'cached' if table.cached else f'{seconds:.1f} s'})")
-    lines.append(f"overall score (mean Mask-SSIM): {table.overall_score():.4f}")
+    lines += [f"note: {n}" for n in notes]
+    if prediction is None:
+        lines.append(f"overall score (mean Mask-SSIM): {table.overall_score():.4f}")
+    else:
+        src = prediction["source"]
+        lines.append(f"mean Mask-SSIM: {table.overall_score():.4f}")
+        lines.append(f"predicted quality (model {src['model']}): {prediction['score']:.4f}")
+        lines.append(f"  {src['description']}; model output {src['distortion']:.4f} in [0, 1] "
+                     f"(higher = more distorted) from {len(src['features'])} selected features")
     return "\n".join(lines)
 
 
@@ -113,10 +134,7 @@ def main(argv: list[str] | None = None) -> int:
 def _run(args) -> int:
     from lit3d.render.convert import to_mesh
 
-    if args.ckpt:
-        raise NotImplementedError(f"{args.ckpt}: --ckpt (learned MOS prediction) is not yet supported; "
-                                  "run without it for the mean Mask-SSIM score")
-    if not 16 <= args.size <= 4096:
+    if args.size is not None and not 16 <= args.size <= 4096:
         raise ValueError(f"--size {args.size}: expected 16..4096 pixels")
     # shapes first: a bad file is reported before torch and the renderer are imported (about 1 s, not 10)
     ref = to_mesh(args.ref)
@@ -125,7 +143,11 @@ def _run(args) -> int:
     from lit3d.render.gbuffer import RenderConfig
     from lit3d.render.styles import resolve_styles
 
-    cfg = FeatureConfig(render=RenderConfig(size=args.size), styles=tuple(resolve_styles(args.styles)))
+    cfg = FeatureConfig(render=RenderConfig(size=args.size or DEFAULT_SIZE),
+                        styles=tuple(resolve_styles(args.styles or "all")))
+    predictor, notes = None, []
+    if args.ckpt:
+        predictor, cfg, notes = _model_features(args, cfg)
     t0 = time.perf_counter()
     table = feature_table(ref, dist, cfg, cache_dir=None if args.no_cache else default_cache_dir(),
                           device=args.device)
@@ -133,13 +155,45 @@ def _run(args) -> int:
     if args.save_views:
         for p in save_contact_sheets(ref, dist, cfg, args.save_views):
             print(f"wrote {p}", file=sys.stderr)
+    prediction = None
+    if predictor is not None:
+        out = predictor.predict(table.features)
+        prediction = {"score": out.pop("score"), "source": {"model": str(args.ckpt), **out}}
     if args.json:
-        print(json.dumps({"ref": str(args.ref), "dist": str(args.dist), "overall_score": table.overall_score(),
-                          "cached": table.cached, "seconds": seconds, "config": cfg.key_dict(),
-                          "features": table.features}, indent=2, sort_keys=True))
+        doc = {"ref": str(args.ref), "dist": str(args.dist), "overall_score": table.overall_score(),
+               "cached": table.cached, "seconds": seconds, "config": cfg.key_dict(), "features": table.features}
+        if prediction is not None:
+            doc.update(predicted_score=prediction["score"], score_source=prediction["source"], notes=notes)
+        print(json.dumps(doc, indent=2, sort_keys=True))
     else:
-        print(_summary(table, args.ref, args.dist, seconds))
+        print(_summary(table, args.ref, args.dist, seconds, prediction, notes))
     return 0
+
+
+def _model_features(args, cli_cfg):
+    """Load ``--ckpt`` and the feature configuration it was trained with.
+
+    Returns ``(predictor, cfg, notes)``: ``cfg`` replaces the command line's ``--size``/``--styles``
+    (``notes`` says so where they differ). Raises ``ValueError`` (one line) for a checkpoint that is
+    not a quality model or whose features the renderer does not compute.
+    """
+    from lit3d.quality.predict import load_predictor
+
+    predictor = load_predictor(args.ckpt)
+    if predictor.feature_fn:
+        raise ValueError(f"{args.ckpt}: the model was trained on features of data.feature_fn="
+                         f"{predictor.feature_fn}, not the renderer's feature table lit3d-score computes")
+    if predictor.feature_options is None:
+        return predictor, cli_cfg, ["the checkpoint does not record its feature options; features computed "
+                                    "with --size/--styles, which may differ from training"]
+    cfg = predictor.feature_config()
+    notes = []
+    if args.size is not None and args.size != cfg.render.size:
+        notes.append(f"--size {args.size} ignored: the model was trained on {cfg.render.size} px renders")
+    if args.styles is not None and list(cli_cfg.styles) != cfg.resolved_styles():
+        notes.append(f"--styles {args.styles} ignored: the model was trained on styles "
+                     f"{','.join(cfg.resolved_styles())}")
+    return predictor, cfg, notes
 
 
 if __name__ == "__main__":

@@ -4,6 +4,7 @@ from lit3d.quality.features import (  # noqa: F401
     MESH_MEASURES,
     FeatureConfig,
     FeatureTable,
+    feature_config,
     feature_table,
     image_measures,
     overall_score,

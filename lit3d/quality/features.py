@@ -25,8 +25,10 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -80,6 +82,23 @@ class FeatureConfig:
         d.pop("workers")
         d["version"] = FEATURE_VERSION
         return d
+
+
+
+def feature_config(options: Mapping[str, Any] | None = None) -> FeatureConfig:
+    """:class:`FeatureConfig` from plain options, as stored in data configs and checkpoints
+    (``data.feature_options``): ``size``, ``extent``, ``distance``, ``shadings``, ``styles``,
+    ``measures``, ``mesh_measures``, ``n_samples``, ``fsim_downsample``, ``chunk``, ``workers``
+    (missing -> the defaults; ``cache_dir`` is ignored)."""
+    o = dict(options or {})
+    render_kw = {k: o.pop(k) for k in ("size", "extent", "distance") if k in o}
+    if "shadings" in o:
+        render_kw["shadings"] = tuple(o.pop("shadings"))
+    o.pop("cache_dir", None)
+    for k in ("styles", "measures"):
+        if k in o and o[k] is not None:
+            o[k] = tuple(o[k])
+    return FeatureConfig(render=RenderConfig(**render_kw), **o)
 
 
 @dataclass

@@ -205,6 +205,8 @@ def _array_to_mesh(arr: np.ndarray, label: str, point_resolution: int):
     arr = np.asarray(arr)
     if arr.size == 0:
         raise ShapeError(f"{label}: empty array")
+    if arr.dtype.kind not in "biuf":  # strings, complex, objects: not a grid or points
+        raise ShapeError(f"{label}: array has dtype {arr.dtype}, expected bool, integer or float values")
     if arr.ndim == 2 and arr.shape[1] == 3 and not is_sdf:
         return points_to_mesh(arr.astype(np.float64), label, point_resolution)
     if arr.ndim == 4 and arr.shape[-1] == 1:

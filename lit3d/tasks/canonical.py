@@ -128,10 +128,11 @@ class CanonicalTask(pl.LightningModule):
 
     def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor | None:
         losses = self._loss(self.net, batch)
-        terms = {"depth": losses["depth"], "mask": losses["mask"]}
+        # the weighted total too: finite terms times a huge alpha/beta can still overflow to Inf
+        terms = {"depth": losses["depth"], "mask": losses["mask"], "loss": losses["loss"]}
         lu = self._loss(self.unet, batch) if self.unet is not None else None
         if lu is not None:
-            terms.update(unet_depth=lu["depth"], unet_mask=lu["mask"])
+            terms.update(unet_depth=lu["depth"], unet_mask=lu["mask"], unet_loss=lu["loss"])
         if not self._losses_finite(terms, batch_idx):
             return None  # no backward, no optimizer step
         bs = batch["depth"].shape[0]

@@ -20,6 +20,8 @@ import torch.nn.functional as F
 from lit3d.losses import critic_loss, generator_adv_loss, gradient_penalty, weighted_bce_with_logits
 from lit3d.metrics.voxel import VoxelSweepMetrics, best_threshold, default_thresholds
 from lit3d.nets.completion import build_completion_nets, resolve_config
+from lit3d.tasks.nonfinite import MODES as NONFINITE_MODES
+from lit3d.tasks.nonfinite import NonFiniteLossError
 from lit3d.utils.voxel_images import panel
 
 SEEN = ("bench", "chair", "couch", "table")
@@ -32,10 +34,6 @@ SOURCES = ("model", "input", "prior")
 def split_key(name: str) -> str:
     """'test_same' / 'same' -> 'same'."""
     return name.removeprefix("test_")
-
-
-class NonFiniteLossError(FloatingPointError):
-    """A loss became NaN/Inf: names the generator step and the loss term."""
 
 
 class CompletionTask(pl.LightningModule):
@@ -68,6 +66,8 @@ class CompletionTask(pl.LightningModule):
     ):
         super().__init__()
         self.save_hyperparameters()
+        if on_nonfinite not in NONFINITE_MODES:
+            raise ValueError(f"task.on_nonfinite must be one of {NONFINITE_MODES}, got {on_nonfinite!r}")
         self.automatic_optimization = False
         self.net_cfg = resolve_config(nets)
         built = build_completion_nets(nets)
