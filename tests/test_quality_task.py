@@ -113,19 +113,22 @@ def test_report_puts_thesis_table_beside_ours(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="not met yet: measured LOSO Spearman ours .778 (SFS) / .781 (all) vs "
-                   "MSE .802, PSNR .795, MS-SSIM .795, single best .789 at this scale (48 px, 2 styles)")
 def test_synthetic_learned_score_beats_every_baseline(tmp_path):
     """Real renderer features, 4 shapes x 6 distortions x 4 levels, fixed seed: leave-one-shape-out
-    Spearman of the learned score with the ordinal severity above every single baseline measure."""
+    Spearman of the learned score with the ordinal severity above every single baseline measure.
+
+    Every image measure at 48 px on 2 styles; SFS scored by leave-one-shape-out inside the training
+    shapes (``criterion="inner_cv"``, Spearman), still never on the held-out shape. Measured (seed 0):
+    ours .814 vs single best .804, MS-SSIM .773, PSNR .759, MSE .755, Chamfer .615; with the thesis's
+    criterion (fit and score on the training set) ours was .763: the margin is small at this scale.
+    """
     dm = QualityDataModule(data_dir=str(tmp_path / "q"), shapes=["blob", "bumpy", "torus", "rock"], n_levels=4,
-                           feature_options=dict(size=48, styles=["ceramic_lightbulb", "metal_lead"],
-                                                measures=["mask_ssim", "mask_ssim_window", "ssim", "ms_ssim", "mse",
-                                                          "psnr"], n_samples=2000), seed=0)
+                           feature_options=dict(size=48, styles=["ceramic_lightbulb", "metal_lead"], n_samples=2000),
+                           seed=0)
     dm.setup()
     fm = dm.matrix
-    cfg = TrainConfig(lr=0.01, momentum=0.9, epochs=60)
-    methods = {"ours": lambda: LearnedScore(cfg, "sfs", max_features=6,
+    methods = {"ours": lambda: LearnedScore(TrainConfig(lr=0.01, momentum=0.9, epochs=60), "sfs", criterion="inner_cv",
+                                            sfs_kind="spearman", max_features=6,
                                             sfs_cfg=TrainConfig(lr=0.01, momentum=0.9, epochs=30))}
     methods.update({k: (lambda k=k: baseline_methods(fm.names)[k]) for k in baseline_methods(fm.names)})
     res = leave_one_shape_out(fm, methods)
