@@ -312,3 +312,18 @@ def test_resume_state_rng_round_trips_through_a_weights_only_checkpoint(tmp_path
     state = _load(tmp_path / "s.ckpt")["callbacks"]["ResumeState"]
     ResumeState(str(tmp_path)).load_state_dict(state)
     assert (random.random(), np.random.rand(3).tolist(), torch.rand(3).tolist()) == expected
+
+
+def test_resume_state_counts_batches_across_epochs(tmp_path):
+    """every_n_train_batches counts over the run: 3-batch epochs with N=4 save after batches 4 and 8."""
+    from types import SimpleNamespace
+
+    from lit3d.callbacks.resume import ResumeState
+
+    saved = []
+    trainer = SimpleNamespace(fast_dev_run=False, sanity_checking=False, save_checkpoint=saved.append)
+    cb = ResumeState(str(tmp_path), every_n_train_batches=4)
+    for _epoch in range(3):
+        for batch_idx in range(3):
+            cb.on_train_batch_end(trainer, None, None, None, batch_idx)
+    assert len(saved) == 2 and cb.saves == 2

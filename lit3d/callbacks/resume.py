@@ -93,6 +93,7 @@ class ResumeState(pl.Callback):
         self.every_n_train_batches = int(every_n_train_batches)
         self.filename = filename
         self.saves = 0
+        self._batches_seen = 0  # training batches since this process started
 
     @property
     def path(self) -> Path:
@@ -109,8 +110,10 @@ class ResumeState(pl.Callback):
             remove_temp_files(self.dirpath)  # a save cut short by SIGKILL leaves only a temp file
 
     def on_train_batch_end(self, trainer, pl_module, outputs, batch, batch_idx: int) -> None:
+        # counted over the whole run, not per epoch: epochs shorter than N batches still save
+        self._batches_seen += 1
         n = self.every_n_train_batches
-        if n and (batch_idx + 1) % n == 0:
+        if n and self._batches_seen % n == 0:
             self._save(trainer)
 
     def on_exception(self, trainer, pl_module, exception: BaseException) -> None:
