@@ -3,9 +3,9 @@
 Rows:
 - one training step (``critic_steps`` critic updates + one generator update, as in the
   thesis) at demo scale (16^3 -> 64^3, batch 8, fp32) on this CPU: median step time, samples/s,
-  the projected time of the thesis's 20 epochs x 26,000 samples at this scale, and the peak
-  memory per sample (each batch size in a fresh process; per sample = slope between batch 4
-  and batch 8 of the peak RSS above the idle process);
+  the projected time of the thesis's 20 epochs x 26,000 samples at this scale, and the
+  activation memory per sample (slope between batch 4 and batch 8 of the peak bytes autograd
+  holds for backward, :class:`benchmarks.common.SavedTensorMeter`; each batch size in a fresh process);
 - the packed-bit cache through the configured ``DataLoader`` (``data.num_workers``,
   ``data.batch_size``) against the same pairs as raw int8 ``.npz``, at demo scale (against the
   step's samples/s: does the loader keep up?) and at paper scale (256^3, batch 3);
@@ -32,8 +32,8 @@ from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 from omegaconf import open_dict
 
-from benchmarks.common import (current_rss_mb, default_threads, isolated, num_threads, peak_rss_mb, row, target_note,
-                               trainer_step_times)
+from benchmarks.common import (SavedTensorMeter, current_rss_mb, default_threads, isolated, num_threads, peak_rss_mb,
+                               row, target_note, trainer_step_times)
 from lit3d.cli.common import CONF_DIR, build_datamodule, build_task
 
 THESIS_SAMPLES, THESIS_EPOCHS = 26_000, 20
@@ -77,9 +77,11 @@ def step_worker(experiment: str = "completion_demo", batch: int = 8, threads: in
         out_res = int(nets.get("out_res", 64))
         batches = random_batches(steps, batch, in_res, out_res)
         idle = current_rss_mb()
-        times = trainer_step_times(task, batches, warmup=warmup)
+        meter = SavedTensorMeter()
+        times = trainer_step_times(task, batches, warmup=warmup, meter=meter)
+        state_mb = sum(p.numel() * p.element_size() for p in task.parameters()) * 4 / 2**20  # + grads + 2 Adam
     return {"times": times, "idle_rss_mb": idle, "peak_rss_mb": peak_rss_mb(), "critic_steps": int(cfg.task.critic_steps),
-            "in_res": in_res, "out_res": out_res}
+            "in_res": in_res, "out_res": out_res, "saved_mb": meter.peak / 2**20, "state_mb": state_mb}
 
 
 def _step_rows() -> tuple[list[dict], float]:
@@ -91,7 +93,8 @@ def _step_rows() -> tuple[list[dict], float]:
     sps = 8 / t
     projected_h = THESIS_EPOCHS * THESIS_SAMPLES / sps / 3600
     work = {b: one[b]["peak_rss_mb"] - one[b]["idle_rss_mb"] for b in one}
-    per_sample = (work[8] - work[4]) / 4
+    saved = {b: one[b]["saved_mb"] for b in one}
+    per_sample = (saved[8] - saved[4]) / 4
     note = (f"{r8['critic_steps']} critic update(s) with gradient penalty + 1 generator update per step; "
             f"{sps:.2f} samples/s; 20 epochs x 26k samples at this scale: {projected_h:.1f} h")
     if multi:
@@ -101,8 +104,11 @@ def _step_rows() -> tuple[list[dict], float]:
                 unit="s/step", threads=1, note=note + "; random occupancy batches; no baseline (time per step)"),
             row("completion train step peak memory per sample, demo, batch 8, fp32, CPU", CMD, per_sample, None,
                 unit="MB/sample", threads=1,
-                note=f"slope of peak RSS above the idle process between batch 4 ({work[4]:.0f} MB) and batch 8 "
-                     f"({work[8]:.0f} MB), each in a fresh process (idle process {r8['idle_rss_mb']:.0f} MB)")]
+                note=f"activation memory: slope between batch 4 ({saved[4]:.0f} MB) and batch 8 ({saved[8]:.0f} MB) of "
+                     f"the peak bytes autograd holds for backward during a step (critic + generator updates); fixed: "
+                     f"weights + grads + Adam states {r8['state_mb']:.0f} MB; whole-process peak RSS above idle "
+                     f"{work[4]:.0f} MB (batch 4) / {work[8]:.0f} MB (batch 8), each in a fresh process, too coarse "
+                     f"for a per-sample figure (allocator caching)")]
     return rows, sps
 
 

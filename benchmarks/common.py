@@ -18,6 +18,7 @@ import statistics
 import subprocess
 import sys
 import time
+import weakref
 from collections.abc import Callable
 
 import torch
@@ -156,14 +157,65 @@ def row(name: str, command: str, ours: float | None, baseline: float | None, uni
             "unit": unit, "ratio": ratio, "note": note, "baseline_name": baseline_name}
 
 
+class SavedTensorMeter:
+    """Peak bytes of tensors autograd holds for backward (the activation memory), while active.
+
+    Each saved tensor's storage is counted once while any graph still references it;
+    :attr:`peak` is the highest total seen. Parameters saved by a layer count too (they are
+    shared, so they do not grow with the batch); the batch-size slope is the per-sample cost.
+    """
+
+    def __init__(self):
+        self.live: dict[int, list] = {}  # storage pointer -> [bytes, references]
+        self.total = 0
+        self.peak = 0
+        self._ctx = None
+
+    def _pack(self, t: torch.Tensor):
+        key = t.untyped_storage().data_ptr()
+        entry = self.live.setdefault(key, [t.untyped_storage().nbytes(), 0])
+        if entry[1] == 0:
+            self.total += entry[0]
+            self.peak = max(self.peak, self.total)
+        entry[1] += 1
+        handle = _SavedHandle(t)
+        weakref.finalize(handle, self._release, key)
+        return handle
+
+    def _release(self, key: int) -> None:
+        entry = self.live.get(key)
+        if entry is None:
+            return
+        entry[1] -= 1
+        if entry[1] == 0:
+            self.total -= entry[0]
+            del self.live[key]
+
+    def __enter__(self):
+        self._ctx = torch.autograd.graph.saved_tensors_hooks(self._pack, lambda h: h.tensor)
+        self._ctx.__enter__()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._ctx.__exit__(*exc)
+
+
+class _SavedHandle:
+    __slots__ = ("tensor", "__weakref__")
+
+    def __init__(self, tensor: torch.Tensor):
+        self.tensor = tensor
+
+
 def trainer_step_times(task, batches: list, *, accelerator: str = "cpu", precision: str = "32-true",
-                       warmup: int = 2) -> list[float]:
+                       warmup: int = 2, meter: SavedTensorMeter | None = None) -> list[float]:
     """Seconds of each Lightning training step of ``task`` over in-memory ``batches``, warm-up dropped.
 
     One epoch of a real ``Trainer.fit`` (manual or automatic optimisation, the precision
     plugin's autocast, callbacks of the task); each step is timed from
     ``on_train_batch_start`` to ``on_train_batch_end`` (device synchronised), so data
-    loading is not included. No validation, logger or checkpoints.
+    loading is not included. No validation, logger or checkpoints. ``meter``: measures the
+    saved-for-backward memory of the last step.
     """
     import lightning.pytorch as pl
     from torch.utils.data import DataLoader
@@ -173,13 +225,17 @@ def trainer_step_times(task, batches: list, *, accelerator: str = "cpu", precisi
             self.times: list[float] = []
             self._t0 = 0.0
 
-        def on_train_batch_start(self, *args, **kwargs):
+        def on_train_batch_start(self, trainer, pl_module, batch, batch_idx):
+            if meter is not None and batch_idx == len(batches) - 1:
+                meter.__enter__()
             _sync()
             self._t0 = time.perf_counter()
 
-        def on_train_batch_end(self, *args, **kwargs):
+        def on_train_batch_end(self, trainer, pl_module, outputs, batch, batch_idx):
             _sync()
             self.times.append(time.perf_counter() - self._t0)
+            if meter is not None and batch_idx == len(batches) - 1:
+                meter.__exit__(None, None, None)
 
     timer = StepTimer()
     trainer = pl.Trainer(accelerator=accelerator, devices=1, precision=precision, max_epochs=1,

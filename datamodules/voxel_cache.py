@@ -82,6 +82,23 @@ def category_label(category: str, seen: Sequence[str] = SEEN_CATEGORIES) -> int:
     return seen.index(category) if category in seen else -1
 
 
+def pair_sample(inp: np.ndarray, tgt: np.ndarray, item: dict, seen: Sequence[str]) -> dict:
+    """One dataset sample from an (r, r, r) input and (R, R, R) target occupancy grid.
+
+    Returns ``input`` (1, r, r, r) float32, ``target`` (1, R, R, R) float32, ``label`` int64
+    (index into ``seen`` or -1) and the item's ``category``, ``split`` and ``name``.
+    """
+    return {
+        # numpy cast: torch's multi-threaded cast costs ~20 ms per 64^3 grid on a busy 2-core box
+        "input": torch.from_numpy(inp.astype(np.float32)[None]),
+        "target": torch.from_numpy(tgt.astype(np.float32)[None]),
+        "label": torch.tensor(category_label(item["category"], seen), dtype=torch.int64),
+        "category": item["category"],
+        "split": item["split"],
+        "name": item["name"],
+    }
+
+
 class VoxelPairDataset(Dataset):
     """Items of a packed voxel cache.
 
@@ -102,16 +119,7 @@ class VoxelPairDataset(Dataset):
 
     def __getitem__(self, idx: int) -> dict:
         it = self.items[idx]
-        inp, tgt = load_pair(self.root / it["file"])
-        return {
-            # numpy cast: torch's multi-threaded cast costs ~20 ms per 64^3 grid on a busy 2-core box
-            "input": torch.from_numpy(inp.astype(np.float32)[None]),
-            "target": torch.from_numpy(tgt.astype(np.float32)[None]),
-            "label": torch.tensor(category_label(it["category"], self.seen), dtype=torch.int64),
-            "category": it["category"],
-            "split": it["split"],
-            "name": it["name"],
-        }
+        return pair_sample(*load_pair(self.root / it["file"]), it, self.seen)
 
 
 class Int8NpzPairDataset(Dataset):
@@ -130,14 +138,7 @@ class Int8NpzPairDataset(Dataset):
         it = self.items[idx]
         with np.load(self.paths[idx]) as z:
             inp, tgt = z["input"], z["target"]
-        return {
-            "input": torch.from_numpy(inp.astype(np.float32)[None]),
-            "target": torch.from_numpy(tgt.astype(np.float32)[None]),
-            "label": torch.tensor(category_label(it["category"], self.seen), dtype=torch.int64),
-            "category": it["category"],
-            "split": it["split"],
-            "name": it["name"],
-        }
+        return pair_sample(inp, tgt, it, self.seen)
 
 
 def write_int8_copies(root: str | os.PathLike, items: Sequence[dict], tmp_dir: str | os.PathLike,
