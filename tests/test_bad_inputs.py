@@ -255,6 +255,7 @@ eval_ckpt = _run_cli("lit3d.cli.evaluate.evaluate", "eval", lambda p: [f"ckpt_pa
 eval_ckpt_any_task = _run_cli("lit3d.cli.evaluate.evaluate", "eval", lambda p: [f"ckpt_path={p}"])
 eval_no_ckpt = _run_cli("lit3d.cli.evaluate.evaluate", "eval", lambda _: [])
 train_resume = _run_cli("lit3d.cli.train.train", "train", lambda p: ["logger=none", f"ckpt_path={p}"])
+train_overrides = _run_cli("lit3d.cli.train.train", "train", lambda o: ["logger=none", *o.split()])
 
 
 def _subprocess(prog: str, extra: Callable[[Path], list[str]] = lambda tmp: []):
@@ -341,6 +342,8 @@ CASES = [
     ("data-unknown-data", _option("data=nope"), data_cli, ["data=nope", "known: canonical_synth"]),
     ("train-tosca-without-data-root", _option("experiment=canonical_tosca", "data.root"), _subprocess("lit3d-train"),
      ["missing value for data.root", "set data.root="]),
+    ("train-bad-task-option-value", _option("experiment=canonical_demo task.on_nonfinite=bogus", "task config"),
+     train_overrides, ["task.on_nonfinite must be one of", "'bogus'"]),
     ("eval-without-ckpt_path", lambda tmp: (None, "ckpt_path"), eval_no_ckpt, ["missing value for ckpt_path"]),
     # checkpoints
     ("eval-ckpt-missing", _missing("nowhere.ckpt"), eval_ckpt, ["checkpoint not found"]),

@@ -71,17 +71,34 @@ def task_kwargs(task_cfg: DictConfig | dict) -> dict:
     return {k: v for k, v in to_plain(task_cfg).items() if k not in CLI_TASK_KEYS}
 
 
+def _construct(group: str, make: Callable[[], Any]) -> Any:
+    """``make()``; a ValueError/TypeError from a constructor's argument checks (a bad option
+    value, an unknown keyword) becomes a one-line :class:`UserError` naming the config group."""
+    try:
+        return make()
+    except (ValueError, TypeError) as exc:
+        text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise UserError(f"{group} config: {text}") from exc
+
+
 def build_task(task_cfg: DictConfig | dict):
     """Instantiate the LightningModule named by ``task_cfg._target_`` with plain kwargs."""
     cls = import_object(task_cfg["_target_"])
-    return cls(**task_kwargs(task_cfg))
+    return _construct("task", lambda: cls(**task_kwargs(task_cfg)))
 
 
 def build_datamodule(data_cfg: DictConfig | dict):
     """Instantiate a DataModule from its config (plain values only)."""
+    from hydra.errors import InstantiationException
     from hydra.utils import instantiate
 
-    return instantiate(OmegaConf.create(to_plain(data_cfg)), _convert_="all")
+    def make():
+        try:
+            return instantiate(OmegaConf.create(to_plain(data_cfg)), _convert_="all")
+        except InstantiationException as exc:  # Hydra wraps the constructor's own error
+            raise (exc.__cause__ if isinstance(exc.__cause__, (ValueError, TypeError)) else exc) from exc
+
+    return _construct("data", make)
 
 
 def read_checkpoint_meta(ckpt_path: str | Path) -> dict:
