@@ -175,12 +175,36 @@ def fail(exc: BaseException, code: int) -> None:
     sys.exit(code)
 
 
-def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None) -> Any:
-    """Console-script wrapper of a ``@hydra.main`` function.
+def check_composes(args: Sequence[str], config_name: str, conf_dir: str = CONF_DIR) -> None:
+    """Raise :class:`UserError` when the overrides do not compose (e.g. a key that is not in the
+    config: ``trainer.max_epoch=3``), with Hydra's first two lines as the message.
+
+    Skipped for multiruns and Hydra's own flags (``-m``, ``--cfg`` ...): Hydra reports those.
+    """
+    if any(a.startswith("-") for a in args):
+        return
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.errors import HydraException
+
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=conf_dir, version_base="1.3"):
+            compose(config_name, overrides=list(args))
+    except HydraException as exc:
+        lines = [ln.strip() for ln in str(exc).strip().splitlines() if ln.strip()]
+        raise UserError("; ".join(ln.rstrip(".") for ln in lines[:2]) or type(exc).__name__) from exc
+    finally:
+        GlobalHydra.instance().clear()
+
+
+def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None, config_name: str = "train") -> Any:
+    """Console-script wrapper of a ``@hydra.main`` function (whose config is ``config_name``).
 
     ``--debug`` is taken off the command line and turns on ``HYDRA_FULL_ERROR=1``
     (tracebacks); unknown config-group options (``experiment=``, ``task=``, ``data=`` ...)
-    stop with one line and exit 2 before Hydra composes anything.
+    and overrides that do not compose (a misspelt key) stop with one line and exit 2 before
+    Hydra runs anything.
     """
     args = list(sys.argv[1:] if argv is None else argv)
     if "--debug" in args:
@@ -188,6 +212,7 @@ def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None) -
         os.environ["HYDRA_FULL_ERROR"] = "1"
     try:
         check_group_overrides(args)
+        check_composes(args, config_name)
     except UserError as exc:
         if _debug_requested():
             raise

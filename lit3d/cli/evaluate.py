@@ -82,7 +82,7 @@ def hydra_main(cfg: DictConfig) -> None:
 
 def main() -> None:
     """Console script ``lit3d-eval`` (``--debug``: tracebacks instead of one-line errors)."""
-    cli_main(hydra_main)
+    cli_main(hydra_main, config_name="eval")
 
 
 if __name__ == "__main__":
