@@ -102,8 +102,19 @@ class ResumeState(pl.Callback):
     def _save(self, trainer: pl.Trainer) -> None:
         if trainer.fast_dev_run or trainer.sanity_checking:
             return
+        self._adopt_last(trainer)
         trainer.save_checkpoint(self.path)
         self.saves += 1
+
+    def _adopt_last(self, trainer: pl.Trainer) -> None:
+        """Tell a ``ModelCheckpoint(save_last=True)`` writing to the same file that it is its own,
+        so that it overwrites it instead of writing ``last-v1.ckpt`` beside it."""
+        from lightning.pytorch.callbacks import ModelCheckpoint
+
+        for cb in getattr(trainer, "checkpoint_callbacks", []):
+            if isinstance(cb, ModelCheckpoint) and cb.save_last and cb.dirpath is not None and \
+                    Path(cb.dirpath) / f"{cb.CHECKPOINT_NAME_LAST}{cb.FILE_EXTENSION}" == self.path:
+                cb.last_model_path = str(self.path)
 
     def setup(self, trainer, pl_module, stage: str) -> None:
         if stage == "fit" and trainer.is_global_zero:
