@@ -52,7 +52,7 @@ from pathlib import Path
 import lightning.pytorch as pl
 import numpy as np
 import torch
-from torch.utils.data import DataLoader, Dataset
+from torch.utils.data import DataLoader, Dataset, WeightedRandomSampler
 
 from datamodules.cache import DataError, stable_hash
 from lit3d.retrieval.depthcam import render_depth
@@ -308,6 +308,18 @@ class PairDataset(Dataset):
         }
 
 
+def subject_balanced_sampler(records: Sequence[dict], seed: int) -> WeightedRandomSampler:
+    """Draws ``len(records)`` items per epoch with replacement, each subject equally often
+    (item weight 1 / items of its subject): a subject with many poses (TOSCA's michael has 20,
+    wolf 3) no longer dominates the canonical shape the network learns."""
+    counts: dict[str, int] = {}
+    for r in records:
+        counts[r["subject"]] = counts.get(r["subject"], 0) + 1
+    weights = torch.tensor([1.0 / counts[r["subject"]] for r in records], dtype=torch.double)
+    return WeightedRandomSampler(weights, num_samples=len(records), replacement=True,
+                                 generator=torch.Generator().manual_seed(int(seed)))
+
+
 class CanonicalDataModule(pl.LightningDataModule):
     """Posed/canonical depth pairs (synthetic figures, TOSCA or SHREC'14); see module docstring."""
 
@@ -343,6 +355,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         val_per_subject: int = 1,
         max_val_items: int | None = 64,
         skip_bad: bool = False,
+        balance_subjects: bool = False,
     ):
         super().__init__()
         self.save_hyperparameters()
@@ -545,7 +558,11 @@ class CanonicalDataModule(pl.LightningDataModule):
                           num_workers=self.hparams.num_workers, persistent_workers=self.hparams.num_workers > 0)
 
     def train_dataloader(self):
-        return self._loader("train", True)
+        if not self.hparams.balance_subjects:
+            return self._loader("train", True)
+        return DataLoader(self.datasets["train"], batch_size=self.hparams.batch_size,
+                          sampler=subject_balanced_sampler(self.datasets["train"].records, self.hparams.seed),
+                          num_workers=self.hparams.num_workers, persistent_workers=self.hparams.num_workers > 0)
 
     def val_dataloader(self):
         return self._loader("val", False)

@@ -150,3 +150,17 @@ def test_real_tosca8k_renders(tmp_path):
     dm.setup()
     b = dm.datasets["test"][0]
     assert b["mask"].sum() > 20 and b["canon_mask"].sum() > 20
+
+
+def test_subject_balanced_sampler_draws_subjects_equally():
+    """20 items of one subject, 2 of another: each subject ~half of the draws, reproducible by seed."""
+    from collections import Counter
+
+    from datamodules.canonical import subject_balanced_sampler
+
+    records = [{"subject": "michael"}] * 20 + [{"subject": "wolf"}] * 2
+    sampler = subject_balanced_sampler(records, seed=0)  # its generator moves on epoch after epoch
+    draws = [records[i]["subject"] for _ in range(200) for i in sampler]
+    share = Counter(draws)["wolf"] / len(draws)
+    assert abs(share - 0.5) < 0.03, share
+    assert list(subject_balanced_sampler(records, 3)) == list(subject_balanced_sampler(records, 3))
