@@ -144,7 +144,10 @@ def gps_embedding(verts, faces, dim: int = 3) -> np.ndarray:
     L, area = cotangent_laplacian(verts, faces)
     M = sp.diags(area)
     k = min(dim + 1, len(verts) - 2)
-    vals, vecs = eigsh(L + 1e-8 * M, k=k, M=M, sigma=-1e-6, which="LM")
+    v0 = np.random.default_rng(0).standard_normal(L.shape[0])  # ARPACK's own start vector is random
+    vals, vecs = eigsh(L + 1e-8 * M, k=k, M=M, sigma=-1e-6, which="LM", v0=v0)
+    # fix each eigenvector's sign (largest-magnitude entry positive): same embedding on every run
+    vecs = vecs * np.sign(vecs[np.abs(vecs).argmax(0), np.arange(vecs.shape[1])])
     order = np.argsort(vals)[1:dim + 1]
     return vecs[:, order] / np.sqrt(np.maximum(vals[order], 1e-12))
 

@@ -65,3 +65,17 @@ def test_mds_and_gps_baselines_are_pose_invariant():
     assert out[0][0].shape[1] == 3
     with pytest.raises(ValueError, match="unknown canonical baseline"):
         canonical_forms([(v, f)], "nope")
+
+
+def test_gps_embedding_is_deterministic():
+    """Same mesh -> the same GPS embedding on every call (seeded start vector, fixed signs)."""
+    import trimesh
+
+    from lit3d.canonical_baselines import gps_embedding
+
+    m = trimesh.creation.icosphere(subdivisions=2)
+    m.vertices[:, 0] *= 1.7
+    a = gps_embedding(m.vertices, m.faces)
+    b = gps_embedding(m.vertices, m.faces)
+    assert a.shape == (len(m.vertices), 3)
+    assert np.array_equal(a, b)
