@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import lightning.pytorch as pl
 
-META_KEY = "lit3d"
+from lit3d.utils.checkpoints import META_KEY
 
 
 class MetadataCallback(pl.Callback):

@@ -21,15 +21,15 @@ from __future__ import annotations
 import importlib
 import logging
 import os
-import pickle
 import signal
 import sys
-import zipfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
+
+from lit3d.utils.checkpoints import first_line
 
 log = logging.getLogger("lit3d")
 
@@ -77,8 +77,7 @@ def _construct(group: str, make: Callable[[], Any]) -> Any:
     try:
         return make()
     except (ValueError, TypeError) as exc:
-        text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise UserError(f"{group} config: {text}") from exc
+        raise UserError(f"{group} config: {first_line(exc, type(exc).__name__)}") from exc
 
 
 def build_task(task_cfg: DictConfig | dict):
@@ -104,31 +103,15 @@ def build_datamodule(data_cfg: DictConfig | dict):
 def read_checkpoint_meta(ckpt_path: str | Path) -> dict:
     """The lit3d metadata stored in a checkpoint (task, data config, W&B id).
 
-    Loads with ``weights_only=True`` (memory-mapped so large checkpoints are cheap): a
+    Loads with ``weights_only=True`` (see :func:`lit3d.utils.checkpoints.load_checkpoint`): a
     checkpoint that pickles arbitrary objects is refused, never executed.
     """
-    import torch
+    from lit3d.utils.checkpoints import META_KEY, load_checkpoint
 
-    from lit3d.callbacks.metadata import META_KEY
-
-    path = Path(ckpt_path)
-    if not path.is_file():
-        raise UserError(f"{path}: checkpoint not found")
-    if not zipfile.is_zipfile(path):  # torch.save writes a zip archive; torch.load's own error here is about mmap
-        raise UserError(f"{path}: not a readable checkpoint (not a torch.save zip archive)")
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
-    except pickle.UnpicklingError as exc:  # pickled objects that weights_only refuses (never executed)
-        refused = [ln.strip() for ln in str(exc).splitlines() if "Unsupported" in ln]
-        detail = refused[0].split(". ")[0] if refused else "UnpicklingError"
-        raise UserError(f"{path}: not a readable checkpoint: refused to load pickled Python objects "
-                        f"({detail})") from exc
-    except Exception as exc:  # corrupt archive, not a torch file
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
-        raise UserError(f"{path}: not a readable checkpoint ({type(exc).__name__}: {first})") from exc
+    ckpt = load_checkpoint(ckpt_path, UserError)
     meta = ckpt.get(META_KEY) if isinstance(ckpt, dict) else None
     if not isinstance(meta, dict):
-        raise UserError(f"{path}: not a lit3d checkpoint (no '{META_KEY}' metadata)")
+        raise UserError(f"{Path(ckpt_path)}: not a lit3d checkpoint (no '{META_KEY}' metadata)")
     return meta
 
 
@@ -169,9 +152,7 @@ def _debug_requested() -> bool:
 
 def fail(exc: BaseException, code: int) -> None:
     """Print ``error: <first line of exc>`` on stderr and exit with ``code``."""
-    text = str(exc).strip()
-    line = text.splitlines()[0] if text else type(exc).__name__
-    print(f"error: {line}", file=sys.stderr, flush=True)
+    print(f"error: {first_line(exc, type(exc).__name__)}", file=sys.stderr, flush=True)
     sys.exit(code)
 
 

@@ -25,7 +25,8 @@ import sys
 import time
 from pathlib import Path
 
-EXIT_USER = 2
+from lit3d.cli.common import EXIT_USER  # light: no torch or Lightning
+
 DEFAULT_SIZE = 256
 
 
@@ -124,7 +125,9 @@ def main(argv: list[str] | None = None) -> int:
             raise
         from lit3d.render.convert import ShapeError
 
-        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        from lit3d.utils.checkpoints import first_line
+
+        msg = first_line(exc, type(exc).__name__)
         user = isinstance(exc, (ShapeError, ValueError, FileNotFoundError, NotImplementedError))
         kind = "error" if user else f"internal error ({type(exc).__name__}; rerun with --debug)"
         print(f"lit3d-score: {kind}: {msg}", file=sys.stderr)

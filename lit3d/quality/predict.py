@@ -26,9 +26,9 @@ import torch
 
 from lit3d.nets.quality import QualityMLP
 from lit3d.quality.protocol import TargetScaling
+from lit3d.utils.checkpoints import META_KEY, first_line, load_checkpoint
 
 CKPT_KEY = "quality"
-META_KEY = "lit3d"  # = lit3d.callbacks.metadata.META_KEY (not imported here: that module pulls in Lightning)
 QUALITY_TARGET = "lit3d.tasks.quality.QualityTask"
 
 
@@ -128,15 +128,7 @@ def _task_name(task_cfg: Mapping) -> str:
 @lru_cache(maxsize=4)
 def _load(path: str, _resolved: str, _mtime: int) -> QualityPredictor:
     p = Path(path)
-    if not p.is_file():
-        raise QualityCheckpointError(f"{p}: checkpoint not found")
-    try:
-        ckpt = torch.load(p, map_location="cpu", weights_only=True)
-    except Exception as exc:  # not a torch file, corrupt, or pickled objects that weights_only refuses
-        first = (str(exc).strip().splitlines() or [""])[0]
-        if first.startswith("Weights only load failed"):  # torch's hint to load unsafely is not ours to give
-            first = "not a torch file, or it holds pickled objects that weights_only=True refuses"
-        raise QualityCheckpointError(f"{p}: not a readable checkpoint ({type(exc).__name__}: {first})") from exc
+    ckpt = load_checkpoint(p, QualityCheckpointError)
     lit3d = ckpt.get(META_KEY) if isinstance(ckpt, dict) else None
     task_cfg = lit3d.get("task") if isinstance(lit3d, dict) else None
     if isinstance(task_cfg, Mapping) and not _is_quality(task_cfg):
@@ -150,8 +142,7 @@ def _load(path: str, _resolved: str, _mtime: int) -> QualityPredictor:
     try:
         net.load_state_dict(state)
     except RuntimeError as exc:
-        first = (str(exc).strip().splitlines() or [""])[0]
-        raise QualityCheckpointError(f"{p}: weights do not match the stored network ({first})") from exc
+        raise QualityCheckpointError(f"{p}: weights do not match the stored network ({first_line(exc)})") from exc
     scaling = TargetScaling.from_dict(meta["scaling"]) if meta.get("scaling") else None
     data_cfg = lit3d.get("data") if isinstance(lit3d, dict) and isinstance(lit3d.get("data"), Mapping) else {}
     options = meta.get("feature_options")

@@ -41,8 +41,7 @@ from torchmetrics import MeanMetric
 from lit3d.callbacks.loss_phases import THESIS_FRACTIONS, LossPhases
 from lit3d.losses_canonical import canonical_loss, composite_depth, per_sample_depth_mse, per_sample_mask_iou
 from lit3d.nets.canonical import build_canonical_net, summarize
-from lit3d.tasks.nonfinite import MODES as NONFINITE_MODES
-from lit3d.tasks.nonfinite import check_losses, nonfinite_terms
+from lit3d.tasks.nonfinite import guard_step, validate_mode
 
 METRICS = ("depth_mse", "iou", "depth_mse_input", "iou_input")
 UNET_METRICS = ("depth_mse_unet", "iou_unet")
@@ -79,8 +78,7 @@ class CanonicalTask(pl.LightningModule):
     ):
         super().__init__()
         self.save_hyperparameters()
-        if on_nonfinite not in NONFINITE_MODES:
-            raise ValueError(f"task.on_nonfinite must be one of {NONFINITE_MODES}, got {on_nonfinite!r}")
+        validate_mode(on_nonfinite)
         cfg = dict(net or {})
         cfg["kind"] = arch
         if arch == "canonical":
@@ -116,16 +114,6 @@ class CanonicalTask(pl.LightningModule):
         return canonical_loss(out.depth, out.mask, batch["canon_depth"], batch["canon_mask"],
                               self.loss_alpha, self.loss_beta, self.hparams.mask_loss, out.mask_logits)
 
-    def _losses_finite(self, terms: dict[str, torch.Tensor], batch_idx: int) -> bool:
-        """False (skip the step, counted) or raise when a loss term is NaN/Inf (``on_nonfinite``)."""
-        where = f"step {self.global_step} (epoch {self.current_epoch}, batch {batch_idx})"
-        if check_losses(terms, where, self.hparams.on_nonfinite):
-            return True
-        self.skipped_steps += 1
-        self.print(f"warning: non-finite loss at {where}: {', '.join(nonfinite_terms(terms))}; "
-                   f"step skipped ({self.skipped_steps} so far)")
-        return False
-
     def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor | None:
         losses = self._loss(self.net, batch)
         # the weighted total too: finite terms times a huge alpha/beta can still overflow to Inf
@@ -133,7 +121,8 @@ class CanonicalTask(pl.LightningModule):
         lu = self._loss(self.unet, batch) if self.unet is not None else None
         if lu is not None:
             terms.update(unet_depth=lu["depth"], unet_mask=lu["mask"], unet_loss=lu["loss"])
-        if not self._losses_finite(terms, batch_idx):
+        where = f"step {self.global_step} (epoch {self.current_epoch}, batch {batch_idx})"
+        if not guard_step(self, terms, where, self.hparams.on_nonfinite):
             return None  # no backward, no optimizer step
         bs = batch["depth"].shape[0]
         self.log_dict({"train/loss": losses["loss"], "train/depth_loss": losses["depth"],

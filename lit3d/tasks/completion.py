@@ -20,8 +20,7 @@ import torch.nn.functional as F
 from lit3d.losses import critic_loss, generator_adv_loss, gradient_penalty, weighted_bce_with_logits
 from lit3d.metrics.voxel import VoxelSweepMetrics, best_threshold, default_thresholds
 from lit3d.nets.completion import build_completion_nets, resolve_config
-from lit3d.tasks.nonfinite import MODES as NONFINITE_MODES
-from lit3d.tasks.nonfinite import NonFiniteLossError
+from lit3d.tasks.nonfinite import NonFiniteLossError, guard_step, validate_mode  # noqa: F401 (re-exported)
 from lit3d.utils.voxel_images import panel
 
 SEEN = ("bench", "chair", "couch", "table")
@@ -66,8 +65,7 @@ class CompletionTask(pl.LightningModule):
     ):
         super().__init__()
         self.save_hyperparameters()
-        if on_nonfinite not in NONFINITE_MODES:
-            raise ValueError(f"task.on_nonfinite must be one of {NONFINITE_MODES}, got {on_nonfinite!r}")
+        validate_mode(on_nonfinite)
         self.automatic_optimization = False
         self.net_cfg = resolve_config(nets)
         built = build_completion_nets(nets)
@@ -106,16 +104,9 @@ class CompletionTask(pl.LightningModule):
         return F.interpolate(partial.float(), size=(size,) * 3, mode="nearest")
 
     def _check_finite(self, **losses: torch.Tensor) -> bool:
-        """False (skip) or raise when a loss is NaN/Inf, naming the step and the term."""
-        bad = [k for k, v in losses.items() if not bool(torch.isfinite(v.detach()).all())]
-        if not bad:
-            return True
-        msg = f"non-finite loss at generator step {self.generator_steps} (epoch {self.current_epoch}): {', '.join(bad)}"
-        if self.hparams.on_nonfinite == "skip":
-            self.skipped_steps += 1
-            self.print(f"warning: {msg}; step skipped ({self.skipped_steps} so far)")
-            return False
-        raise NonFiniteLossError(msg + " (set task.on_nonfinite=skip to skip such steps)")
+        """False (skip, counted) or raise when a loss is NaN/Inf, naming the step and the term."""
+        where = f"generator step {self.generator_steps} (epoch {self.current_epoch})"
+        return guard_step(self, losses, where, self.hparams.on_nonfinite)
 
     # ------------------------------------------------------------------ training
     def configure_optimizers(self):
