@@ -48,7 +48,7 @@ def _net_times(size: int, batch: int, arch: str, steps: int, warmup: int) -> tup
     """(train s/image, inference s/image, parameters) of the paper-size net at ``size``^2."""
     cfg = _cfg("canonical_paper", tempfile.mkdtemp(),
                [f"task.net.image_size={size}", f"data.image_size={size}", f"task.arch={arch}",
-                "task.unet_baseline=false", "task.retrieval=null"])
+ "task.retrieval=null"])
     task = build_task(cfg.task)
     params = sum(p.numel() for p in task.net.parameters())
     batches = _batches(steps + warmup, batch, size)
@@ -77,7 +77,7 @@ def _net_rows() -> list[dict]:
 
 
 def _canonical_depth(dm, size: int) -> tuple[np.ndarray, np.ndarray]:
-    from lit3d.retrieval.depthcam import render_depth
+    from lit3d.render.depth import render_depth
 
     subject = dm.source.subjects()[0]
     v, f = dm.normalized_mesh(subject, "canonical")
@@ -85,7 +85,7 @@ def _canonical_depth(dm, size: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _descriptor_row(depth: np.ndarray, mask: np.ndarray, level: int, view_size: int, vocab: int, label: str) -> dict:
-    from lit3d.retrieval.depthcam import depth_to_mesh
+    from lit3d.render.depth import depth_to_mesh
     from lit3d.retrieval.descriptor import (DescriptorConfig, bow_histogram, fit_codebook, octahedron_views,
                                             view_features)
 

@@ -35,6 +35,7 @@ from omegaconf import open_dict
 from benchmarks.common import (SavedTensorMeter, current_rss_mb, default_threads, isolated, num_threads, peak_rss_mb,
                                row, target_note, trainer_step_times)
 from lit3d.cli.common import CONF_DIR, build_datamodule, build_task
+from lit3d.utils.shapenet_categories import SEEN_CATEGORIES
 
 THESIS_SAMPLES, THESIS_EPOCHS = 26_000, 20
 GPU_TARGET_SPS = 5.0  # samples/s at paper scale on one GPU (the issue's target)
@@ -55,13 +56,13 @@ def _cfg(experiment: str, data_dir: str, overrides=()):
 def random_batches(n: int, batch: int, in_res: int, out_res: int, seed: int = 0, device: str = "cpu") -> list[dict]:
     """``n`` batches of random occupancy (10 %) with the partial input max-pooled from the target."""
     g = torch.Generator().manual_seed(seed)
-    cats = ("bench", "chair", "couch", "table")
+    cats = SEEN_CATEGORIES
     out = []
     for _ in range(n):
         y = (torch.rand(batch, 1, out_res, out_res, out_res, generator=g) < 0.1).float()
         x = torch.nn.functional.adaptive_max_pool3d(y, in_res)
-        out.append({"input": x.to(device), "target": y.to(device), "label": torch.arange(batch) % 4,
-                    "category": [cats[i % 4] for i in range(batch)]})
+        out.append({"input": x.to(device), "target": y.to(device), "label": torch.arange(batch) % len(cats),
+                    "category": [cats[i % len(cats)] for i in range(batch)]})
     return out
 
 
@@ -73,8 +74,7 @@ def step_worker(experiment: str = "completion_demo", batch: int = 8, threads: in
         cfg = _cfg(experiment, tmp, [*WITH_CRITIC, *(overrides or [])])
         task = build_task(cfg.task)
         nets = cfg.task.nets
-        in_res = int(nets.get("in_res", 16))
-        out_res = int(nets.get("out_res", 64))
+        in_res, out_res = int(nets.in_res), int(nets.out_res)
         batches = random_batches(steps, batch, in_res, out_res)
         idle = current_rss_mb()
         meter = SavedTensorMeter()
@@ -206,7 +206,7 @@ def paper_gpu_rows(experiment: str = "completion_paper", device: str = "cuda", b
             if compiled:
                 task.generator.compile()
             nets = cfg.task.nets
-            batches = random_batches(steps, batch, int(nets.get("in_res", 64)), int(nets.get("out_res", 256)))
+            batches = random_batches(steps, batch, int(nets.in_res), int(nets.out_res))
             if cuda:
                 torch.cuda.empty_cache()
                 torch.cuda.reset_peak_memory_stats()

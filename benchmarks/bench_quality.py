@@ -98,7 +98,7 @@ def _mask_ssim_rows(size: int = 256, n: int = 360, n_ref: int = 24) -> dict:
 
 
 def run() -> list[dict]:
-    from lit3d.quality.features import FeatureConfig, feature_table
+    from lit3d.features.table import FeatureConfig, feature_table
     from lit3d.render.gbuffer import RenderConfig
 
     rows = []

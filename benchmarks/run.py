@@ -21,7 +21,7 @@ import torch
 
 import benchmarks
 from benchmarks.common import cpu_model, default_threads, load_avg
-from lit3d.reports.tables import markdown_table
+from lit3d.utils.tables import markdown_table
 
 OUT = Path(__file__).resolve().parents[1] / "BENCHMARKS.md"
 

@@ -44,7 +44,7 @@ MARKER = "prepare.json"
 
 __all__ = [
     "MANIFEST", "MARKER", "CacheBuilder", "DataError", "atomic_save_npz", "atomic_write_bytes",
-    "clean_temp_files", "file_sha256", "read_manifest", "stable_hash", "stable_seed", "write_json",
+    "clean_temp_files", "file_sha256", "read_manifest", "stable_hash", "stable_int_seed", "stable_seed", "write_json",
 ]
 
 
@@ -66,6 +66,12 @@ def stable_seed(*parts: int | str) -> np.random.SeedSequence:
     """A numpy SeedSequence from ints and strings (strings via crc32, stable across processes)."""
     ints = [p if isinstance(p, int) else zlib.crc32(str(p).encode("utf-8")) for p in parts]
     return np.random.SeedSequence([int(i) & 0xFFFFFFFF for i in ints])
+
+
+def stable_int_seed(*parts: object) -> int:
+    """A 31-bit int seed from strings/ints (crc32 of ``"a|b|c"``), stable across processes; the
+    quality data's distortion and shape seeds (their caches were made with it)."""
+    return zlib.crc32("|".join(str(p) for p in parts).encode()) & 0x7FFFFFFF
 
 
 def atomic_save_npz(path: str | os.PathLike, compress: bool = True, **arrays: np.ndarray) -> Path:

@@ -11,7 +11,7 @@ monitor, plane), renders one depth view per sample and voxelises it like
 Batches (default collate) are dicts:
     input    (B, 1, r, r, r) float32 {0,1}   r = target_res / input_factor
     target   (B, 1, R, R, R) float32 {0,1}   R = target_res
-    label    (B,) int64  index into SEEN_CATEGORIES or -1 (unseen)
+    label    (B,) int64  index into SEEN_CATEGORIES (lit3d.utils.shapenet_categories) or -1 (unseen)
     category, split, name: list[str]
 """
 from __future__ import annotations
@@ -26,11 +26,11 @@ import numpy as np
 from torch.utils.data import DataLoader
 
 from datamodules.cache import CacheBuilder, DataError, bytes_on_disk, stable_seed
-from datamodules.voxel_cache import SEEN_CATEGORIES, VoxelPairDataset, load_pair, save_pair
+from datamodules.voxel_cache import VoxelPairDataset, load_pair, save_pair
+from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, select_seen_categories, select_unseen_categories
 
 log = logging.getLogger("lit3d.data")
 
-UNSEEN_CATEGORIES = ("car", "faucet", "firearm", "guitar", "monitor", "plane")
 SPLITS = ("train", "val", "test_same", "test_cross", "test_unseen")
 TEST_SPLITS = ("test_same", "test_cross", "test_unseen")
 DEFAULT_SIZES = {"train": 240, "val": 40, "test_same": 40, "test_cross": 40, "test_unseen": 40}
@@ -103,8 +103,9 @@ class CompletionDataModule(pl.LightningDataModule):
         input_factor: r = R / input_factor (4: 64 -> 16, 256 -> 64).
         sizes: synthetic items per split (train, val, test_same, test_cross, test_unseen); splits
             left out keep the demo defaults (240/40/40/40/40); 0 drops a split.
-        categories: seen categories used for train/val/test_same/test_cross.
-        unseen_categories: categories of test_unseen.
+        categories: seen categories used for train/val/test_same/test_cross (None: all of
+            :data:`~lit3d.utils.shapenet_categories.SEEN_CATEGORIES`; labels always index that list).
+        unseen_categories: categories of test_unseen (None: all unseen categories).
         views_per_shape: synthetic views per shape instance.
         unseen_view_set: view set of synthetic test_unseen ("same" or "cross").
         val_fraction: recgan: share of train shape ids held out as val.
@@ -119,7 +120,7 @@ class CompletionDataModule(pl.LightningDataModule):
 
     def __init__(self, source: str = "synth", data_dir: str = "data/completion_synth", root: str | None = None,
                  target_res: int = 64, input_factor: int = 4, sizes: dict | None = None,
-                 categories: Sequence[str] = SEEN_CATEGORIES, unseen_categories: Sequence[str] = UNSEEN_CATEGORIES,
+                 categories: Sequence[str] | None = None, unseen_categories: Sequence[str] | None = None,
                  batch_size: int = 4, num_workers: int = 0, seed: int = 0, skip_bad: bool = False,
                  pin_memory: bool = False, views_per_shape: int = 4, unseen_view_set: str = "same",
                  val_fraction: float = 0.1, raw_res: int = 256, compress: bool = True, render_factor: int = 2,
@@ -129,9 +130,10 @@ class CompletionDataModule(pl.LightningDataModule):
             raise DataConfigError(f"data.source={source!r}: expected 'synth' or 'recgan'")
         if target_res % input_factor:
             raise DataConfigError(f"data.target_res={target_res} is not divisible by data.input_factor={input_factor}")
-        bad = [c for c in categories if c not in SEEN_CATEGORIES]
-        if bad:
-            raise DataConfigError(f"data.categories: unknown seen categories {bad}; known: {list(SEEN_CATEGORIES)}")
+        try:
+            categories, unseen_categories = select_seen_categories(categories), select_unseen_categories(unseen_categories)
+        except ValueError as exc:
+            raise DataConfigError(f"data.{exc}") from None
         self.source, self.data_dir = source, Path(data_dir)
         self.root = None if root in (None, "") else Path(root)
         self.target_res, self.input_factor = int(target_res), int(input_factor)

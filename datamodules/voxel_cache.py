@@ -19,8 +19,7 @@ import torch
 from torch.utils.data import Dataset
 
 from datamodules.cache import DataError, atomic_save_npz
-
-SEEN_CATEGORIES = ("bench", "chair", "couch", "table")
+from lit3d.utils.shapenet_categories import SEEN_CATEGORIES
 
 
 def save_pair(path: str | os.PathLike, input: np.ndarray, target: np.ndarray, compress: bool = True) -> Path:

@@ -14,7 +14,7 @@ from typing import Any
 import yaml
 from hydra.experimental.callback import Callback
 
-from lit3d.reports.tables import fmt, markdown_table
+from lit3d.utils.tables import fmt, markdown_table
 from lit3d.utils.io import atomic_write_text
 
 

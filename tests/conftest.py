@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
-from omegaconf import DictConfig, open_dict
+from omegaconf import DictConfig, OmegaConf, open_dict
 
 from lit3d.cli.common import CONF_DIR
 
@@ -43,6 +43,29 @@ def compose_cfg(tmp_path):
 
     yield _compose
     GlobalHydra.instance().clear()
+
+
+def _composed_task_nets(experiment: str) -> dict:
+    """``task.nets`` of ``experiment=NAME`` as a plain dict (the config is the only source of sizes)."""
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+            cfg = compose(config_name="train", overrides=[f"experiment={experiment}"])
+        return OmegaConf.to_container(cfg.task.nets, resolve=True)
+    finally:
+        GlobalHydra.instance().clear()
+
+
+@pytest.fixture(scope="session")
+def completion_demo_nets() -> dict:
+    """The demo experiment's completion net sizes (16^3 -> 64^3); copy before changing it."""
+    return _composed_task_nets("completion_demo")
+
+
+@pytest.fixture(scope="session")
+def completion_paper_nets() -> dict:
+    """The thesis's completion net sizes (64^3 -> 256^3, conf/task/completion.yaml); copy before changing it."""
+    return _composed_task_nets("completion_paper")
 
 
 def pytest_collection_modifyitems(config, items):

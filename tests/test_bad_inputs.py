@@ -17,7 +17,6 @@ Separate tests below: ``--debug`` shows the traceback, and ``skip_bad`` skips an
 """
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -122,12 +121,14 @@ def _disc(size: int = S) -> tuple[np.ndarray, np.ndarray]:
 
 
 def write_depth_cache(root: Path, breaker: Callable | None, skip_bad: bool = False) -> CanonicalDataModule:
-    """A complete canonical cache as ``prepare_data`` leaves it (manifest + one ``.npz`` per
-    subject), with ``depth_1_0`` of subject ``s1`` passed through ``breaker(depth, mask)``."""
+    """A complete canonical cache as ``prepare_data`` leaves it (manifest + one ``subjects/<s>.npz``
+    per subject), with ``depth_1_0`` of subject ``s1`` passed through ``breaker(depth, mask)``."""
     subjects, poses = ("s0", "s1", "s2"), ("0", "1", "2")
     dm = CanonicalDataModule(str(root), image_size=S, n_subjects=3, n_poses=3, n_folds=2, batch_size=2,
                              skip_bad=skip_bad)
-    root.mkdir(parents=True, exist_ok=True)
+    builder = dm.cache_builder()
+    builder.begin()
+    builder.path("subjects").mkdir()
     for s in subjects:
         arrays = {"poses": np.array(poses), "skipped": np.array([], dtype=str)}
         for p in ("canonical", *poses):
@@ -135,16 +136,15 @@ def write_depth_cache(root: Path, breaker: Callable | None, skip_bad: bool = Fal
             if breaker is not None and (s, p) == ("s1", "1"):
                 d, m = breaker(d, m)
             arrays[f"depth_{p}_0"], arrays[f"mask_{p}_0"] = d, np.packbits(m)
-        np.savez(root / f"{s}.npz", **arrays)
-    (root / "manifest.json").write_text(json.dumps({
-        "config_hash": dm.config_hash(), "complete": True, "subjects": list(subjects),
-        "generator_version": "test", "categories": {}}))
+        np.savez(builder.path(f"subjects/{s}.npz"), **arrays)
+    builder.finish([{"file": f"subjects/{s}.npz", "subject": s} for s in subjects],
+                   extra={"complete": True, "subjects": list(subjects), "categories": {}})
     return dm
 
 
 def _depth(breaker):
     def write(tmp: Path):
-        return write_depth_cache(tmp / "cache", breaker), str(tmp / "cache" / "s1.npz")
+        return write_depth_cache(tmp / "cache", breaker), str(tmp / "cache" / "subjects" / "s1.npz")
     return write
 
 

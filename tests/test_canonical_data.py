@@ -9,7 +9,7 @@ import trimesh
 from datamodules.canonical import CanonicalDataModule, DataError, split_pose, split_subject_pose
 from datamodules.readers import tosca
 from datamodules.synth.figures import KINDS, figure_mesh, joint_positions, make_pose, make_subject
-from lit3d.retrieval.depthcam import depth_to_mesh, depth_to_points, render_depth
+from lit3d.render.depth import depth_to_mesh, depth_to_points, render_depth
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "tosca8k"
 
@@ -69,14 +69,22 @@ def test_datamodule_cache_manifest_and_strict_split(tmp_path):
     png = dm.show(3, tmp_path / "show.png")
     assert png.stat().st_size > 100
     # a second module with the same config reuses the cache (no rendering)
-    mtime = (tmp_path / "data" / man["subjects"][0]).with_suffix(".npz").stat().st_mtime
+    first = tmp_path / "data" / "subjects" / f"{man['subjects'][0]}.npz"
+    assert [it["file"] for it in man["items"]] == [f"subjects/{s}.npz" for s in man["subjects"]]
+    mtime = first.stat().st_mtime
     dm2 = _dm(tmp_path)
     dm2.prepare_data()
-    assert (tmp_path / "data" / man["subjects"][0]).with_suffix(".npz").stat().st_mtime == mtime
+    assert first.stat().st_mtime == mtime
 
 
 def test_interrupted_preparation_resumes(tmp_path, monkeypatch):
     dm = _dm(tmp_path, n_subjects=4, n_poses=3, n_folds=2)
+    # a cache of the layout before CacheBuilder (one <subject>.npz beside its manifest) is replaced
+    legacy = tmp_path / "data" / "humanoid000.npz"
+    legacy.parent.mkdir()
+    legacy.write_bytes(b"old")
+    (tmp_path / "data" / "manifest.json").write_text(json.dumps(
+        {"generator_version": "canonical-data-1", "complete": True, "subjects": ["humanoid000"]}))
     calls = []
     orig = dm._render_subject
 
@@ -89,15 +97,16 @@ def test_interrupted_preparation_resumes(tmp_path, monkeypatch):
     monkeypatch.setattr(dm, "_render_subject", flaky)
     with pytest.raises(KeyboardInterrupt):
         dm.prepare_data()
-    assert not json.loads((tmp_path / "data" / "manifest.json").read_text())["complete"]
-    assert len(list((tmp_path / "data").glob("*.npz"))) == 2
-    assert not list((tmp_path / "data").glob(".*.tmp"))
+    assert not (tmp_path / "data" / "manifest.json").exists()  # written last, by a complete preparation
+    assert len(list((tmp_path / "data" / "subjects").glob("*.npz"))) == 2
+    assert not list((tmp_path / "data").rglob(".*.tmp"))
     dm2 = _dm(tmp_path, n_subjects=4, n_poses=3, n_folds=2)
     rendered = []
     orig2 = dm2._render_subject
     monkeypatch.setattr(dm2, "_render_subject", lambda s: rendered.append(s) or orig2(s))
     dm2.prepare_data()
     assert len(rendered) == 2 and json.loads((tmp_path / "data" / "manifest.json").read_text())["complete"]
+    assert not legacy.exists()
 
 
 def test_split_functions_cover_every_fold():

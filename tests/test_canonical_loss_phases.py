@@ -6,8 +6,8 @@ import pytest
 import torch
 from torch.utils.data import DataLoader, TensorDataset
 
-from lit3d.callbacks.loss_phases import THESIS_FRACTIONS, THESIS_PHASES, LossPhases, phase_at
-from lit3d.losses_canonical import canonical_loss, mask_loss, masked_depth_loss
+from lit3d.canonical.loss_phases import THESIS_FRACTIONS, THESIS_PHASES, LossPhases, phase_at
+from lit3d.canonical.losses import canonical_loss, mask_loss, masked_depth_loss
 
 
 class _Mod(SimpleNamespace):

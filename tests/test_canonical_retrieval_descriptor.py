@@ -3,7 +3,11 @@ import numpy as np
 import pytest
 import trimesh
 
-from lit3d.canonical_baselines import canonical_forms, classical_mds, geodesic_matrix, gps_embedding, simplify
+from lit3d.geometry.canonical_forms import canonical_forms
+from lit3d.geometry.geodesics import geodesic_matrix
+from lit3d.geometry.mds import classical_mds
+from lit3d.geometry.simplify import simplify_to_vertices
+from lit3d.geometry.spectral import gps_embedding
 from lit3d.metrics.retrieval import retrieval_scores
 from lit3d.retrieval.descriptor import (
     DescriptorConfig,
@@ -59,7 +63,7 @@ def test_mds_and_gps_baselines_are_pose_invariant():
     assert np.allclose(s1, s2, rtol=0.15)
     g = gps_embedding(v, f)
     assert g.shape == (len(v), 3) and np.isfinite(g).all()
-    sv, sf = simplify(v, f, 100)
+    sv, sf = simplify_to_vertices(v, f, 100)
     assert len(sv) <= 100 and sf.max() < len(sv)
     out = canonical_forms([(v, f)], "gps", max_vertices=200)
     assert out[0][0].shape[1] == 3
@@ -71,7 +75,7 @@ def test_gps_embedding_is_deterministic():
     """Same mesh -> the same GPS embedding on every call (seeded start vector, fixed signs)."""
     import trimesh
 
-    from lit3d.canonical_baselines import gps_embedding
+    from lit3d.geometry.spectral import gps_embedding
 
     m = trimesh.creation.icosphere(subdivisions=2)
     m.vertices[:, 0] *= 1.7

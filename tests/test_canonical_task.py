@@ -1,4 +1,5 @@
-"""Canonical task: short real training beats the posed-input baseline on held-out subjects and poses."""
+"""Canonical task: short real training beats the posed-input baseline on held-out subjects and poses;
+retrieval and the mesh baselines come from the evaluator's protocol after the test."""
 import time
 
 import lightning.pytorch as pl
@@ -6,9 +7,11 @@ import pytest
 import torch
 
 from datamodules.canonical import CanonicalDataModule
+from omegaconf import OmegaConf
+
+from lit3d.canonical import evaluator
+from lit3d.canonical.module import CanonicalTask
 from lit3d.cli.common import build_datamodule, build_task
-from lit3d.nets.canonical import TINY
-from lit3d.tasks.canonical import CanonicalTask
 
 
 @pytest.fixture
@@ -19,23 +22,34 @@ def one_thread():
     torch.set_num_threads(n)
 
 
-def _train(tmp_path, epochs, retrieval=None, size=48, n=9, mesh_resolution=32, **task_kw):
+@pytest.fixture
+def tiny_net(compose_cfg):
+    """tiny_net(size) -> the net sizes of experiment=canonical_tiny at ``size``^2 (plain dict)."""
+    def net(size: int = 48) -> dict:
+        cfg = compose_cfg(["experiment=canonical_tiny", f"task.net.image_size={size}"])
+        return OmegaConf.to_container(cfg.task.net, resolve=True)
+    return net
+
+
+def _train(tmp_path, net, epochs, retrieval=None, size=48, n=9, mesh_resolution=32, **task_kw):
+    """Fit and test on synthetic humanoids; returns (task, datamodule, test metrics + evaluator protocol)."""
     pl.seed_everything(0, workers=True)
     dm = CanonicalDataModule(str(tmp_path / "data"), image_size=size, n_subjects=n, n_poses=n,
                              mesh_resolution=mesh_resolution, n_folds=3, batch_size=8, kinds=["humanoid"], seed=0)
-    task = CanonicalTask(net={**TINY, "image_size": size}, retrieval=retrieval, chance_trials=20, **task_kw)
+    task = CanonicalTask(net=net(size), retrieval=retrieval, chance_trials=20, **task_kw)
     tr = pl.Trainer(max_epochs=epochs, logger=False, enable_checkpointing=False, enable_progress_bar=False,
                     enable_model_summary=False, accelerator="cpu", num_sanity_val_steps=0,
                     check_val_every_n_epoch=epochs, deterministic=True)
     tr.fit(task, dm)
     res = tr.test(task, dm, verbose=False)[0]
+    res.update(evaluator.protocol(task, dm))
     return task, dm, res
 
 
 # about 35 s on 2 cores: in the default suite (the task's beat-the-baseline run)
-def test_short_training_beats_posed_input_on_held_out_subjects_and_poses(tmp_path, one_thread):
+def test_short_training_beats_posed_input_on_held_out_subjects_and_poses(tmp_path, one_thread, tiny_net):
     t0 = time.time()
-    task, dm, res = _train(tmp_path, epochs=20, mask_loss="bce",
+    task, dm, res = _train(tmp_path, tiny_net, epochs=20, mask_loss="bce",
                            retrieval={"level": 0, "view_size": 48, "vocab": 32, "dense_step": 6})
     assert {r["subject"] for r in dm.splits["test"]}.isdisjoint({r["subject"] for r in dm.splits["train"]})
     assert res["test/depth_mse"] < 0.9 * res["test/depth_mse_input"], res  # measured 0.170 vs 0.214
@@ -46,24 +60,35 @@ def test_short_training_beats_posed_input_on_held_out_subjects_and_poses(tmp_pat
     print(f"train+test {time.time() - t0:.0f}s: {res}")
 
 
-def test_tiny_run_logs_unet_and_mesh_baselines_beside_the_model(tmp_path, one_thread):
-    """Fast twin of the test above: two epochs at 32^2 with the U-Net trained in the same run and the
-    non-learned mesh baselines computed at test time; checks what is logged, not the quality."""
-    task, dm, res = _train(tmp_path, epochs=2, size=32, n=6, mesh_resolution=20, mask_loss="bce",
-                           retrieval={"level": 0, "view_size": 32, "vocab": 16, "dense_step": 6},
-                           unet_baseline=True, mesh_baselines=["cmds", "smacof", "gps", "posed"],
-                           baseline_max_vertices=200)
-    assert task.unet is not None and type(task.unet).__name__ == "UNet"
-    for k in ("depth_mse", "iou", "depth_mse_input", "iou_input", "depth_mse_unet", "iou_unet"):
+def test_tiny_run_scores_mesh_baselines_and_a_unet_run_under_its_source(tmp_path, one_thread, tiny_net):
+    """Fast twin of the test above: two epochs at 32^2 with the non-learned mesh baselines computed
+    by the evaluator after the test; then a plain U-Net run (arch=unet) on the same data, whose
+    retrieval is scored under source "unet". Checks what is reported, not the quality."""
+    kw = dict(epochs=2, size=32, n=6, mesh_resolution=20, mask_loss="bce",
+              retrieval={"level": 0, "view_size": 32, "vocab": 16, "dense_step": 6})
+    task, dm, res = _train(tmp_path, tiny_net, mesh_baselines=["cmds", "smacof", "gps", "posed"],
+                           baseline_max_vertices=200, **kw)
+    for k in ("depth_mse", "iou", "depth_mse_input", "iou_input"):
         assert torch.isfinite(torch.tensor(res[f"test/{k}"])), k
-    for src in ("model", "unet", "input", "target", "chance", "cmds", "smacof", "gps", "posed"):
+    for src in ("model", "input", "target", "chance", "cmds", "smacof", "gps", "posed"):
         for k in ("nn", "ft", "st", "e", "dcg"):
             assert 0 <= res[f"test/retrieval/{src}/{k}"] <= 1, (src, k)
     assert res["test/retrieval/target/nn"] >= res["test/retrieval/chance/nn"]
     assert res["test/retrieval/cmds/seconds"] > 0
-    # the mesh baselines rank one item per unique test (subject, pose)
+    # the gathered test outputs hold every test item once; the mesh baselines rank one item per
+    # unique test (subject, pose)
+    outputs = {k: v.cpu() for k, v in task.test_outputs.compute().items()}
+    assert outputs["pred_depth"].shape == (len(dm.splits["test"]), 1, 32, 32)
     n_shapes = len({(r["subject"], r["pose"]) for r in dm.splits["test"]})
-    assert task.retrieval_results["cmds"]["n_queries"] <= n_shapes
+    results = evaluator.retrieval_results(task.hparams, outputs, dm)
+    assert results["cmds"]["n_queries"] <= n_shapes
+    # the plain U-Net as a run of its own: same data and losses, retrieval under source "unet"
+    unet, _, res_u = _train(tmp_path, tiny_net, arch="unet", **kw)
+    assert type(unet.net).__name__ == "UNet"
+    for src in ("unet", "input", "target", "chance"):
+        for k in ("nn", "ft", "st", "e", "dcg"):
+            assert 0 <= res_u[f"test/retrieval/{src}/{k}"] <= 1, (src, k)
+    assert not any(k.startswith("test/retrieval/model/") for k in res_u)
 
 
 def test_config_builds_task_and_data(compose_cfg):
@@ -95,8 +120,8 @@ def test_paper_summary_rows():
     assert by["total"]["output_shape"] == (1, 2, 500, 500)
 
 
-def test_checkpoint_loads_with_weights_only(tmp_path):
-    task = CanonicalTask(net=dict(TINY))
+def test_checkpoint_loads_with_weights_only(tmp_path, tiny_net):
+    task = CanonicalTask(net=tiny_net())
     tr = pl.Trainer(max_epochs=1, logger=False, accelerator="cpu", enable_progress_bar=False)
     tr.strategy.connect(task)
     path = tmp_path / "c.ckpt"
@@ -105,3 +130,10 @@ def test_checkpoint_loads_with_weights_only(tmp_path):
     assert ckpt["hyper_parameters"]["net"]["image_size"] == 48
     again = CanonicalTask.load_from_checkpoint(path, map_location="cpu", weights_only=True)
     assert isinstance(again, CanonicalTask)
+    # checkpoints written before the U-Net became a run of its own carry unet_baseline=False
+    ckpt["hyper_parameters"]["unet_baseline"] = False
+    torch.save(ckpt, tmp_path / "old.ckpt")
+    assert isinstance(CanonicalTask.load_from_checkpoint(tmp_path / "old.ckpt", map_location="cpu",
+                                                         weights_only=True), CanonicalTask)
+    with pytest.raises(ValueError, match="task.arch=unet"):
+        CanonicalTask(net=tiny_net(), unet_baseline=True)

@@ -34,7 +34,7 @@ def bin_path(name: str) -> str:
 
 
 def test_fast_dev_run(compose_cfg, data_dir):
-    cfg = compose_cfg([*TINY, "trainer=fdr"], data_dir=data_dir)
+    cfg = compose_cfg([*TINY, "debug=fdr"], data_dir=data_dir)
     train(cfg)
     metrics = json.loads((Path(cfg.paths.output_dir) / "metrics.json").read_text())
     assert "test/same/iou" in metrics and "test/unseen/iou_input" in metrics
@@ -43,7 +43,7 @@ def test_fast_dev_run(compose_cfg, data_dir):
 
 def test_critic_and_generator_steps_per_batch(compose_cfg, data_dir):
     # not fast_dev_run: it sets max_steps, and a GAN batch makes critic_steps + 1 optimiser steps
-    cfg = compose_cfg([*TINY, "trainer=limit", "trainer.max_epochs=1", "trainer.limit_train_batches=3",
+    cfg = compose_cfg([*TINY, "debug=limit", "trainer.max_epochs=1", "trainer.limit_train_batches=3",
                        "trainer.limit_val_batches=0", "task.critic_steps=2", "task.adversarial_start_epoch=0",
                        "logger=none"], data_dir=data_dir)
     from lit3d.cli.common import build_datamodule, build_task
@@ -60,7 +60,7 @@ def test_critic_and_generator_steps_per_batch(compose_cfg, data_dir):
 
 
 def test_train_then_eval_writes_tables_and_figures(compose_cfg, data_dir, tmp_path):
-    cfg = compose_cfg([*TINY, "trainer=limit", "logger=csv"], data_dir=data_dir)
+    cfg = compose_cfg([*TINY, "debug=limit", "logger=csv"], data_dir=data_dir)
     value = train(cfg)
     run = Path(cfg.paths.output_dir)
     assert (run / "checkpoints" / "last.ckpt").is_file()
@@ -86,12 +86,12 @@ def test_train_then_eval_writes_tables_and_figures(compose_cfg, data_dir, tmp_pa
 
 
 def test_resume_continues_epoch_optimizer_and_wandb_run(compose_cfg, data_dir):
-    first = compose_cfg([*TINY, "trainer=limit", "trainer.max_epochs=1", "logger=wandb"], data_dir=data_dir)
+    first = compose_cfg([*TINY, "debug=limit", "trainer.max_epochs=1", "logger=wandb"], data_dir=data_dir)
     train(first)
     run = Path(first.paths.output_dir)
     ck1 = torch.load(run / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=True)
     assert ck1["epoch"] == 0
-    second = compose_cfg([*TINY, "trainer=limit", "trainer.max_epochs=2", "logger=wandb", "ckpt_path=last"],
+    second = compose_cfg([*TINY, "debug=limit", "trainer.max_epochs=2", "logger=wandb", "ckpt_path=last"],
                          data_dir=data_dir)
     train(second)
     ck2 = torch.load(run / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=True)
@@ -131,7 +131,7 @@ def test_summary_paper_scale_shapes():
 
 def test_multirun_sweep_collects_table(data_dir, tmp_path):
     sweep_dir = tmp_path / "sweep"
-    res = _run([bin_path("lit3d-train"), "-m", *TINY, "+sweep=completion_classifier", "trainer=fdr",
+    res = _run([bin_path("lit3d-train"), "-m", *TINY, "+sweep=completion_classifier", "debug=fdr",
                 f"paths.data_dir={data_dir}", f"paths.log_dir={tmp_path}/logs", f"hydra.sweep.dir={sweep_dir}"], REPO)
     assert res.returncode == 0, res.stderr[-3000:]
     jobs = sorted(p for p in sweep_dir.iterdir() if (p / "metrics.json").is_file())

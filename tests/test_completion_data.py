@@ -10,12 +10,13 @@ import torch
 
 from datamodules import completion as completion_mod
 from datamodules.cache import MANIFEST, MARKER, DataError
-from datamodules.completion import SEEN_CATEGORIES, UNSEEN_CATEGORIES, CompletionDataModule
+from datamodules.completion import CompletionDataModule
 from datamodules.synth.depth_voxels import (
     VIEW_SETS, ViewGeometry, camera_rotation, make_sample, max_pool, solid_occupancy,
 )
 from datamodules.synth.furniture import GENERATORS, Shape, box, make_shape
 from datamodules.voxel_cache import load_pair, save_pair
+from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, UNSEEN_CATEGORIES
 
 SMALL = {"train": 8, "val": 4, "test_same": 4, "test_cross": 4, "test_unseen": 24}
 
@@ -226,6 +227,18 @@ def test_recgan_without_root_says_how_to_fix(tmp_path):
         dm.prepare_data()
     with pytest.raises(DataError, match="source"):
         CompletionDataModule(source="shapenet", data_dir=str(tmp_path))
+
+
+def test_categories_are_the_one_list_and_are_checked(tmp_path):
+    # every category has a synthetic generator, and only those
+    assert set(GENERATORS) == set(SEEN_CATEGORIES) | set(UNSEEN_CATEGORIES)
+    dm = CompletionDataModule(data_dir=str(tmp_path), progress=False)  # null in the configs: all of them
+    assert dm.categories == SEEN_CATEGORIES and dm.unseen_categories == UNSEEN_CATEGORIES
+    assert CompletionDataModule(data_dir=str(tmp_path), categories=["chair"]).categories == ("chair",)
+    with pytest.raises(DataError, match=r"data\.categories: unknown categories \['chiar'\]"):
+        CompletionDataModule(data_dir=str(tmp_path), categories=["chiar"])
+    with pytest.raises(DataError, match=r"data\.unseen_categories: unknown categories \['chair'\]"):
+        CompletionDataModule(data_dir=str(tmp_path), unseen_categories=["chair"])
 
 
 @pytest.mark.parametrize("res,factor", [(32, 2), (32, 4), (64, 8), (64, 16), (48, 3), (48, 12)])

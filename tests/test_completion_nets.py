@@ -4,18 +4,12 @@ from __future__ import annotations
 import pytest
 import torch
 
-from lit3d.nets.attention import SelfAttention3d
-from lit3d.nets.completion import (
-    DEMO,
-    CascadeGenerator,
-    Critic,
-    GeneratorOutput,
-    LatentSelector,
-    ShapeClassifier,
-    build_completion_nets,
-    resolve_config,
-)
-
+from lit3d.completion.attention import SelfAttention3d
+from lit3d.completion.classifier import ShapeClassifier
+from lit3d.completion.critic import Critic
+from lit3d.completion.generator import CascadeGenerator, GeneratorOutput
+from lit3d.completion.nets import NET_KEYS, build_completion_nets, validate_net_config
+from lit3d.completion.selector import LatentSelector
 
 
 @pytest.fixture(autouse=True, scope="module")
@@ -67,25 +61,25 @@ def test_selector_straight_through_vs_literal_gradients():
 
 
 # ---------------------------------------------------------------- generator
-def test_generator_demo_shapes_and_outputs():
+def test_generator_demo_shapes_and_outputs(completion_demo_nets):
     torch.manual_seed(0)
-    g = build_completion_nets({"preset": "demo"})["generator"]
+    demo = completion_demo_nets
+    g = build_completion_nets(demo)["generator"]
     out = g(_partial(2))
     assert isinstance(out, GeneratorOutput)
     assert out.logits.shape == (2, 1, 64, 64, 64)
     assert [tuple(s.shape) for s in out.stage_logits] == [(2, 1, 16, 16, 16)] * 2 + [(2, 1, 64, 64, 64)]
     assert out.stage_logits[-1] is out.logits
-    assert out.keep_fraction.shape == () and out.keep_fraction.item() == pytest.approx(DEMO["k"] / DEMO["latent_dim"])
+    assert out.keep_fraction.shape == () and out.keep_fraction.item() == pytest.approx(demo["k"] / demo["latent_dim"])
     # stage inputs have 1, 2, 3 channels; the last stage gets the stage-1 global skips
     assert [s.encoder[0][0][1].in_channels for s in g.stages] == [1, 2, 3]
     assert g.use_global_skips
 
 
 def test_generator_global_skips_change_last_stage_decoder():
-    with_gs = CascadeGenerator(in_res=16, stages=2, enc_channels=(4, 8), up_channels=(4,), latent_dim=16, k=4,
-                               global_skips=True)
-    without = CascadeGenerator(in_res=16, stages=2, enc_channels=(4, 8), up_channels=(4,), latent_dim=16, k=4,
-                               global_skips=False)
+    kw = dict(in_res=16, stages=2, enc_channels=(4, 8), up_channels=(4,), latent_dim=16, k=4)
+    with_gs = CascadeGenerator(**kw, global_skips=True)
+    without = CascadeGenerator(**kw, global_skips=False)
     # decoder level 0 input: fc map (8) + local skip (8) [+ global skip (8)]
     assert with_gs.stages[-1].decoder[0].in_channels == 24
     assert without.stages[-1].decoder[0].in_channels == 16
@@ -125,11 +119,11 @@ ABLATIONS = [
 
 
 @pytest.mark.parametrize("switch", ABLATIONS, ids=lambda d: ",".join(f"{k}={v}" for k, v in d.items()))
-def test_every_ablation_builds_and_runs_at_demo_scale(switch):
+def test_every_ablation_builds_and_runs_at_demo_scale(switch, completion_demo_nets):
     torch.manual_seed(0)
-    cfg = {"preset": "demo", **switch}
+    cfg = {**completion_demo_nets, **switch}
     nets = build_completion_nets(cfg)
-    c = resolve_config(cfg)
+    c = validate_net_config(cfg)
     g, d = nets["generator"], nets["critic"]
     x = _partial(1)
     out = g(x)
@@ -156,13 +150,25 @@ def test_every_ablation_builds_and_runs_at_demo_scale(switch):
     assert g.stages[0].encoder[0][0][1].weight.grad.abs().sum() > 0
 
 
-def test_bad_config_is_rejected():
+def test_bad_config_is_rejected(completion_demo_nets):
+    demo = completion_demo_nets
     with pytest.raises(ValueError, match="unknown completion net config keys"):
-        build_completion_nets({"preset": "demo", "stagse": 2})
+        build_completion_nets({**demo, "stagse": 2})
     with pytest.raises(ValueError, match="out_res"):
-        build_completion_nets({"preset": "demo", "out_res": 128})
+        build_completion_nets({**demo, "out_res": 128})
     with pytest.raises(ValueError, match="stages"):
-        build_completion_nets({"preset": "demo", "stages": 4})
+        build_completion_nets({**demo, "stages": 4})
+    # no size presets in Python: a size left out is an error naming it, never a silent default
+    with pytest.raises(ValueError, match=r"lacks \['latent_dim'\]"):
+        build_completion_nets({k: v for k, v in demo.items() if k != "latent_dim"})
+    with pytest.raises(ValueError, match="unknown completion net config keys \\['preset'\\]"):
+        build_completion_nets({**demo, "preset": "demo"})
+
+
+def test_the_configs_name_every_net_key_and_only_those(completion_demo_nets, completion_paper_nets):
+    assert set(completion_demo_nets) == set(NET_KEYS) == set(completion_paper_nets)
+    assert (completion_demo_nets["in_res"], completion_demo_nets["out_res"]) == (16, 64)
+    assert (completion_paper_nets["in_res"], completion_paper_nets["out_res"]) == (64, 256)
 
 
 # ---------------------------------------------------------------- self-attention

@@ -42,7 +42,7 @@ CANONICAL = [
     "data.mesh_resolution=20", "data.kinds=[humanoid]", "data.batch_size=4", "task.net.image_size=32",
     "task.net.lfe_channels=[8,12,16]", "task.net.msfe_channels=[6,6,4]", "task.net.msfe_grid=6",
     "task.net.fuser_hidden=64", "task.net.fuser_out=48", "task.net.msfe_dec_channels=[32,16,12,8,8,8]",
-    "task.net.rec_channels=[12,16,24]", "task.unet_baseline=false", "task.retrieval=null",
+    "task.net.rec_channels=[12,16,24]", "task.retrieval=null",
     "task.mesh_baselines=[]", "task.mask_loss=bce", "test_after_fit=false", "callbacks.progress_bar=null",
     "+trainer.limit_val_batches=0",
 ]
@@ -289,11 +289,11 @@ def test_nonfinite_loss_skip_counts_and_keeps_weights(compose_cfg, canonical_dat
     assert all(torch.isfinite(v).all() for v in ckpt["state_dict"].values()), "a skipped step changed the weights"
 
 
-@pytest.mark.parametrize("target", ["lit3d.tasks.canonical.CanonicalTask", "lit3d.tasks.completion.CompletionTask"])
-def test_unknown_nonfinite_mode_is_refused(target):
+@pytest.mark.parametrize("target", ["lit3d.canonical.module.CanonicalTask", "lit3d.completion.module.CompletionTask"])
+def test_unknown_nonfinite_mode_is_refused(target, completion_demo_nets):
     from lit3d.cli.common import import_object
 
-    kwargs = {"nets": {"preset": "demo"}} if "Completion" in target else {}
+    kwargs = {"nets": completion_demo_nets} if "Completion" in target else {}
     with pytest.raises(ValueError, match="on_nonfinite must be one of"):
         import_object(target)(on_nonfinite="ignore", **kwargs)
 

@@ -8,8 +8,8 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-from lit3d.losses import critic_loss, generator_adv_loss, gradient_penalty, weighted_bce_with_logits
-from lit3d.nets.completion import Critic
+from lit3d.completion.losses import critic_loss, generator_adv_loss, gradient_penalty, weighted_bce_with_logits
+from lit3d.completion.nets import Critic
 
 
 @pytest.fixture(autouse=True, scope="module")

@@ -10,7 +10,7 @@ import torch
 import trimesh
 
 from lit3d.metrics import image as im
-from lit3d.quality.features import FeatureConfig, feature_table, image_measures, overall_score
+from lit3d.features.table import FeatureConfig, feature_table, image_measures, overall_score
 from lit3d.render.gbuffer import RenderConfig
 
 SHARED_MESHES = Path(__file__).resolve().parents[2] / "shared" / "data" / "meshes"

@@ -8,7 +8,7 @@ import pytest
 import scipy.stats
 import torch
 
-from lit3d.nets.quality import BatchedQualityMLP, QualityMLP
+from lit3d.quality.nets import BatchedQualityMLP, QualityMLP
 from lit3d.quality.protocol import (
     FeatureBaseline,
     FeatureMatrix,

@@ -18,11 +18,11 @@ from scipy.spatial import cKDTree
 from datamodules.quality import SEVERITY_NAME, QualityDataModule
 from lit3d.quality.predict import QualityCheckpointError, load_predictor, predict_from_features
 from lit3d.quality.protocol import LearnedScore, TrainConfig, baseline_methods, leave_one_shape_out
-from lit3d.tasks.quality import QualityTask
+from lit3d.quality.module import QualityTask
 
 
 def fake_features(ref, dist):
-    """Cheap stand-in for ``lit3d.quality.features.feature_table`` (same naming scheme)."""
+    """Cheap stand-in for ``lit3d.features.table.feature_table`` (same naming scheme)."""
     a = trimesh.load(ref, force="mesh", process=False)
     b = trimesh.load(dist, force="mesh", process=False)
     scale = float(np.linalg.norm(np.ptp(a.vertices, axis=0)))
@@ -74,6 +74,9 @@ def test_task_trains_checkpoints_and_predicts(tmp_path):
     assert 1 <= len(task.features) <= 3 and task.sfs_info["selected"] == task.features
     trainer.test(task, datamodule=dm)
     m = {k: float(v) for k, v in trainer.callback_metrics.items()}
+    from lit3d.quality import evaluator
+
+    m.update(evaluator.protocol(task, dm))  # baselines + leave-one-shape-out (as run_evaluation does)
     for key in ("test/ours/pearson", "test/ours/spearman/rock", "test/chamfer/pearson", "test/single_best/spearman",
                 "test/cv/ours_sfs/pearson/blob", "test/cv/chamfer/spearman"):
         assert key in m and math.isfinite(m[key]), key
@@ -93,15 +96,14 @@ def test_task_trains_checkpoints_and_predicts(tmp_path):
     restored = QualityTask.load_from_checkpoint(ckpt, map_location="cpu")
     assert restored.features == task.features
     # report + scatter plots
-    from lit3d.reports.quality import write_figures, write_results
-
-    md = write_results(m, tmp_path).read_text()
+    md = evaluator.write_results(m, tmp_path).read_text()
     assert "Leave-one-shape-out" in md and "ordinal severity" in md and "| rock |" in md
-    assert all(p.stat().st_size > 0 for p in write_figures(task, dm, tmp_path))
+    figures = evaluator.write_figures(task, dm, tmp_path)
+    assert len(figures) == 2 and all(p.stat().st_size > 0 for p in figures)
 
 
 def test_report_puts_thesis_table_beside_ours(tmp_path):
-    from lit3d.reports.quality import write_results
+    from lit3d.quality.report import write_results
 
     m = {}
     for s in ("armadillo", "dyno", "rockerarm", "venus"):

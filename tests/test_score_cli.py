@@ -114,7 +114,7 @@ def _by_hand(ckpt, features: dict) -> float:
     """The model's output for the selected columns of a feature table, via the task's own forward."""
     import torch
 
-    from lit3d.tasks.quality import QualityTask
+    from lit3d.quality.module import QualityTask
 
     task = QualityTask.load_from_checkpoint(ckpt, map_location="cpu").eval()
     x = torch.tensor([[features[f] for f in task.features]], dtype=torch.float32)  # (1, F)
@@ -164,7 +164,7 @@ def test_ckpt_refuses_other_tasks_and_non_checkpoints(pair, quality_ckpt, capsys
     ref, dist = pair
 
     def canonical(raw):  # what a canonical-task checkpoint carries: lit3d metadata, no quality entry
-        raw["lit3d"]["task"] = {"_target_": "lit3d.tasks.canonical.CanonicalTask", "name": "canonical"}
+        raw["lit3d"]["task"] = {"_target_": "lit3d.canonical.module.CanonicalTask", "name": "canonical"}
         del raw["quality"]
 
     def renamed(raw):  # a selected feature the checkpoint's options do not render

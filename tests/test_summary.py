@@ -4,8 +4,9 @@ from __future__ import annotations
 import torch
 import torch.nn as nn
 
-from lit3d.nets.completion import PAPER, build_completion_nets
-from lit3d.nets.summary import format_summary_table, summarize, summarize_completion
+from lit3d.completion.nets import build_completion_nets
+from lit3d.completion.summary import summarize_completion
+from lit3d.utils.summary import format_summary_table, summarize
 
 
 def test_summarize_small_model_matches_real_counts_and_bytes():
@@ -40,8 +41,8 @@ def test_summarize_skips_inplace_and_handles_tuple_outputs():
     assert s["activation_bytes_per_sample"] == 2 * 4  # Linear output only
 
 
-def test_paper_generator_summary_on_meta_device():
-    rows = {r["component"]: r for r in summarize_completion({"preset": "paper"})}
+def test_paper_generator_summary_on_meta_device(completion_paper_nets):
+    rows = {r["component"]: r for r in summarize_completion(completion_paper_nets)}
     g = rows["generator"]
     assert g["input"] == (1, 1, 64, 64, 64) and g["output"] == (1, 1, 256, 256, 256)
     assert rows["generator stage 1"]["output"] == (1, 1, 64, 64, 64)
@@ -54,7 +55,7 @@ def test_paper_generator_summary_on_meta_device():
     assert g["activation_bytes_per_sample"] > 64 * 2**20
     # parameter counts agree with the nets built on meta
     with torch.device("meta"):
-        nets = build_completion_nets(PAPER)
+        nets = build_completion_nets(completion_paper_nets)
     for name in ("generator", "critic", "classifier"):
         assert rows[name]["params"] == sum(p.numel() for p in nets[name].parameters())
     stages = sum(rows[f"generator stage {i}"]["params"] for i in (1, 2, 3))
@@ -66,10 +67,10 @@ def test_paper_generator_summary_on_meta_device():
     assert f"{g['params']:,}" in table
 
 
-def test_summary_works_inside_meta_context():
+def test_summary_works_inside_meta_context(completion_demo_nets):
     # lit3d-summary calls summary_rows inside `with torch.device("meta")`
     with torch.device("meta"):
-        rows = summarize_completion({"preset": "demo", "stages": 2, "selector": False})
+        rows = summarize_completion({**completion_demo_nets, "stages": 2, "selector": False})
     names = [r["component"] for r in rows]
     assert names[:2] == ["generator stage 1", "generator stage 2"]
     assert not any("selector" in n for n in names)

@@ -34,10 +34,10 @@ import numpy as np
 
 from datamodules.cache import DataError, stable_hash
 from datamodules.voxel_cache import max_pool_bool
+from lit3d.utils.shapenet_categories import CATEGORY_ALIASES
 
 log = logging.getLogger("lit3d.data")
 
-CATEGORY_ALIASES = {"coach": "couch", "sofa": "couch"}
 DIR_RE = re.compile(r"^(?P<split>train|test)(?:_(?P<views>125|216))?_(?P<kind>25d|3d)_vox(?P<res>\d+)$")
 FILE_RE = re.compile(r"^(?P<id>.+)_(?P<a>\d+)_(?P<b>\d+)_(?P<c>\d+)\.npz$")
 VIEW_SETS = {"125": "same", "216": "cross"}

@@ -26,6 +26,7 @@ import numpy as np
 
 from datamodules.synth.furniture import Shape, shape_mesh
 from datamodules.voxel_cache import max_pool_bool
+from lit3d.render.camera import OrthoCamera, look_at, render_ortho_depth
 
 # Analogues of the 3D-RecGAN++ view sets: same-view 5x5x5 (125 views), cross-view
 # 6x6x6 (216 views), as (azimuth, elevation, roll) grids. The two sets share no view.
@@ -117,41 +118,17 @@ def solid_occupancy(shape: Shape, geom: ViewGeometry, pad: float = 0.5) -> np.nd
     return occ
 
 
-def _linear_ortho_depth(depth: np.ndarray, znear: float, zfar: float) -> np.ndarray:
-    """Undo pyrender's perspective depth linearisation for an orthographic camera.
-
-    pyrender 0.1.45 maps every depth buffer with the perspective formula; for an
-    orthographic projection the NDC depth is linear in eye depth.
-    """
-    out = np.zeros_like(depth, dtype=np.float64)
-    fg = depth > 0
-    d = depth[fg].astype(np.float64)
-    ndc = (zfar + znear - 2.0 * znear * zfar / d) / (zfar - znear)
-    out[fg] = (ndc * (zfar - znear) + zfar + znear) / 2.0
-    return out
-
-
 def render_depth(shape: Shape, geom: ViewGeometry, pixels: int) -> np.ndarray:
     """(pixels, pixels) float64 orthographic eye depth in voxel units (0 = background).
 
     Row 0 is the top of the image (GL +y). The camera sits at GL z = res looking along -z.
     """
-    from lit3d.render.egl import import_pyrender, offscreen_renderer  # noqa: PLC0415
-
-    pyrender = import_pyrender()
     mesh = shape_mesh(shape)
-    mesh.vertices = geom.to_voxel(np.asarray(mesh.vertices))
     res = geom.res
-    znear, zfar = 1.0, 3.0 * res
-    scene = pyrender.Scene()
-    scene.add(pyrender.Mesh.from_trimesh(mesh, smooth=False))
-    cam = pyrender.OrthographicCamera(xmag=res / 2, ymag=res / 2, znear=znear, zfar=zfar)
-    pose = np.eye(4)
-    pose[2, 3] = float(res)
-    scene.add(cam, pose=pose)
-    renderer = offscreen_renderer(pixels, pixels)
-    depth = renderer.render(scene, flags=pyrender.RenderFlags.DEPTH_ONLY)
-    return _linear_ortho_depth(np.asarray(depth), znear, zfar)
+    camera = OrthoCamera(half_width=res / 2, znear=1.0, zfar=3.0 * res)
+    depth, _ = render_ortho_depth(geom.to_voxel(np.asarray(mesh.vertices)), np.asarray(mesh.faces),
+                                  look_at([0.0, 0.0, float(res)]), pixels, camera)
+    return depth
 
 
 def backproject(depth: np.ndarray, res: int, push: float = 0.25) -> np.ndarray:

@@ -51,9 +51,18 @@ class Interrupted(Exception):
     exit_code = EXIT_SIGTERM
 
 
+# checkpoints written before the one-room-per-task layout name their module by its old path
+LEGACY_MODULES = {
+    "lit3d.tasks.completion": "lit3d.completion.module",
+    "lit3d.tasks.quality": "lit3d.quality.module",
+    "lit3d.tasks.canonical": "lit3d.canonical.module",
+}
+
+
 def import_object(path: str) -> Any:
-    """Import ``pkg.module.Name`` (or ``pkg.module:Name``)."""
+    """Import ``pkg.module.Name`` (or ``pkg.module:Name``); old module paths are mapped to the new rooms."""
     module, _, name = path.replace(":", ".").rpartition(".")
+    module = LEGACY_MODULES.get(module, module)
     return getattr(importlib.import_module(module), name)
 
 
@@ -218,14 +227,30 @@ def exit_code_for(exc: BaseException) -> int | None:
     return None
 
 
+LIGHTNING_LOGGERS = ("lightning", "lightning.pytorch", "lightning.fabric")
+
+
+def log_once_through_hydra() -> None:
+    """Lightning gives its loggers their own stderr handlers when it is imported; under Hydra, which
+    has already configured the root logger, every Lightning line then appears twice (once bare, once in
+    Hydra's format). Drop Lightning's handlers and let its records reach Hydra's root handlers."""
+    import lightning.pytorch  # noqa: F401  (its import adds the handlers we remove)
+
+    for name in LIGHTNING_LOGGERS:
+        logger = logging.getLogger(name)
+        for handler in list(logger.handlers):
+            logger.removeHandler(handler)
+        logger.propagate = True
+
+
 def run_cli(fn: Callable[[DictConfig], Any], cfg: DictConfig) -> Any:
     """Run ``fn(cfg)``; errors the user can act on become one line on stderr (see module doc).
 
-    ``HYDRA_FULL_ERROR=1`` (or ``--debug``, or ``debug=true`` in the config) shows the
-    traceback instead.
+    ``HYDRA_FULL_ERROR=1`` (or ``--debug``) shows the traceback instead.
     """
     from omegaconf.errors import MissingMandatoryValue
 
+    log_once_through_hydra()
     try:
         missing = sorted(OmegaConf.missing_keys(cfg))
         if missing:  # before any work or logging: the one line is all the user sees
@@ -233,9 +258,42 @@ def run_cli(fn: Callable[[DictConfig], Any], cfg: DictConfig) -> Any:
         return fn(cfg)
     except Exception as exc:
         code = exit_code_for(exc)
-        if code is None or _debug_requested() or cfg.get("debug", False):
+        if code is None or _debug_requested():
             raise
         if isinstance(exc, MissingMandatoryValue):
             key = getattr(exc, "full_key", "") or "a required option"
             exc = UserError(f"missing value for {key}: set {key}=... on the command line")
         fail(exc, code)
+
+
+def scalar_metrics(metrics: dict) -> dict[str, float]:
+    """The one-number entries of Lightning's ``callback_metrics`` as floats."""
+    import torch
+
+    return {k: float(v) for k, v in metrics.items() if torch.as_tensor(v).numel() == 1}
+
+
+def run_evaluation(trainer, task, datamodule, task_name: str, out_dir: Path, *, ckpt_path: str | None = None,
+                   validate: bool = False, n_figures: int = 0, extra: dict | None = None) -> dict[str, float]:
+    """Test ``task`` (after validating it when ``validate``: the completion threshold is chosen there),
+    run the task room's evaluator on the result, and on rank 0 write ``metrics.json``, ``results.md``
+    and ``n_figures`` figures per split into ``out_dir``. Used by ``lit3d-eval`` and, after fitting,
+    by ``lit3d-train``. ``extra``: entries written first into ``metrics.json`` (not returned)."""
+    from lit3d.cli.registry import evaluator_module
+    from lit3d.utils.io import write_json
+
+    evaluator = evaluator_module(task_name)
+    metrics: dict[str, float] = {}
+    if validate:
+        trainer.validate(task, datamodule=datamodule, ckpt_path=ckpt_path, weights_only=True)
+        metrics.update({k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("val/")})
+    trainer.test(task, datamodule=datamodule, ckpt_path=ckpt_path, weights_only=True)
+    metrics.update({k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("test/")})
+    metrics.update(evaluator.protocol(task, datamodule))
+    if trainer.is_global_zero:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        write_json(out_dir / "metrics.json", {**(extra or {}), **metrics})
+        evaluator.write_results(metrics, out_dir)
+        figures = evaluator.write_figures(task, datamodule, out_dir, n=n_figures) if n_figures > 0 else []
+        log.info("wrote %s, results.md and %d figures", out_dir / "metrics.json", len(figures))
+    return metrics

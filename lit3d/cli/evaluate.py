@@ -21,14 +21,11 @@ from lit3d.cli.common import (
     build_datamodule,
     cli_main,
     import_object,
-    log,
     read_checkpoint_meta,
     run_cli,
+    run_evaluation,
     to_plain,
 )
-from lit3d.cli.train import scalar_metrics
-from lit3d.tasks.registry import report_module
-from lit3d.utils.io import write_json
 
 
 def checkpoint_meta_for(cfg: DictConfig) -> dict:
@@ -59,19 +56,11 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
     datamodule = build_datamodule(data_cfg)
     trainer: pl.Trainer = instantiate(cfg.trainer, logger=False, enable_checkpointing=False,
                                       callbacks=[pl.callbacks.RichProgressBar()])
-    metrics: dict[str, float] = {}
-    if getattr(task, "validate_before_test", False):
-        trainer.validate(task, datamodule=datamodule)
-        metrics.update({k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("val/")})
-    trainer.test(task, datamodule=datamodule)
-    metrics.update({k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("test/")})
+    metrics = run_evaluation(trainer, task, datamodule, task_cfg["name"], out_dir,
+                             validate=getattr(task, "validate_before_test", False), n_figures=cfg.n_figures,
+                             extra={"ckpt_path": str(cfg.ckpt_path)})
     if trainer.is_global_zero:
-        write_json(out_dir / "metrics.json", {"ckpt_path": str(cfg.ckpt_path), **metrics})
-        report = report_module(task_cfg["name"])
-        report.write_results(metrics, out_dir)
-        figures = report.write_figures(task, datamodule, out_dir, n=cfg.n_figures)
         OmegaConf.save(OmegaConf.create({"task": task_cfg, "data": data_cfg}), out_dir / "config.yaml")
-        log.info("wrote %s, results.md and %d figures", out_dir / "metrics.json", len(figures))
     return metrics
 
 

@@ -52,7 +52,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def _summary(table, ref: str, dist: str, seconds: float, prediction: dict | None = None,
              notes: list[str] = ()) -> str:
-    from lit3d.reports.tables import markdown_table
+    from lit3d.utils.tables import markdown_table
 
     feats = table.features
     measures: dict[str, dict[str, list[float]]] = {}
@@ -90,7 +90,7 @@ def save_contact_sheets(ref, dist, cfg, out_dir: str | Path, thumb: int = 64) ->
     from PIL import Image
 
     from lit3d.metrics.image import ssim_map, to_grey
-    from lit3d.quality.features import render_views
+    from lit3d.features.table import render_views
     from lit3d.utils.io import atomic_write_bytes
 
     out = Path(out_dir)
@@ -142,7 +142,7 @@ def _run(args) -> int:
     # shapes first: a bad file is reported before torch and the renderer are imported (about 1 s, not 10)
     ref = to_mesh(args.ref)
     dist = to_mesh(args.dist)
-    from lit3d.quality.features import FeatureConfig, default_cache_dir, feature_table
+    from lit3d.features.table import FeatureConfig, default_cache_dir, feature_table
     from lit3d.render.gbuffer import RenderConfig
     from lit3d.render.styles import resolve_styles
 

@@ -13,7 +13,7 @@ from lit3d.cli.common import CONF_DIR, cli_main, import_object, run_cli, task_kw
 def summary(cfg: DictConfig) -> str:
     import torch
 
-    from lit3d.nets.summary import format_summary_table
+    from lit3d.utils.summary import format_summary_table
 
     task_cls = import_object(cfg.task["_target_"])
     with torch.device("meta"):

@@ -1,7 +1,7 @@
 """``lit3d-train``: fit a task, test the best checkpoint, write metrics.json.
 
     lit3d-train experiment=completion_demo
-    lit3d-train experiment=completion_demo trainer=fdr
+    lit3d-train experiment=completion_demo debug=fdr
     lit3d-train hydra.run.dir=logs/completion/runs/X ckpt_path=last     # resume
     lit3d-train -m +sweep=completion_k                                  # ablation sweep
 
@@ -24,9 +24,10 @@ from lit3d.cli.common import (
     build_datamodule,
     build_task,
     cli_main,
-    log,
     read_checkpoint_meta,
     run_cli,
+    run_evaluation,
+    scalar_metrics,
     to_plain,
 )
 from lit3d.utils.io import atomic_write_text, write_json
@@ -77,12 +78,6 @@ def finish_wandb(loggers: list) -> None:
                 pass
 
 
-def scalar_metrics(metrics: dict) -> dict[str, float]:
-    import torch
-
-    return {k: float(v) for k, v in metrics.items() if torch.as_tensor(v).numel() == 1}
-
-
 def checkpoint_plugins(trainer_cfg: DictConfig) -> dict:
     """``plugins=[AtomicCheckpointIO()]`` unless the trainer config sets its own plugins."""
     if trainer_cfg.get("plugins") is not None:
@@ -97,7 +92,7 @@ def fit(trainer, task, datamodule, ckpt_path: str | None, output_dir: Path) -> N
     from lightning.pytorch.utilities.exceptions import SIGTERMException
 
     try:
-        trainer.fit(task, datamodule=datamodule, ckpt_path=ckpt_path)
+        trainer.fit(task, datamodule=datamodule, ckpt_path=ckpt_path, weights_only=True)
     except SIGTERMException as exc:
         raise Interrupted(
             f"{output_dir}: stopped by SIGTERM at epoch {trainer.current_epoch}; resume with the same "
@@ -132,15 +127,13 @@ def train(cfg: DictConfig) -> float | None:
         fit(trainer, task, datamodule, ckpt_path, output_dir)
         fit_metrics = scalar_metrics(trainer.callback_metrics)
         monitored = _monitored_value(trainer, cfg.task.monitor, fit_metrics)
-        test_metrics: dict[str, float] = {}
         if cfg.get("test_after_fit", True):
             best = trainer.checkpoint_callback.best_model_path if trainer.checkpoint_callback else ""
-            trainer.test(task, datamodule=datamodule, ckpt_path=best or None)
-            test_metrics = {k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("test/")}
-        if trainer.is_global_zero:
-            summary = {"monitor": cfg.task.monitor, "monitored_value": monitored, **test_metrics}
-            write_json(output_dir / "metrics.json", summary)
-            log.info("wrote %s", output_dir / "metrics.json")
+            run_evaluation(trainer, task, datamodule, cfg.task.name, output_dir, ckpt_path=best or None,
+                           n_figures=int(cfg.get("n_figures", 0)),
+                           extra={"monitor": cfg.task.monitor, "monitored_value": monitored})
+        elif trainer.is_global_zero:
+            write_json(output_dir / "metrics.json", {"monitor": cfg.task.monitor, "monitored_value": monitored})
         return monitored
     finally:
         finish_wandb(loggers)

@@ -1,12 +1,3 @@
-"""Rendering-based 3-D shape quality (thesis ch. 4): feature tables of mesh pairs."""
-from lit3d.quality.features import (  # noqa: F401
-    IMAGE_MEASURES,
-    MESH_MEASURES,
-    FeatureConfig,
-    FeatureTable,
-    feature_config,
-    feature_table,
-    image_measures,
-    overall_score,
-    render_views,
-)
+"""Task 2, shape quality (thesis ch. 4): the thesis MLP and its one trainer, Sequential Forward
+Search, the leave-one-shape-out / cross-dataset protocol, the LightningModule and the evaluator.
+The rendering features it learns from live below it, in :mod:`lit3d.features`."""

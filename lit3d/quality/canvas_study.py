@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lit3d.quality.features import FeatureConfig, feature_table
+from lit3d.features.table import FeatureConfig, feature_table
 from lit3d.render.gbuffer import RenderConfig
 
 DEFAULT_CANVASES = (128, 256, 512, 1024)
@@ -64,7 +64,7 @@ def canvas_rows(ref, dist, canvases=DEFAULT_CANVASES, styles=DEFAULT_STYLES, bas
 
 def markdown(rows: list[dict]) -> str:
     """The table as markdown, plus the drift (max - min) of each column."""
-    from lit3d.reports.tables import markdown_table
+    from lit3d.utils.tables import markdown_table
 
     cols = ("ssim", "mask_ssim", "mask_ssim_window", "mask_ssim_negative", "mask_ssim_merge")
     body = [[str(r["canvas"]), str(r["shape_px"])] + [f"{r[c]:.4f}" for c in cols] for r in rows]

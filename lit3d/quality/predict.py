@@ -1,6 +1,6 @@
 """Use a trained quality checkpoint on one feature table (for ``lit3d-score --ckpt``).
 
-The checkpoint of :class:`lit3d.tasks.quality.QualityTask` stores, as plain values,
+The checkpoint of :class:`lit3d.quality.module.QualityTask` stores, as plain values,
 ``checkpoint["quality"] = {"features": [...selected names, in input order...], "net": {...},
 "scaling": {"lo", "hi", "higher_is_better", "name"}, "sfs": ..., "dataset": ...,
 "feature_options": {size, styles, measures, ...}}`` (how the training features were rendered),
@@ -24,12 +24,12 @@ from pathlib import Path
 
 import torch
 
-from lit3d.nets.quality import QualityMLP
+from lit3d.quality.nets import QualityMLP
 from lit3d.quality.protocol import TargetScaling
 from lit3d.utils.checkpoints import META_KEY, first_line, load_checkpoint
 
 CKPT_KEY = "quality"
-QUALITY_TARGET = "lit3d.tasks.quality.QualityTask"
+QUALITY_TARGET = "lit3d.quality.module.QualityTask"
 
 
 class QualityCheckpointError(ValueError):
@@ -49,7 +49,7 @@ class QualityPredictor:
         feature_options: the data's feature options (render size, styles, measures, ...) used to
             compute the training features; None when the checkpoint does not record them.
         feature_fn: the data's custom feature function (``data.feature_fn``), None = the renderer's
-            feature table (:func:`lit3d.quality.features.feature_table`).
+            feature table (:func:`lit3d.features.table.feature_table`).
     """
 
     features: list[str]
@@ -65,8 +65,8 @@ class QualityPredictor:
         return self.scaling.name if self.scaling else "distortion"
 
     def feature_config(self):
-        """The :class:`lit3d.quality.features.FeatureConfig` of the training features."""
-        from lit3d.quality.features import feature_config
+        """The :class:`lit3d.features.table.FeatureConfig` of the training features."""
+        from lit3d.features.table import feature_config
 
         return feature_config(self.feature_options)
 

@@ -26,6 +26,8 @@ from typing import Any
 
 import numpy as np
 
+from lit3d.geometry.normalise import normalise_vertices
+
 MESH_SUFFIXES = {".obj", ".off", ".ply", ".stl", ".glb", ".gltf"}
 POINT_SUFFIXES = {".xyz", ".pts", ".txt"}
 GRID_SUFFIXES = {".npz", ".npy"}
@@ -98,9 +100,7 @@ def validate_mesh(mesh, label: str):
 def normalise(mesh):
     """Copy of ``mesh`` centred at its bounding-box centre and scaled to unit longest side."""
     m = mesh.copy()
-    lo, hi = m.bounds
-    m.apply_translation(-(lo + hi) / 2.0)
-    m.apply_scale(1.0 / float(np.max(hi - lo)))
+    m.vertices = normalise_vertices(m.vertices)[0]
     return m
 
 

@@ -14,7 +14,8 @@ resolve would average the normal colours of an edge pixel with its neighbours
 and the black background (wrong decoded normals along silhouettes and creases),
 and on Mesa llvmpipe MSAA makes every pass about 3x slower.
 
-Cameras are orthographic, looking at the origin from ``distance``; the shape is
+Cameras are the one orthographic camera of :mod:`lit3d.render.camera`, looking at the
+origin from ``distance``; the shape is
 centred and scaled to a unit bounding box first, so it always fits in the
 default half-width ``extent = 0.9`` (bounding sphere radius <= 0.866).
 """
@@ -27,6 +28,7 @@ import numpy as np
 import torch
 
 from lit3d.render.convert import normalise as normalise_mesh
+from lit3d.render.camera import OrthoCamera, render_ortho
 from lit3d.render.egl import import_pyrender, new_offscreen_renderer
 from lit3d.render.views import camera_poses, dodecahedron_directions
 
@@ -62,7 +64,8 @@ class GBuffer:
     Attributes:
         normals: ``(V, 3, H, W) float32`` unit view-space normals (``+z`` towards the
             camera, ``+y`` up); 0 in the background.
-        depth: ``(V, 1, H, W) float32`` distance along the view axis; 0 in the background.
+        depth: ``(V, 1, H, W) float32`` camera distance along the view axis (orthographic
+            linearisation of :func:`lit3d.render.camera.linear_depth_ortho`); 0 in the background.
         mask: ``(V, 1, H, W) bool`` foreground.
     """
 
@@ -142,22 +145,16 @@ def render_gbuffers(mesh, config: RenderConfig | None = None, *, normalise: bool
     rot = torch.from_numpy(poses[:, :3, :3]).float()  # camera-to-world rotations (V, 3, 3)
     renderer = _gbuffer_renderer(cfg.size)
     scene = pyrender.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[1.0, 1.0, 1.0])
-    cam = pyrender.OrthographicCamera(xmag=cfg.extent, ymag=cfg.extent, znear=0.05,
-                                      zfar=cfg.distance + 2.0)
-    cam_node = scene.add(cam, pose=poses[0])
+    camera = OrthoCamera(half_width=cfg.extent, znear=0.05, zfar=cfg.distance + 2.0)
     out: dict[str, GBuffer] = {}
     for shading in cfg.shadings:
         node = scene.add(_pyrender_mesh(m, shading))
-        cols, depths = [], []
-        for pose in poses:
-            scene.set_pose(cam_node, pose)
-            color, depth = renderer.render(scene, flags=pyrender.RenderFlags.FLAT)
-            cols.append(color[..., :3])
-            depths.append(depth)
+        views = list(render_ortho(scene, poses, cfg.size, camera, pyrender.RenderFlags.FLAT, renderer))
         scene.remove_node(node)
+        cols = [color[..., :3] for color, _, _ in views]
         col = torch.from_numpy(np.stack(cols)).float().permute(0, 3, 1, 2)  # (V, 3, H, W)
-        dep = torch.from_numpy(np.stack(depths)).float()[:, None]
-        mask = dep > 0
+        dep = torch.from_numpy(np.stack([dist for _, dist, _ in views])).float()[:, None]
+        mask = torch.from_numpy(np.stack([fg for _, _, fg in views]))[:, None]
         n_world = col * (2.0 / 255.0) - 1.0
         # view-space normal = R^T n_world  (R's columns are the camera axes in world space)
         n_view = torch.einsum("vji,vjhw->vihw", rot, n_world).contiguous()

@@ -1,4 +1,4 @@
-"""The 12 view directions of the quality task and look-at camera poses.
+"""The 12 view directions of the quality task and their camera poses (:func:`lit3d.render.camera.look_at`).
 
 The thesis places 12 cameras at the face centres of a regular dodecahedron, all
 looking at the shape's centre. The face centres of a dodecahedron point in the
@@ -12,6 +12,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
+from lit3d.render.camera import look_at
 
 PHI = (1.0 + math.sqrt(5.0)) / 2.0
 N_VIEWS = 12
@@ -35,28 +37,6 @@ def dodecahedron_directions() -> np.ndarray:
             dirs.append((s1 * PHI, 0.0, s2))
     d = np.asarray(dirs, dtype=np.float64)
     return d / math.sqrt(1.0 + PHI * PHI)
-
-
-def look_at(eye: np.ndarray, target: np.ndarray | None = None, up: np.ndarray | None = None) -> np.ndarray:
-    """OpenGL camera-to-world pose ``(4, 4) float64`` at ``eye`` looking at ``target``.
-
-    The camera looks down its local ``-z`` axis with ``+y`` up (pyrender/OpenGL
-    convention). ``up`` defaults to world ``+y``; if the view is parallel to it,
-    world ``+z`` is used instead.
-    """
-    eye = np.asarray(eye, dtype=np.float64)
-    target = np.zeros(3) if target is None else np.asarray(target, dtype=np.float64)
-    up = np.array([0.0, 1.0, 0.0]) if up is None else np.asarray(up, dtype=np.float64)
-    z = eye - target
-    z = z / np.linalg.norm(z)
-    if abs(float(np.dot(z, up))) > 0.999:
-        up = np.array([0.0, 0.0, 1.0])
-    x = np.cross(up, z)
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    pose = np.eye(4)
-    pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = x, y, z, eye
-    return pose
 
 
 def camera_poses(distance: float = 3.0, directions: np.ndarray | None = None) -> np.ndarray:

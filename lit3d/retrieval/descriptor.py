@@ -24,6 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from lit3d.render.camera import OrthoCamera, look_at, render_ortho_depth
+
 
 @dataclass
 class DescriptorConfig:
@@ -104,40 +106,24 @@ def normalize_pose(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return v * (0.5 / max(rms, 1e-12))
 
 
-def _look_at(eye: np.ndarray) -> np.ndarray:
-    z = eye / np.linalg.norm(eye)
-    up = np.array([0.0, 1.0, 0.0]) if abs(z[1]) < 0.99 else np.array([1.0, 0.0, 0.0])
-    x = np.cross(up, z)
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    pose = np.eye(4)
-    pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = x, y, z, eye
-    return pose
+VIEW_DISTANCE = 4.0
+VIEW_CAMERA = OrthoCamera(half_width=1.6, znear=1.0, zfar=7.0)
+Y_AXIS, X_AXIS = np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0])
+
+
+def view_poses(dirs: np.ndarray, distance: float = VIEW_DISTANCE) -> np.ndarray:
+    """``(V, 4, 4)`` camera-to-world poses at ``distance`` along each unit direction ``(V, 3)``,
+    looking at the origin, up = +y (+x for views within 8 degrees of the y axis)."""
+    return np.stack([look_at(d * distance, up=Y_AXIS, fallback_up=X_AXIS, parallel_cos=0.99) for d in dirs])
 
 
 def render_views(verts: np.ndarray, faces: np.ndarray, dirs: np.ndarray, size: int) -> np.ndarray:
     """``(V, S, S) uint8`` depth views (near = bright, background 0) of a pose-normalised mesh."""
-    import trimesh
-
-    from lit3d.render.egl import import_pyrender, offscreen_renderer
-    from lit3d.retrieval.depthcam import linear_depth_ortho
-
-    pyrender = import_pyrender()
-    r = offscreen_renderer(size, size)
-    scene = pyrender.Scene()
-    scene.add(pyrender.Mesh.from_trimesh(trimesh.Trimesh(verts, faces, process=False), smooth=False))
-    dist, mag, zn, zf = 4.0, 1.6, 1.0, 7.0
-    cam = scene.add(pyrender.OrthographicCamera(xmag=mag, ymag=mag, znear=zn, zfar=zf))
-    out = np.zeros((len(dirs), size, size), np.uint8)
-    for i, d in enumerate(dirs):
-        scene.set_pose(cam, _look_at(d * dist))
-        raw = r.render(scene, flags=pyrender.RenderFlags.DEPTH_ONLY | pyrender.RenderFlags.SKIP_CULL_FACES)
-        fg = raw > 0
-        z = linear_depth_ortho(raw, zn, zf)
-        img = np.zeros(raw.shape)
-        img[fg] = np.clip(1 - (z[fg] - (dist - mag)) / (2 * mag), 0, 1) * 215 + 40
-        out[i] = img.astype(np.uint8)
-    return out
+    dist, mag = VIEW_DISTANCE, VIEW_CAMERA.half_width
+    z, fg = render_ortho_depth(verts, faces, view_poses(dirs, dist), size, VIEW_CAMERA, cull_faces=False)
+    img = np.zeros(z.shape)
+    img[fg] = np.clip(1 - (z[fg] - (dist - mag)) / (2 * mag), 0, 1) * 215 + 40
+    return img.astype(np.uint8)
 
 
 def sift_features(img: np.ndarray, dense_step: int = 8) -> np.ndarray:
@@ -225,7 +211,7 @@ def distance_matrix_from_meshes(meshes: list[tuple[np.ndarray, np.ndarray]], cfg
 
 def distance_matrix_from_depths(depths: np.ndarray, masks: np.ndarray, cfg: DescriptorConfig | None = None) -> np.ndarray:
     """Back-project each ``(S, S)`` normalised depth + mask to a surface, then as above."""
-    from lit3d.retrieval.depthcam import depth_to_mesh
+    from lit3d.render.depth import depth_to_mesh
 
     cfg = cfg or DescriptorConfig()
     meshes = [depth_to_mesh(np.asarray(d, np.float64), np.asarray(m), cfg.max_jump) for d, m in zip(depths, masks)]

@@ -1,0 +1,73 @@
+"""Cached canonical-form depth images: the checks every image passes and the reader of one
+subject's cache file.
+
+A subject's file (``subjects/<subject>.npz``) holds, for the canonical pose and every kept pose
+``p`` and view ``v``: ``depth_<p>_<v>`` ``(S, S)`` float16 in [0, 1] (0 = background) and
+``mask_<p>_<v>`` (``np.packbits`` of the ``(S, S)`` bool mask); ``poses`` (str) lists the kept
+poses and ``skipped`` (str) the problems of poses dropped while rendering (``skip_bad``).
+"""
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from datamodules.cache import DataError
+
+
+def depth_image_problem(depth: np.ndarray, mask: np.ndarray | None, size: int) -> str | None:
+    """What is wrong with one depth image ``(S, S)`` and its mask ``(S, S)``, or None.
+
+    Checked: both ``size`` x ``size``, depth finite, something in view (mask and depth not all
+    background)."""
+    if depth.shape != (size, size):
+        return f"depth image has shape {tuple(depth.shape)}, expected ({size}, {size}) (data.image_size={size})"
+    if mask is None or mask.shape != (size, size):
+        return f"mask missing or not {size} x {size}"
+    if not np.isfinite(depth).all():
+        return "depth image contains NaN or inf"
+    if not mask.any() or not (depth > 0).any():
+        return "depth image is all background (nothing in view)"
+    return None
+
+
+def unpack_mask(packed: np.ndarray | None, size: int) -> np.ndarray | None:
+    """``np.packbits`` of an ``(S, S)`` bool mask -> ``(S, S)`` bool; None when absent or of another size."""
+    if packed is None or packed.size != (size * size + 7) // 8:
+        return None
+    return np.unpackbits(packed)[: size * size].reshape(size, size).astype(bool)
+
+
+def read_subject(path: Path, size: int, n_views: int) -> tuple[dict | None, list[str]]:
+    """One subject's cache file -> (``{"depth", "mask", "poses"}`` of its valid images, problems).
+
+    A pose with a bad or missing view is left out of ``poses``; a bad canonical view gives
+    ``None`` (the subject cannot be used). Each problem names the file and the image.
+
+    Raises:
+        DataError: the file is missing or not a readable ``.npz``.
+    """
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise DataError(f"{path}: unreadable cached subject ({type(exc).__name__}: {exc}); "
+                        "delete it and run lit3d-data again") from exc
+    depth, mask, problems = {}, {}, []
+    listed = ["canonical"] + [str(p) for p in arrays.get("poses", [])]
+    for key in (f"{p}_{v}" for p in listed for v in range(n_views)):
+        if f"depth_{key}" not in arrays:
+            problems.append(f"{path}: depth_{key}: depth image missing")
+            continue
+        d = arrays[f"depth_{key}"].astype(np.float32)
+        m = unpack_mask(arrays.get(f"mask_{key}"), size)
+        problem = depth_image_problem(d, m, size)
+        if problem:
+            problems.append(f"{path}: depth_{key}: {problem}")
+        else:
+            depth[key], mask[key] = d, m.astype(np.float32)
+    complete = [p for p in listed if all(f"{p}_{v}" in depth for v in range(n_views))]
+    if "canonical" not in complete:
+        return None, problems
+    return {"depth": depth, "mask": mask, "poses": [int(p) for p in complete[1:]]}, problems

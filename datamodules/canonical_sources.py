@@ -1,0 +1,137 @@
+"""Where canonical-form meshes come from: one class per data source, each enumerating subjects and
+poses and loading meshes ``(V, 3) float, (F, 3) int`` unnormalised with y up.
+
+    synth    procedural humanoids / quadrupeds (``datamodules.synth.figures``); canonical = T-pose
+             / standing pose; no download.
+    tosca    TOSCA meshes under ``root`` (.mat/.vert+.tri/.off/.ply); canonical = pose 0 (null pose).
+    shrec14  SHREC'14 humans under ``root`` with a PSB ``.cla`` (classes = subjects); canonical =
+             the pose at ``canonical_pose`` within each class.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from datamodules.cache import DataError
+
+SOURCES = ("synth", "tosca", "shrec14")
+
+
+class _Source:
+    """Enumerates subjects and poses and loads meshes (unnormalised, y up)."""
+
+    kind = "base"
+
+    def subjects(self) -> list[str]: ...
+    def poses(self, subject: str) -> list[int]: ...
+    def canonical_pose(self, subject: str): ...
+    def mesh(self, subject: str, pose) -> tuple[np.ndarray, np.ndarray]: ...
+    def category(self, subject: str) -> str:
+        return subject
+
+
+class SynthSource(_Source):
+    kind = "synth"
+
+    def __init__(self, kinds: Sequence[str], n_subjects: int, n_poses: int, seed: int, mesh_resolution: int,
+                 pose_seed: int, yaw_range: float, pose_strength: float):
+        from datamodules.synth import figures
+
+        self.f = figures
+        self.kinds = list(kinds)
+        self.n_subjects, self.n_poses = n_subjects, n_poses
+        self.seed, self.res, self.pose_seed = seed, mesh_resolution, pose_seed
+        self.yaw_range, self.strength = yaw_range, pose_strength
+        self._subjects = {}
+        for i in range(n_subjects):
+            kind = self.kinds[i % len(self.kinds)]
+            self._subjects[f"{kind}{i:03d}"] = (kind, seed * 1000 + i)
+
+    def subjects(self):
+        return list(self._subjects)
+
+    def poses(self, subject):
+        return list(range(self.n_poses))
+
+    def canonical_pose(self, subject):
+        return "canonical"
+
+    def category(self, subject):
+        return self._subjects[subject][0]
+
+    def mesh(self, subject, pose):
+        kind, sseed = self._subjects[subject]
+        subj = self.f.make_subject(kind, sseed)
+        if pose == "canonical":
+            return self.f.figure_mesh(subj, None, self.res)
+        rng = np.random.default_rng([self.pose_seed, int(pose), 17])
+        yaw = float(rng.uniform(-self.yaw_range, self.yaw_range))
+        return self.f.figure_mesh(subj, self.f.make_pose(kind, int(pose), self.pose_seed, self.strength),
+                                  self.res, yaw_deg=yaw)
+
+
+class ToscaSource(_Source):
+    kind = "tosca"
+
+    def __init__(self, root: str, classes: Sequence[str] | None, canonical_pose: int, up_axis: str):
+        from datamodules.readers import tosca
+
+        self.t = tosca
+        items = tosca.index_tosca(root, list(classes) if classes else None)
+        self.items = {(it.cls, it.pose): it.path for it in items}
+        self.canon = canonical_pose
+        self.up_axis = up_axis
+        missing = sorted({c for c, _ in self.items} - {c for c, p in self.items if p == canonical_pose})
+        if missing:
+            raise DataError(f"{root}: no canonical pose {canonical_pose} for class(es) {', '.join(missing)}")
+
+    def subjects(self):
+        return sorted({c for c, _ in self.items})
+
+    def poses(self, subject):
+        return sorted(p for c, p in self.items if c == subject and p != self.canon)
+
+    def canonical_pose(self, subject):
+        return self.canon
+
+    def mesh(self, subject, pose):
+        v, f = self.t.read_mesh(self.items[(subject, int(pose))])
+        return (self.t.z_up_to_y_up(v) if self.up_axis == "z" else v), f
+
+
+class Shrec14Source(_Source):
+    kind = "shrec14"
+
+    def __init__(self, root: str, cla: str | None, canonical_pose: int, up_axis: str):
+        from datamodules.readers import shrec14, tosca
+
+        self.t = tosca
+        items = shrec14.index_shrec14(root, cla)
+        self.items = {(it.subject, it.pose): it.path for it in items}
+        self.canon, self.up_axis = canonical_pose, up_axis
+
+    def subjects(self):
+        return sorted({s for s, _ in self.items})
+
+    def poses(self, subject):
+        return sorted(p for s, p in self.items if s == subject and p != self.canon)
+
+    def canonical_pose(self, subject):
+        return self.canon
+
+    def mesh(self, subject, pose):
+        v, f = self.t.read_mesh(self.items[(subject, int(pose))])
+        return (self.t.z_up_to_y_up(v) if self.up_axis == "z" else v), f
+
+
+def make_source(hp) -> _Source:
+    """The source named by ``hp.source`` built from the DataModule's hyper-parameters ``hp``."""
+    if hp.source == "synth":
+        return SynthSource(hp.kinds, hp.n_subjects, hp.n_poses, hp.seed, hp.mesh_resolution,
+                           hp.pose_seed, hp.yaw_range, hp.pose_strength)
+    if hp.source == "tosca":
+        return ToscaSource(hp.root, hp.classes, hp.canonical_pose, hp.up_axis)
+    if hp.source == "shrec14":
+        return Shrec14Source(hp.root, hp.cla, hp.canonical_pose, hp.up_axis)
+    raise DataError(f"unknown canonical data source '{hp.source}' ({', '.join(SOURCES)})")

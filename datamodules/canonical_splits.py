@@ -1,0 +1,62 @@
+"""Train/val/test splits of canonical-form pairs (subject, pose); see ``split`` in
+:mod:`datamodules.canonical`.
+
+    subject_pose  subjects and poses are each dealt into ``n_folds`` groups (seeded); fold f
+                  tests subject group f x pose group f and trains on the other subjects x other
+                  poses only (no test subject and no test pose in training). Validation = the
+                  items that share exactly one of the two (held out from training, too).
+    pose          (TOSCA: one subject per class) every subject's non-canonical poses are dealt
+                  into ``n_folds`` groups; fold f tests group f; ``val_per_subject`` training
+                  poses per subject go to validation.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from datamodules.cache import DataError
+
+SPLITS = ("train", "val", "test")
+
+
+def deal(items: Sequence, n_groups: int, seed: int) -> list[list]:
+    """Shuffle ``items`` (seeded) and deal them round-robin into ``n_groups`` groups."""
+    order = list(items)
+    np.random.default_rng(seed).shuffle(order)
+    return [sorted(order[g::n_groups], key=str) for g in range(n_groups)]
+
+
+def split_subject_pose(subjects, poses, n_folds: int, fold: int, seed: int) -> dict[str, list[tuple]]:
+    """Strict split: test = S_f x P_f, train = (S \\ S_f) x (P \\ P_f), val = the mixed rest."""
+    if n_folds < 2:
+        raise DataError("subject_pose split needs n_folds >= 2")
+    if len(subjects) < n_folds or len(poses) < n_folds:
+        raise DataError(f"subject_pose split with {n_folds} folds needs at least {n_folds} subjects and poses "
+                        f"(have {len(subjects)} subjects, {len(poses)} poses)")
+    sg = deal(subjects, n_folds, seed)[fold % n_folds]
+    pg = deal(poses, n_folds, seed + 1)[fold % n_folds]
+    out = {k: [] for k in SPLITS}
+    for s in subjects:
+        for p in poses:
+            a, b = s in sg, p in pg
+            out["test" if a and b else "train" if not (a or b) else "val"].append((s, p))
+    return out
+
+
+def split_pose(subject_poses: dict[str, list], n_folds: int, fold: int, seed: int,
+               val_per_subject: int = 1) -> dict[str, list[tuple]]:
+    """Per subject: poses dealt into folds; fold f -> test, ``val_per_subject`` others -> val."""
+    out = {k: [] for k in SPLITS}
+    for i, (s, poses) in enumerate(sorted(subject_poses.items())):
+        if len(poses) < 2:
+            out["train"] += [(s, p) for p in poses]
+            continue
+        groups = deal(poses, min(n_folds, len(poses)), seed + i)
+        test = groups[fold % len(groups)]
+        rest = [p for p in poses if p not in test]
+        val = rest[:val_per_subject] if len(rest) > val_per_subject else []
+        out["test"] += [(s, p) for p in test]
+        out["val"] += [(s, p) for p in val]
+        out["train"] += [(s, p) for p in rest if p not in val]
+    return out

@@ -1,0 +1,105 @@
+"""Evaluator of the canonical task (interface: :mod:`lit3d.cli.registry`): retrieval scores and the
+non-learned mesh baselines after the test run, results.md and figures.
+
+:func:`protocol` reads what :class:`~lit3d.canonical.module.CanonicalTask` gathered during the
+test (``task.test_outputs``, DDP-correct) and returns ``test/retrieval/<source>/<nn|ft|st|e|dcg>``
+(and ``.../seconds`` for the mesh baselines) for the sources
+
+- ``model`` (or ``unet`` when the task is the plain U-Net, ``arch=unet``): the predicted canonical
+  depth, back-projected to a surface, then the CM-BOF-style descriptor;
+- ``input``: the posed input depth; ``target``: the true canonical depth (the ceiling);
+- ``chance``: random distances;
+- each of ``mesh_baselines`` (cmds, smacof, nmds, gps, posed): the non-learned canonical forms of
+  the full test meshes, one per unique (subject, pose), from ``datamodule.normalized_mesh``.
+
+Settings come from the task config (``retrieval``: descriptor config or null = off,
+``retrieval_min_subjects``, ``chance_trials``, ``mask_threshold``, ``mesh_baselines``,
+``baseline_max_vertices``, ``baseline_smacof_eps``).
+"""
+from __future__ import annotations
+
+import logging
+import time
+
+import numpy as np
+import torch
+
+from lit3d.canonical.report import write_figures, write_results  # noqa: F401
+from lit3d.metrics.depth import composite_depth
+
+log = logging.getLogger("lit3d")
+
+LOGGED_SCORES = ("nn", "ft", "st", "e", "dcg", "seconds")
+# the retrieval source name of a task's own predictions, by task.arch
+PREDICTION_SOURCE = {"canonical": "model", "unet": "unet"}
+
+
+def protocol(task, datamodule) -> dict[str, float]:
+    """``{"test/retrieval/<source>/<score>": value}`` from the task's gathered test outputs; ``{}``
+    when retrieval is off (``task.retrieval=null``), nothing was tested, or fewer than
+    ``retrieval_min_subjects`` test subjects have 2+ items. Call on every process (the gathered
+    outputs are synchronised across DDP ranks)."""
+    outputs = task.test_outputs.compute()
+    if task.hparams.retrieval is None or not outputs:
+        return {}
+    outputs = {k: v.cpu() for k, v in outputs.items()}
+    results = retrieval_results(task.hparams, outputs, datamodule)
+    return {f"test/retrieval/{source}/{k}": float(scores[k])
+            for source, scores in results.items() for k in LOGGED_SCORES if k in scores}
+
+
+def retrieval_results(hp, outputs: dict[str, torch.Tensor], datamodule=None) -> dict[str, dict]:
+    """``{source: retrieval scores}`` (see :func:`lit3d.metrics.retrieval.retrieval_scores`) of the
+    depth sources and the mesh baselines; ``{}`` when too few subjects. ``hp``: the task's
+    hyper-parameters; ``outputs``: ``task.test_outputs.compute()`` on the CPU."""
+    labels = outputs["subject_idx"].numpy()
+    if (np.bincount(labels) >= 2).sum() < hp.retrieval_min_subjects:
+        log.info("retrieval skipped: fewer than %d test subjects with 2+ items", hp.retrieval_min_subjects)
+        return {}
+    results = depth_retrieval(hp, outputs, labels)
+    results.update(mesh_baseline_retrieval(hp, outputs, datamodule))
+    return results
+
+
+def depth_retrieval(hp, outputs: dict[str, torch.Tensor], labels: np.ndarray) -> dict[str, dict]:
+    """Retrieval scores of the predicted canonical forms, the posed inputs and the true canonical
+    forms (each depth image back-projected to a surface, then the CM-BOF-style descriptor), and chance."""
+    from lit3d.metrics.retrieval import chance_scores, retrieval_scores
+    from lit3d.retrieval.descriptor import DescriptorConfig, distance_matrix_from_depths
+
+    cfg = DescriptorConfig(**(hp.retrieval or {}))
+    predicted = PREDICTION_SOURCE.get(hp.arch, "model")
+    sources = {
+        predicted: (outputs["pred_depth"], (outputs["pred_mask"] >= hp.mask_threshold).float()),
+        "input": (outputs["depth"], outputs["mask"]),
+        "target": (outputs["canon_depth"], outputs["canon_mask"]),
+    }
+    out = {}
+    for name, (d, m) in sources.items():
+        dist = distance_matrix_from_depths(composite_depth(d, m)[:, 0].numpy(), m[:, 0].numpy(), cfg)
+        out[name] = retrieval_scores(dist, labels)
+    out["chance"] = chance_scores(labels, hp.chance_trials, seed=0)
+    return out
+
+
+def mesh_baseline_retrieval(hp, outputs: dict[str, torch.Tensor], datamodule) -> dict[str, dict]:
+    """Non-learned canonical forms (``mesh_baselines``) of the full test meshes, one per unique
+    (subject, pose) of the test items, through the same descriptor (empty when off, or when the
+    datamodule cannot give meshes)."""
+    methods = list(hp.mesh_baselines or [])
+    if not methods:
+        return {}
+    if datamodule is None or not hasattr(datamodule, "normalized_mesh"):
+        log.info("mesh baselines skipped: the datamodule has no normalized_mesh()")
+        return {}
+    from lit3d.canonical.baselines import baseline_retrieval
+    from lit3d.retrieval.descriptor import DescriptorConfig
+
+    names = {i: s for s, i in datamodule.subject_index.items()}
+    keys = sorted({(int(s), int(p)) for s, p in zip(outputs["subject_idx"], outputs["pose"])})
+    t0 = time.perf_counter()
+    meshes = [datamodule.normalized_mesh(names[s], p) for s, p in keys]
+    out = baseline_retrieval(meshes, [s for s, _ in keys], methods, DescriptorConfig(**(hp.retrieval or {})),
+                             hp.baseline_max_vertices, eps=hp.baseline_smacof_eps)
+    log.info("mesh baselines %s on %d test shapes: %.0fs", methods, len(keys), time.perf_counter() - t0)
+    return out

@@ -1,0 +1,215 @@
+"""Canonical form from one depth image (thesis ch. 5) as a LightningModule.
+
+Batches come from ``datamodules.canonical`` (``depth``, ``mask``, ``canon_depth``,
+``canon_mask``: ``(B, 1, S, S)`` float32; ``subject_idx`` ``(B,)``). The net maps the posed
+depth + mask to the canonical depth + mask; the loss is alpha L_depth + beta L_mask with
+alpha/beta set per epoch by the :class:`~lit3d.canonical.loss_phases.LossPhases` callback
+that this module adds itself (``configure_callbacks``), so it is saved in checkpoints and a
+resumed run continues in its phase. ``mask_loss``: "mse" (thesis) or "bce" (from logits;
+measured here: at demo scale the MSE version collapses to an all-background mask, the BCE
+version does not).
+
+A NaN/Inf loss term stops training with the step and the term named
+(``on_nonfinite="raise"``) or skips that step (``"skip"``, counted in ``skipped_steps``).
+
+Logged: ``train/loss|depth_loss|mask_loss|alpha|beta``; ``val/`` and ``test/`` ``depth_mse``
+(masked depth error, :class:`lit3d.metrics.depth.MaskedDepthMSE`), ``iou`` (mask IoU,
+:class:`lit3d.metrics.depth.MaskIoU`), and the same with suffix ``_input`` for the posed-input
+baseline (the input taken as its own canonical form).
+
+At test time the module also gathers, in :attr:`CanonicalTask.test_outputs` (a DDP-correct
+:class:`lit3d.metrics.gathered.GatheredTensors`), every test item's prediction, input, target,
+subject and pose; :func:`lit3d.canonical.evaluator.protocol` scores retrieval and the mesh
+baselines from it after the test (``retrieval``, ``retrieval_min_subjects``, ``chance_trials``,
+``mesh_baselines``, ``baseline_*`` are its settings). The plain U-Net baseline is a run of its
+own (``arch=unet``, same data and losses).
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import lightning.pytorch as pl
+import numpy as np
+import torch
+
+from lit3d.callbacks.nonfinite import guard_step, validate_mode
+from lit3d.canonical.loss_phases import THESIS_FRACTIONS, LossPhases
+from lit3d.canonical.losses import canonical_loss
+from lit3d.canonical.nets import build_canonical_net, summarize
+from lit3d.metrics.depth import MaskedDepthMSE, MaskIoU, composite_depth
+from lit3d.metrics.gathered import GatheredTensors
+
+METRICS = ("depth_mse", "iou", "depth_mse_input", "iou_input")
+# per test item, gathered for the evaluator: prediction (depth, mask probability), posed input,
+# true canonical form ((N, 1, S, S) float32), subject index and pose ((N,) int64)
+TEST_OUTPUTS = ("pred_depth", "pred_mask", "depth", "mask", "canon_depth", "canon_mask", "subject_idx", "pose")
+
+
+class CanonicalTask(pl.LightningModule):
+    """Posed depth+mask -> canonical depth+mask (CanonicalNet, or a plain U-Net with ``arch="unet"``)."""
+
+    def __init__(
+        self,
+        net: dict | None = None,
+        arch: str = "canonical",
+        use_lfe: bool = True,
+        use_msfe: bool = True,
+        lr: float = 1e-3,
+        betas: Sequence[float] = (0.9, 0.999),
+        use_phases: bool = True,
+        phases: Sequence[dict] | None = None,
+        phase_unit: str = "fraction",
+        alpha: float = 1000.0,
+        beta: float = 100.0,
+        mask_loss: str = "mse",
+        mask_threshold: float = 0.5,
+        image_every_n_epochs: int = 1,
+        n_panel: int = 4,
+        retrieval: dict | None = None,
+        retrieval_min_subjects: int = 2,
+        chance_trials: int = 100,
+        mesh_baselines: Sequence[str] | None = None,
+        baseline_max_vertices: int = 1000,
+        baseline_smacof_eps: float = 1e-4,
+        on_nonfinite: str = "raise",
+        unet_baseline: bool = False,
+    ):
+        super().__init__()
+        if unet_baseline:
+            raise ValueError("unet_baseline was removed: train the plain U-Net as a run of its own "
+                             "(task.arch=unet) and merge its rows with python -m lit3d.canonical.report RUN_DIR "
+                             "--unet UNET_RUN_DIR")
+        self.save_hyperparameters(ignore=["unet_baseline"])  # accepted (false) from older checkpoints only
+        validate_mode(on_nonfinite)
+        cfg = dict(net or {})
+        cfg["kind"] = arch
+        if arch == "canonical":
+            cfg.update(use_lfe=use_lfe, use_msfe=use_msfe)
+        self.net = build_canonical_net(cfg)
+        # set by LossPhases each epoch; constant weights when phases are off
+        self.loss_alpha, self.loss_beta = float(alpha), float(beta)
+        self.val_metrics = self._image_metrics(mask_threshold)
+        self.test_metrics = self._image_metrics(mask_threshold)
+        self.test_outputs = GatheredTensors(TEST_OUTPUTS)  # read by lit3d.canonical.evaluator.protocol
+        self.skipped_steps = 0  # training steps skipped for a NaN/Inf loss (on_nonfinite=skip)
+
+    @staticmethod
+    def _image_metrics(threshold: float) -> torch.nn.ModuleDict:
+        """The :data:`METRICS`: the prediction binarised at ``threshold``, the posed input at 0.5."""
+        return torch.nn.ModuleDict({"depth_mse": MaskedDepthMSE(threshold), "iou": MaskIoU(threshold),
+                                    "depth_mse_input": MaskedDepthMSE(), "iou_input": MaskIoU()})
+
+    # ------------------------------------------------------------------ model
+    def forward(self, depth: torch.Tensor, mask: torch.Tensor):
+        """``(B,1,S,S)`` depth, mask -> CanonicalOutput (depth, mask probabilities, mask logits)."""
+        return self.net(depth, mask)
+
+    def configure_callbacks(self):
+        if not self.hparams.use_phases:
+            return []
+        return [LossPhases(self.hparams.phases or THESIS_FRACTIONS, unit=self.hparams.phase_unit)]
+
+    def configure_optimizers(self):
+        return torch.optim.Adam(self.parameters(), lr=self.hparams.lr, betas=tuple(self.hparams.betas))
+
+    # ------------------------------------------------------------------ training
+    def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor | None:
+        out = self.net(batch["depth"], batch["mask"])
+        losses = canonical_loss(out.depth, out.mask, batch["canon_depth"], batch["canon_mask"],
+                                self.loss_alpha, self.loss_beta, self.hparams.mask_loss, out.mask_logits)
+        # the weighted total too: finite terms times a huge alpha/beta can still overflow to Inf
+        terms = {"depth": losses["depth"], "mask": losses["mask"], "loss": losses["loss"]}
+        where = f"step {self.global_step} (epoch {self.current_epoch}, batch {batch_idx})"
+        if not guard_step(self, terms, where, self.hparams.on_nonfinite):
+            return None  # no backward, no optimizer step
+        bs = batch["depth"].shape[0]
+        self.log_dict({"train/loss": losses["loss"], "train/depth_loss": losses["depth"],
+                       "train/mask_loss": losses["mask"]}, on_step=True, on_epoch=True, batch_size=bs)
+        if not self.hparams.use_phases:
+            self.log_dict({"train/alpha": self.loss_alpha, "train/beta": self.loss_beta},
+                          on_step=False, on_epoch=True, batch_size=bs)
+        return losses["loss"]
+
+    # ------------------------------------------------------------------ evaluation
+    @staticmethod
+    def _update(metrics: torch.nn.ModuleDict, batch: dict, out) -> None:
+        d, m = batch["canon_depth"], batch["canon_mask"]
+        metrics["depth_mse"].update(out.depth, out.mask, d, m)
+        metrics["iou"].update(out.mask, m)
+        metrics["depth_mse_input"].update(batch["depth"], batch["mask"], d, m)
+        metrics["iou_input"].update(batch["mask"], m)
+
+    def validation_step(self, batch: dict, batch_idx: int) -> None:
+        out = self(batch["depth"], batch["mask"])
+        self._update(self.val_metrics, batch, out)
+        loss = canonical_loss(out.depth, out.mask, batch["canon_depth"], batch["canon_mask"], 1.0, 1.0)
+        self.log_dict({"val/depth_loss": loss["depth"], "val/mask_loss": loss["mask"]},
+                      on_epoch=True, batch_size=batch["depth"].shape[0])
+        if batch_idx == 0 and self.hparams.image_every_n_epochs and \
+                self.current_epoch % self.hparams.image_every_n_epochs == 0:
+            self._log_panels(batch, out)
+
+    def on_validation_epoch_end(self) -> None:
+        for k, m in self.val_metrics.items():
+            self.log(f"val/{k}", m.compute(), prog_bar=k in ("depth_mse", "iou"))
+            m.reset()
+
+    def on_test_epoch_start(self) -> None:
+        self.test_outputs.reset()
+
+    def test_step(self, batch: dict, batch_idx: int) -> None:
+        out = self(batch["depth"], batch["mask"])
+        self._update(self.test_metrics, batch, out)
+        self.test_outputs.update(
+            pred_depth=out.depth.float(), pred_mask=out.mask.float(), depth=batch["depth"], mask=batch["mask"],
+            canon_depth=batch["canon_depth"], canon_mask=batch["canon_mask"],
+            subject_idx=torch.as_tensor(batch["subject_idx"], device=self.device),
+            pose=torch.as_tensor(batch["pose"], device=self.device))
+
+    def on_test_epoch_end(self) -> None:
+        for k, m in self.test_metrics.items():
+            self.log(f"test/{k}", m.compute())
+            m.reset()
+
+    # ------------------------------------------------------------------ images
+    def panel(self, batch: dict, out, n: int | None = None) -> np.ndarray:
+        """uint8 image ``(n * (S + 2), 4 * (S + 2))``: rows of input | predicted | target depth |
+        |error|, one row per sample (each tile padded by 1 px)."""
+        n = min(n or self.hparams.n_panel, batch["depth"].shape[0])
+        thr = self.hparams.mask_threshold
+        rows = []
+        for i in range(n):
+            pred = composite_depth(out.depth[i, 0], out.mask[i, 0], thr).detach().float().cpu()
+            tgt = batch["canon_depth"][i, 0].cpu()
+            err = (pred - tgt).abs()
+            tiles = [batch["depth"][i, 0].cpu(), pred, tgt, err]
+            rows.append(torch.cat([torch.nn.functional.pad(t, (1, 1, 1, 1), value=0.3) for t in tiles], 1))
+        return (torch.cat(rows, 0).clamp(0, 1).numpy() * 255).astype(np.uint8)
+
+    def _log_panels(self, batch: dict, out) -> None:
+        loggers = [lg for lg in self.loggers if type(lg).__name__ == "WandbLogger"]
+        if not loggers or self.trainer.sanity_checking:
+            return
+        image = self.panel(batch, out)
+        for lg in loggers:
+            lg.log_image(key="val/panels", images=[image], caption=["input | predicted | true canonical | error"],
+                         step=self.global_step)
+
+    # ------------------------------------------------------------------ state
+    def on_save_checkpoint(self, checkpoint: dict) -> None:
+        checkpoint["skipped_steps"] = self.skipped_steps
+
+    def on_load_checkpoint(self, checkpoint: dict) -> None:
+        self.skipped_steps = int(checkpoint.get("skipped_steps", 0))
+
+    # ------------------------------------------------------------------ summary
+    @staticmethod
+    def summary_rows(kwargs: dict) -> list[dict]:
+        """Per-component rows for ``lit3d-summary`` (built on the meta device by the caller)."""
+        cfg = dict(kwargs.get("net") or {})
+        cfg["kind"] = kwargs.get("arch", "canonical")
+        if cfg["kind"] == "canonical":
+            cfg.update(use_lfe=kwargs.get("use_lfe", True), use_msfe=kwargs.get("use_msfe", True))
+        net = build_canonical_net(cfg)
+        rows = summarize(net, int(cfg.get("image_size", 128)))
+        return [{"name": r["component"], "params": r["params"], "output_shape": r["output"]} for r in rows]

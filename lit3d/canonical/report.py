@@ -1,0 +1,192 @@
+"""results.md and contact sheets for the canonical-form task, in the layout of thesis tables 5.1-5.4.
+
+Thesis rows are the thesis's published retrieval figures (synthetic humans of SHREC'14, real
+humans, TOSCA); ours are measured in this run on this run's data (which may be the built-in
+synthetic figures): compare them only when the data is the same.
+"""
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+import torch
+from PIL import Image
+
+from lit3d.utils.tables import fmt, markdown_table
+from lit3d.utils.io import atomic_write_bytes, atomic_write_text
+
+COLS = ("nn", "ft", "st", "dcg")
+THESIS = {
+    "5.1": ("synthetic humans (SHREC'14)", {
+        "Classic MDS": (.10, .22, .39, .54), "Fast MDS": (.14, .20, .35, .53), "Non-metric MDS": (.09, .24, .41, .55),
+        "Least Square MDS": (.01, .13, .31, .45), "Constrained MDS": (.04, .14, .25, .46), "GPS": (.40, .20, .32, .56),
+        "Mesh Unfolding": (.04, .18, .34, .49), "Skeleton-based": (.01, .14, .32, .46), "Ours": (.51, .32, .41, .63)}),
+    "5.2": ("real humans (SHREC'14), trained on synthetic", {
+        "Classic MDS": (.01, .03, .07, .28), "GPS": (.07, .06, .12, .33), "Non-metric MDS": (.02, .04, .08, .30),
+        "Ours": (.04, .023, .051, .23)}),
+    "5.3": ("TOSCA", {
+        "Classic MDS": (.74, .54, .80, .80), "Fast MDS": (.73, .52, .77, .77), "Non-metric MDS": (.76, .67, .87, .85),
+        "Least Square MDS": (.79, .63, .86, .84), "Constrained MDS": (.88, .71, .89, .89), "GPS": (.71, .52, .72, .76),
+        "Mesh Unfolding": (.88, .65, .86, .85), "Skeleton-based": (.78, .62, .85, .84), "Ours": (.91, .76, .80, .89)}),
+}
+ABLATION = {"Complete": (.91, .76, .80, .89), "without LFE": (.88, .62, .76, .84), "without MSFE": (.72, .48, .61, .73)}
+OURS = (("lit3d model (ours)", "model"), ("plain U-Net, same data and losses (ours)", "unet"),
+        ("posed input depth, no canonicalisation (ours)", "input"),
+        ("true canonical depth, ceiling (ours)", "target"),
+        ("classical MDS, full mesh (ours)", "cmds"), ("SMACOF (least-squares MDS), full mesh (ours)", "smacof"),
+        ("non-metric MDS, full mesh (ours)", "nmds"), ("GPS, full mesh (ours)", "gps"),
+        ("posed full mesh, no canonicalisation (ours)", "posed"),
+        ("chance: random distances (ours)", "chance"))
+MESH_KEYS = ("cmds", "smacof", "nmds", "gps", "posed")
+# which thesis table a run's data belongs to (data.source)
+TABLE_OF_SOURCE = {"synth": "5.1", "shrec14": "5.1", "tosca": "5.3"}
+
+
+def retrieval_rows(metrics: dict) -> list[list[str]]:
+    rows = []
+    for label, key in OURS:
+        vals = [metrics.get(f"test/retrieval/{key}/{c}") for c in COLS]
+        if all(v is None for v in vals):
+            continue
+        rows.append([label] + [fmt(v, 2) for v in vals])
+    return rows
+
+
+def _dataset_from_run_dir(out_dir: Path) -> str | None:
+    """``data.source`` from the run dir's config.yaml (written by lit3d-train / lit3d-eval), if any."""
+    path = Path(out_dir) / "config.yaml"
+    if not path.is_file():
+        return None
+    try:
+        import yaml
+
+        cfg = yaml.safe_load(path.read_text()) or {}
+        return (cfg.get("data") or {}).get("source")
+    except Exception:
+        return None
+
+
+def write_results(metrics: dict, out_dir: Path, dataset: str | None = None) -> Path:
+    """results.md: image metrics (model, U-Net, posed input) and retrieval rows (model, U-Net, posed
+    input, true canonical, non-learned mesh baselines, chance) beside thesis tables 5.1-5.3; table 5.4.
+
+    ``dataset`` (data.source: synth, tosca, shrec14; default: read from ``out_dir/config.yaml``) puts
+    our rows into the matching thesis table only (synth/SHREC'14 -> 5.1, TOSCA -> 5.3); unknown ->
+    our rows in every table."""
+    m = metrics
+    dataset = dataset or _dataset_from_run_dir(out_dir)
+    ours_in = TABLE_OF_SOURCE.get(dataset or "")
+    image_rows = [["lit3d model (ours)", fmt(m.get("test/depth_mse"), 4), fmt(m.get("test/iou"))]]
+    if m.get("test/depth_mse_unet") is not None:
+        image_rows.append(["plain U-Net, same data and losses (ours)", fmt(m.get("test/depth_mse_unet"), 4),
+                           fmt(m.get("test/iou_unet"))])
+    image_rows.append(["posed input as its own canonical form (ours)", fmt(m.get("test/depth_mse_input"), 4),
+                       fmt(m.get("test/iou_input"))])
+    parts = ["# Canonical-form results", "",
+             "Rows marked *(ours)* are measured in this run on this run's test split (held-out subjects and poses"
+             + (f"; data: {dataset}" if dataset else "") + "); thesis rows are the thesis's published figures on "
+             "its data. Retrieval classes = subjects.", "",
+             "## Canonical depth and mask (test)", "",
+             markdown_table(["prediction", "masked depth MSE (lower is better)", "mask IoU"], image_rows)]
+    if m.get("test/depth_mse_unet") is not None:
+        parts += ["", "The plain U-Net rows come from a run of its own on the same data, loss and alpha/beta "
+                      "phases (`task.arch=unet`), merged by `python -m lit3d.canonical.report RUN_DIR --unet "
+                      "UNET_RUN_DIR`."]
+    ours = retrieval_rows(m)
+    for number, (title, rows) in THESIS.items():
+        table = [[f"{k} (thesis)"] + [fmt(v, 2) for v in vals] for k, vals in rows.items()]
+        if ours_in is None or ours_in == number:
+            table += ours
+        parts += ["", f"## Table {number}: retrieval, {title}", "", markdown_table(["method", "NN", "FT", "ST", "DCG"], table)]
+    notes = []
+    if any(m.get(f"test/retrieval/{k}/nn") is not None for k in MESH_KEYS):
+        secs = ", ".join(f"{k} {m[f'test/retrieval/{k}/seconds']:.1f}s" for k in MESH_KEYS
+                         if m.get(f"test/retrieval/{k}/seconds") is not None)
+        notes.append("*Full mesh* rows: the non-learned canonical forms of the test shapes' full meshes (one per "
+                     "subject x pose, simplified to task.baseline_max_vertices; geodesics by the heat method), then the same "
+                     "descriptor; the depth rows rank every test item (subject x pose x view). "
+                     + (f"Time per method (forms + descriptor): {secs}." if secs else ""))
+    if m.get("test/retrieval/model/e") is not None:
+        notes.append("E-measure (ours; F1 of the top min(32, n-1) results, so constant when every item is "
+                     "within 32 ranks): " + ", ".join(
+            f"{key} {fmt(m.get(f'test/retrieval/{key}/e'), 2)}" for _, key in OURS
+            if m.get(f"test/retrieval/{key}/e") is not None))
+    if notes:
+        parts += [""] + [f"{n}  " if i < len(notes) - 1 else n for i, n in enumerate(notes)]
+    parts += ["", "## Table 5.4: ablation on TOSCA (thesis); run `+sweep=canonical_ablation` for ours", "",
+              markdown_table(["model", "NN", "FT", "ST", "DCG"],
+                             [[f"{k} (thesis)"] + [fmt(v, 2) for v in vals] for k, vals in ABLATION.items()])]
+    path = Path(out_dir) / "results.md"
+    atomic_write_text(path, "\n".join(parts) + "\n")
+    return path
+
+
+def _png(path: Path, img: np.ndarray) -> Path:
+    buf = io.BytesIO()
+    Image.fromarray(img).save(buf, format="PNG")
+    return atomic_write_bytes(path, buf.getvalue())
+
+
+def write_figures(task, datamodule, out_dir: Path, n: int = 4) -> list[Path]:
+    """One contact sheet per test subject ``canonical_<subject>.png``: rows (test poses/views) of
+    input | predicted canonical | true canonical | |error|. Also rewrites ``results.md`` for the datamodule's source when ``metrics.json`` is in
+    ``out_dir`` (lit3d-eval writes them before the figures, without knowing the data source)."""
+    import json
+
+    out_dir = Path(out_dir)
+    task.eval()
+    datamodule.setup("test")
+    ds = datamodule.datasets["test"]
+    by_subject: dict[str, list[int]] = {}
+    for i, r in enumerate(ds.records):
+        by_subject.setdefault(r["subject"], []).append(i)
+    paths = []
+    dev = next(task.parameters()).device
+    for subject, idx in sorted(by_subject.items()):
+        items = [ds[i] for i in idx[:n]]
+        batch = {k: torch.stack([it[k] for it in items]).to(dev) for k in ("depth", "mask", "canon_depth", "canon_mask")}
+        with torch.no_grad():
+            out = task(batch["depth"], batch["mask"])
+        paths.append(_png(out_dir / f"canonical_{subject}.png", task.panel(batch, out, n=len(items))))
+    mpath = out_dir / "metrics.json"
+    source = getattr(getattr(datamodule, "hparams", None), "get", lambda k: None)("source")
+    if mpath.is_file() and source:
+        write_results(json.loads(mpath.read_text()), out_dir, dataset=source)
+    return paths
+
+
+def unet_run_metrics(unet_metrics: dict) -> dict:
+    """The metrics of a plain U-Net run (``task.arch=unet``: its metrics.json) under the U-Net
+    rows' keys: ``test/depth_mse|iou`` -> ``test/depth_mse_unet|iou_unet``, its retrieval
+    (``test/retrieval/unet/...``; ``.../model/...`` in runs older than the source name) as is."""
+    out = {f"{k}_unet": unet_metrics[k] for k in ("test/depth_mse", "test/iou") if k in unet_metrics}
+    for key, value in unet_metrics.items():
+        for prefix in ("test/retrieval/unet/", "test/retrieval/model/"):
+            if key.startswith(prefix):
+                out.setdefault("test/retrieval/unet/" + key[len(prefix):], value)
+    return out
+
+
+def main(argv: list[str] | None = None) -> None:
+    """``python -m lit3d.canonical.report RUN_DIR [SOURCE] [--unet UNET_RUN_DIR]``: results.md from a
+    run's metrics.json (e.g. after ``lit3d-train``, which writes metrics.json but no report); with
+    ``--unet``, the U-Net rows from the metrics.json of a plain U-Net run (``task.arch=unet``, same
+    data) are added and RUN_DIR's metrics.json is left as it is."""
+    import argparse
+    import json
+    import sys
+
+    parser = argparse.ArgumentParser(prog="python -m lit3d.canonical.report")
+    parser.add_argument("run", type=Path, help="run dir with metrics.json")
+    parser.add_argument("source", nargs="?", default=None, choices=sorted(TABLE_OF_SOURCE))
+    parser.add_argument("--unet", type=Path, default=None, help="run dir of a plain U-Net run (task.arch=unet)")
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    metrics = json.loads((args.run / "metrics.json").read_text())
+    if args.unet is not None:
+        metrics.update(unet_run_metrics(json.loads((args.unet / "metrics.json").read_text())))
+    print(write_results(metrics, args.run, args.source))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,30 @@
+"""Task name -> the task room's evaluator module. The LightningModule class comes from the task
+config's ``_target_``.
+
+An evaluator module (``lit3d/<task>/evaluator.py``) provides:
+
+- ``protocol(task, datamodule) -> dict[str, float]``: metrics computed after ``trainer.test`` from
+  what the module's test metrics gathered (retrieval, baselines, cross-validation); ``{}`` if none;
+- ``write_results(metrics, out_dir) -> Path``: results.md in the thesis's table layout;
+- ``write_figures(task, datamodule, out_dir, n) -> list[Path]``: labelled PNGs.
+
+``lit3d-eval`` and ``lit3d-train`` (after testing) both run it through
+:func:`lit3d.cli.common.run_evaluation`.
+"""
+from __future__ import annotations
+
+import importlib
+from types import ModuleType
+
+EVALUATORS = {
+    "completion": "lit3d.completion.evaluator",
+    "quality": "lit3d.quality.evaluator",
+    "canonical": "lit3d.canonical.evaluator",
+}
+
+
+def evaluator_module(task_name: str) -> ModuleType:
+    """The task room's evaluator module (see the module docstring)."""
+    if task_name not in EVALUATORS:
+        raise KeyError(f"unknown task '{task_name}' (known: {', '.join(sorted(EVALUATORS))})")
+    return importlib.import_module(EVALUATORS[task_name])

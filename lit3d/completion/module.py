@@ -1,0 +1,349 @@
+"""3DCascade-GAN shape completion as a LightningModule (manual optimisation, WGAN-GP).
+
+Batches are dicts from ``datamodules.completion``:
+    input  (B, 1, r, r, r) float32 {0,1}   partial 2.5D grid (r = out_res / 4)
+    target (B, 1, R, R, R) float32 {0,1}   complete solid shape
+    label  (B,) int64                      index into ``categories`` or -1 (unseen)
+    category list[str]                     category name (seen or unseen)
+
+One training step = ``critic_steps`` critic updates, then one generator update
+(generator + auxiliary classifier share the generator optimiser).
+
+Buffers saved in checkpoints (what evaluation needs, so a loaded checkpoint evaluates as it was):
+    threshold, prior_threshold  () float32   IoU thresholds chosen on validation (model, prior)
+    prior        (1, 1, R, R, R) float32     per-voxel mean of the first ``prior_samples`` training
+                                             targets (index order), computed once at fit start
+    prior_items  () int64                    training items averaged into ``prior``; 0 = not computed
+"""
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+
+import lightning.pytorch as pl
+import torch
+import torch.nn.functional as F
+
+from lit3d.completion.losses import critic_loss, generator_adv_loss, gradient_penalty, weighted_bce_with_logits
+from lit3d.metrics.voxel import VoxelSweepMetrics, best_threshold, default_thresholds
+from lit3d.completion.nets import build_completion_nets, validate_net_config
+from lit3d.completion.prior import mean_training_target
+from lit3d.callbacks.nonfinite import NonFiniteLossError, guard_step, validate_mode  # noqa: F401 (re-exported)
+from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, select_seen_categories, select_unseen_categories
+from lit3d.utils.voxel_images import panel
+
+log = logging.getLogger("lit3d.completion")
+
+SPLITS = ("same", "cross", "unseen")
+# predictions: the model, the partial input upsampled, the per-voxel training prior
+SOURCES = ("model", "input", "prior")
+
+
+def split_key(name: str) -> str:
+    """'test_same' / 'same' -> 'same'."""
+    return name.removeprefix("test_")
+
+
+class CompletionTask(pl.LightningModule):
+    """Cascade generator + critic (+ classifier) trained with WGAN-GP and weighted BCE."""
+
+    # lit3d-eval runs validation first: the IoU threshold is chosen there
+    validate_before_test = True
+
+    def __init__(
+        self,
+        nets: dict,
+        critic_steps: int = 1,
+        lr_g: float = 1e-4,
+        lr_d: float = 1e-4,
+        betas: Sequence[float] = (0.9, 0.999),
+        eps: float = 1e-8,
+        alpha: float = 0.35,
+        gamma: float = 0.8,
+        zeta: float = 0.01,
+        gp_lambda: float = 10.0,
+        stage_weight: float = 0.0,
+        adversarial: bool = True,
+        adversarial_start_epoch: int = 0,
+        categories: Sequence[str] | None = None,
+        unseen_categories: Sequence[str] | None = None,
+        prior_samples: int = 256,
+        image_every_n_epochs: int = 1,
+        channels_last: bool = False,
+        on_nonfinite: str = "raise",
+    ):
+        super().__init__()
+        self.save_hyperparameters()
+        validate_mode(on_nonfinite)
+        self.automatic_optimization = False
+        nets = dict(nets)
+        if nets.pop("preset", None) is not None:  # checkpoints written before issue 12 name one beside every size
+            log.info("task.nets.preset is ignored: the sizes come from the config alone")
+        self.net_cfg = validate_net_config(nets)
+        if self.net_cfg["classifier"] and self.net_cfg["n_classes"] != len(SEEN_CATEGORIES):
+            raise ValueError(f"task.nets.n_classes={self.net_cfg['n_classes']}: class labels index the "
+                             f"{len(SEEN_CATEGORIES)} seen categories {list(SEEN_CATEGORIES)}")
+        built = build_completion_nets(self.net_cfg)
+        self.generator = built["generator"]
+        self.critic = built["critic"] if adversarial else None
+        self.classifier = built.get("classifier")
+        seen, unseen = select_seen_categories(categories), select_unseen_categories(unseen_categories)
+        self.eval_categories = list(seen) + [c for c in unseen if c not in seen]
+        self.cat_index = {c: i for i, c in enumerate(self.eval_categories)}
+        thresholds = default_thresholds()
+        self.register_buffer("thresholds", thresholds.float(), persistent=False)
+        # chosen on validation, applied to test; saved in checkpoints
+        self.register_buffer("threshold", torch.tensor(0.5))
+        self.register_buffer("prior_threshold", torch.tensor(0.5))
+        res = int(self.net_cfg["out_res"])
+        self.register_buffer("prior", torch.full((1, 1, res, res, res), 0.5))
+        self.register_buffer("prior_items", torch.tensor(0))
+        self.val_metrics = torch.nn.ModuleDict({s: VoxelSweepMetrics(self.eval_categories, thresholds) for s in SOURCES})
+        self.test_metrics = torch.nn.ModuleDict(
+            {f"{sp}_{s}": VoxelSweepMetrics(self.eval_categories, thresholds) for sp in SPLITS for s in SOURCES}
+        )
+        self.generator_steps = 0
+        self.skipped_steps = 0
+
+    # ------------------------------------------------------------------ helpers
+    def forward(self, partial: torch.Tensor) -> torch.Tensor:
+        """(B, 1, r, r, r) partial grid -> (B, 1, R, R, R) occupancy probabilities."""
+        return torch.sigmoid(self.generator(self._fmt(partial)).logits.float())
+
+    def _fmt(self, x: torch.Tensor) -> torch.Tensor:
+        return x.contiguous(memory_format=torch.channels_last_3d) if self.hparams.channels_last else x
+
+    def _categories(self, batch: dict) -> torch.Tensor:
+        return torch.tensor([self.cat_index.get(c, -1) for c in batch["category"]], device=self.device)
+
+    @staticmethod
+    def upsample_input(partial: torch.Tensor, size: int) -> torch.Tensor:
+        """Nearest upsampling of the partial grid: the input-as-prediction baseline."""
+        return F.interpolate(partial.float(), size=(size,) * 3, mode="nearest")
+
+    def _check_finite(self, **losses: torch.Tensor) -> bool:
+        """False (skip, counted) or raise when a loss is NaN/Inf, naming the step and the term."""
+        where = f"generator step {self.generator_steps} (epoch {self.current_epoch})"
+        return guard_step(self, losses, where, self.hparams.on_nonfinite)
+
+    # ------------------------------------------------------------------ training
+    def configure_optimizers(self):
+        hp = self.hparams
+        g_params = list(self.generator.parameters())
+        if self.classifier is not None:
+            g_params += list(self.classifier.parameters())
+        opt_g = torch.optim.Adam(g_params, lr=hp.lr_g, betas=tuple(hp.betas), eps=hp.eps)
+        if self.critic is None:
+            return opt_g
+        opt_d = torch.optim.Adam(self.critic.parameters(), lr=hp.lr_d, betas=tuple(hp.betas), eps=hp.eps)
+        return [opt_g, opt_d]
+
+    def _optimizers(self):
+        opts = self.optimizers()
+        return (opts[0], opts[1]) if isinstance(opts, list) else (opts, None)
+
+    def training_step(self, batch: dict, batch_idx: int) -> None:
+        hp = self.hparams
+        x, y = self._fmt(batch["input"]), self._fmt(batch["target"])
+        opt_g, opt_d = self._optimizers()
+        if self.current_epoch < hp.adversarial_start_epoch:
+            opt_d = None  # warm-up: reconstruction (+ classifier) only
+        logs: dict[str, torch.Tensor] = {}
+        if opt_d is not None:
+            for _ in range(hp.critic_steps):
+                with self.toggled_optimizer(opt_d):
+                    with torch.no_grad():
+                        fake = torch.sigmoid(self.generator(x).logits)
+                    d_real, d_fake = self.critic(x, y), self.critic(x, fake)
+                    gp, grad_norm = gradient_penalty(self.critic, x, y, fake)
+                    loss_d = critic_loss(d_fake, d_real, gp, hp.gp_lambda)
+                    if self._check_finite(critic=loss_d):
+                        opt_d.zero_grad(set_to_none=True)
+                        self.manual_backward(loss_d)
+                        opt_d.step()
+            logs.update({"loss_d": loss_d, "gp": gp, "grad_norm": grad_norm,
+                         "wasserstein": (d_real - d_fake).mean()})
+        with self.toggled_optimizer(opt_g):
+            out = self.generator(x)
+            probs = torch.sigmoid(out.logits)
+            bce = weighted_bce_with_logits(out.logits, y, hp.alpha)
+            loss_g = hp.gamma * bce if opt_d is not None else bce
+            terms = {"bce": bce}
+            if hp.stage_weight > 0 and len(out.stage_logits) > 1:
+                terms["bce_stages"] = self._stage_bce(out.stage_logits[:-1], y)
+                loss_g = loss_g + hp.stage_weight * terms["bce_stages"]
+            if opt_d is not None:
+                terms["adv"] = generator_adv_loss(self.critic(x, probs))
+                loss_g = loss_g + (1 - hp.gamma) * terms["adv"]
+            if self.classifier is not None:
+                seen = batch["label"] >= 0
+                if bool(seen.any()):
+                    terms["cls"] = F.cross_entropy(self.classifier(probs[seen]).float(), batch["label"][seen])
+                    loss_g = loss_g + hp.zeta * terms["cls"]
+            if self._check_finite(generator=loss_g, **terms):
+                opt_g.zero_grad(set_to_none=True)
+                self.manual_backward(loss_g)
+                opt_g.step()
+        self.generator_steps += 1
+        logs.update(terms)
+        logs.update({"loss_g": loss_g, "keep_fraction": out.keep_fraction})
+        self.log_dict({f"train/{k}": v.detach().float() for k, v in logs.items()},
+                      prog_bar=False, on_step=True, on_epoch=True, batch_size=x.shape[0])
+        self.log("train/generator_steps", float(self.generator_steps), on_step=True, on_epoch=False)
+
+    def _stage_bce(self, stage_logits: list[torch.Tensor], target: torch.Tensor) -> torch.Tensor:
+        """Mean weighted BCE of the intermediate stages' (B, 1, r, r, r) logits against the
+        target max-pooled to r^3 (a voxel of the coarse grid is occupied if any of its cell is)."""
+        small = F.adaptive_max_pool3d(target.float(), stage_logits[0].shape[-3:])
+        return torch.stack([weighted_bce_with_logits(lg, small, self.hparams.alpha) for lg in stage_logits]).mean()
+
+    # ------------------------------------------------------------------ prior
+    def on_fit_start(self) -> None:
+        """Average the training targets into the ``prior`` buffer once, before the first step
+        (a resumed fit has it from its checkpoint)."""
+        if int(self.prior_items) == 0:
+            self._compute_prior()
+
+    def _ensure_prior(self) -> None:
+        """Evaluating a checkpoint saved before the prior was kept: compute it now."""
+        if int(self.prior_items) == 0:
+            log.info("no occupancy prior in this model: averaging up to %d training targets", self.hparams.prior_samples)
+            self._compute_prior()
+
+    def _compute_prior(self) -> None:
+        """``prior`` = per-voxel mean of the first ``prior_samples`` training targets, in index order
+        (the same items on every rank); 0.5 everywhere when there is no training data."""
+        dm = getattr(self.trainer, "datamodule", None)
+        prior, n = None, 0
+        if dm is not None:
+            loader = dm.train_dataloader()
+            prior, n = mean_training_target(loader.dataset, self.hparams.prior_samples,
+                                            loader.batch_size or 1, loader.num_workers)
+        if prior is None:
+            log.warning("no training data: the prior baseline predicts 0.5 everywhere")
+            self.prior.fill_(0.5)
+        else:
+            self.prior.copy_(prior)
+        self.prior_items.fill_(n)
+
+    def _predictions(self, batch: dict) -> dict[str, torch.Tensor]:
+        x, y = batch["input"], batch["target"]
+        size = y.shape[-1]
+        return {
+            "model": self(x),
+            "input": self.upsample_input(x, size),
+            "prior": self.prior.expand(y.shape[0], -1, -1, -1, -1),
+        }
+
+    # ------------------------------------------------------------------ validation
+    def on_validation_epoch_start(self) -> None:
+        self._ensure_prior()
+
+    def validation_step(self, batch: dict, batch_idx: int) -> None:
+        cats = self._categories(batch)
+        preds = self._predictions(batch)
+        for src, p in preds.items():
+            self.val_metrics[src].update(p, batch["target"], cats)
+        if batch_idx == 0:
+            self._log_panels(batch)
+
+    def on_validation_epoch_end(self) -> None:
+        model = self.val_metrics["model"].compute()
+        prior = self.val_metrics["prior"].compute()
+        inp = self.val_metrics["input"].compute()
+        t, iou = best_threshold(model["iou"], self.thresholds)
+        tp, iou_p = best_threshold(prior["iou"], self.thresholds)
+        self.threshold.fill_(t)
+        self.prior_threshold.fill_(tp)
+        self.log_dict({
+            "val/iou": iou, "val/threshold": t, "val/ce": float(model["ce"]),
+            "val/iou_input": float(inp["iou"][0]), "val/iou_prior": iou_p,
+            "val/iou_at_0.5": float(model["iou"][self._thr_index(0.5)]),
+        }, sync_dist=False)
+        for m in self.val_metrics.values():
+            m.reset()
+
+    def _thr_index(self, t: float) -> int:
+        return int(torch.argmin((self.thresholds - t).abs()))
+
+    # ------------------------------------------------------------------ test
+    def on_test_epoch_start(self) -> None:
+        self._ensure_prior()
+
+    def _split_name(self, dataloader_idx: int) -> str:
+        dm = getattr(self.trainer, "datamodule", None)
+        names = list(getattr(dm, "test_split_names", SPLITS))
+        return split_key(names[dataloader_idx]) if dataloader_idx < len(names) else SPLITS[dataloader_idx]
+
+    def test_step(self, batch: dict, batch_idx: int, dataloader_idx: int = 0) -> None:
+        split = self._split_name(dataloader_idx)
+        cats = self._categories(batch)
+        for src, p in self._predictions(batch).items():
+            self.test_metrics[f"{split}_{src}"].update(p, batch["target"], cats)
+
+    def on_test_epoch_end(self) -> None:
+        thresholds = {"model": float(self.threshold), "prior": float(self.prior_threshold), "input": 0.5}
+        out: dict[str, float] = {"test/threshold": float(self.threshold)}
+        for split in SPLITS:
+            for src in SOURCES:
+                metric = self.test_metrics[f"{split}_{src}"]
+                res = metric.compute()
+                if float(res["count_per_category"].sum()) == 0:
+                    metric.reset()
+                    continue
+                j = self._thr_index(thresholds[src])
+                suffix = "" if src == "model" else f"_{src}"
+                out[f"test/{split}/iou{suffix}"] = float(res["iou"][j])
+                out[f"test/{split}/ce{suffix}"] = float(res["ce"])
+                for c, cat in enumerate(self.eval_categories):
+                    if res["count_per_category"][c] > 0:
+                        out[f"test/{split}/iou{suffix}/{cat}"] = float(res["iou_per_category"][c, j])
+                        out[f"test/{split}/ce{suffix}/{cat}"] = float(res["ce_per_category"][c])
+                metric.reset()
+        self.log_dict(out, sync_dist=False)
+
+    # ------------------------------------------------------------------ images
+    def _log_panels(self, batch: dict) -> None:
+        every = max(int(self.hparams.image_every_n_epochs), 1)
+        if self.current_epoch % every or not self.trainer.is_global_zero:
+            return
+        loggers = [lg for lg in self.loggers if type(lg).__name__ == "WandbLogger"]
+        if not loggers:
+            return
+        with torch.no_grad():
+            out = self.generator(self._fmt(batch["input"][:1]))
+        vols = [batch["input"][0, 0]] + [torch.sigmoid(s[0, 0].float()) for s in out.stage_logits]
+        vols += [torch.sigmoid(out.logits[0, 0].float()), batch["target"][0, 0]]
+        image = panel(vols, threshold=float(self.threshold))
+        caption = "input | " + " | ".join(f"stage {i + 1}" for i in range(len(out.stage_logits))) + " | final | target"
+        for lg in loggers:
+            lg.log_image(key="val/panels", images=[image], caption=[caption], step=self.global_step)
+
+    # ------------------------------------------------------------------ state
+    def on_save_checkpoint(self, checkpoint: dict) -> None:
+        checkpoint["generator_steps"] = self.generator_steps
+        checkpoint["skipped_steps"] = self.skipped_steps
+
+    def on_load_checkpoint(self, checkpoint: dict) -> None:
+        state = checkpoint.get("state_dict")
+        if state is not None and "prior" not in state:
+            log.info("checkpoint without the occupancy prior (saved before it was kept): "
+                     "it is computed from the training data before evaluation")
+            state["prior"] = torch.full_like(self.prior, 0.5)
+            state["prior_items"] = torch.zeros_like(self.prior_items)
+        self.generator_steps = int(checkpoint.get("generator_steps", 0))
+        self.skipped_steps = int(checkpoint.get("skipped_steps", 0))
+
+    def adapt_data_config(self, data_cfg: dict) -> dict:
+        """Make a data config deliver grids at this checkpoint's resolution."""
+        return {**data_cfg, "target_res": int(self.net_cfg["out_res"])}
+
+    # ------------------------------------------------------------------ summary
+    @staticmethod
+    def summary_rows(kwargs: dict) -> list[dict]:
+        """Per-component rows for ``lit3d-summary`` (meta device, nothing allocated)."""
+        from lit3d.completion.summary import summarize_completion
+
+        return summarize_completion(kwargs["nets"])
+
+

@@ -1,0 +1,121 @@
+"""results.md and PNG figures for shape completion, in the layout of thesis tables 3.1-3.6.
+
+Thesis rows are the thesis's published figures on the full 3D-RecGAN++ ShapeNet
+data; ours are measured on whatever data the evaluation ran on.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+from PIL import Image
+
+from lit3d.completion.module import split_key
+from lit3d.utils.io import atomic_write_bytes, atomic_write_text
+from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, UNSEEN_CATEGORIES
+from lit3d.utils.tables import fmt, markdown_table
+from lit3d.utils.voxel_images import panel
+
+# (title, split, categories, {thesis method: [IoU per category]}) from SPEC.md / the thesis.
+# lit3d trains one multi-category model, so its row sits beside both the thesis's
+# single-category (3.1, 3.3) and multi-category (3.2, 3.4) rows of the same view set.
+THESIS = [
+    ("Tables 3.1 / 3.2: IoU, same view", "same", SEEN_CATEGORIES, {
+        "3D-RecGAN++, single-category (thesis 3.1)": [.580, .647, .753, .679],
+        "3DCascade-GAN, single-category (thesis 3.1)": [.641, .701, .809, .698],
+        "3DCascade-GAN, multi-category (thesis 3.2)": [.624, .669, .773, .682]}),
+    ("Tables 3.3 / 3.4: IoU, cross view", "cross", SEEN_CATEGORIES, {
+        "3DCascade-GAN, single-category (thesis 3.3)": [.585, .628, .680, .647],
+        "3DCascade-GAN, multi-category (thesis 3.4)": [.574, .620, .673, .633]}),
+    ("Tables 3.5 / 3.6: IoU, unseen categories (multi-category training)", "unseen", UNSEEN_CATEGORIES, {
+        "3DCascade-GAN, cross view (thesis 3.5)": [.564, .537, .425, .455, .560, .394],
+        "3DCascade-GAN, same view (thesis 3.6)": [.559, .541, .430, .455, .569, .395]}),
+]
+OURS = (("lit3d, multi-category (ours)", ""), ("input as prediction (ours)", "_input"),
+        ("per-voxel prior (ours)", "_prior"))
+
+
+def category_rows(metrics: dict, split: str, categories, kind: str = "iou") -> list[list[str]]:
+    """Our rows (model and baselines) for one split: per category + mean."""
+    rows = []
+    for label, suffix in OURS:
+        vals = [metrics.get(f"test/{split}/{kind}{suffix}/{c}") for c in categories]
+        total = metrics.get(f"test/{split}/{kind}{suffix}")
+        if all(v is None for v in vals) and total is None:
+            continue
+        rows.append([label] + [fmt(v) for v in vals] + [fmt(total)])
+    return rows
+
+
+def write_results(metrics: dict, out_dir: Path) -> Path:
+    """Write results.md: one table per thesis table, thesis rows beside ours."""
+    parts = [
+        "# Shape completion results",
+        "",
+        f"Threshold chosen on validation: {fmt(metrics.get('test/threshold'), 2)} "
+        f"(validation IoU {fmt(metrics.get('val/iou'))}). IoU per category, last column = mean over test samples.",
+        "Rows marked *(thesis)* are the thesis's published figures on the full 3D-RecGAN++ ShapeNet data; "
+        "rows marked *(ours)* are measured in this run on this run's data. Compare them only when the data is the same.",
+    ]
+    for title, split, cats, thesis in THESIS:
+        ours = category_rows(metrics, split, cats)
+        if not ours:
+            continue
+        rows = [[name] + [fmt(v) for v in vals] + ["–"] for name, vals in thesis.items()] + ours
+        parts += ["", f"## {title}", "", markdown_table(["method", *cats, "mean"], rows)]
+    for split, cats in (("same", SEEN_CATEGORIES), ("cross", SEEN_CATEGORIES), ("unseen", UNSEEN_CATEGORIES)):
+        ce = category_rows(metrics, split, cats, kind="ce")
+        if ce:
+            parts += ["", f"## Cross-entropy, {split} split (lower is better)", "",
+                      markdown_table(["method", *cats, "mean"], ce)]
+    path = Path(out_dir) / "results.md"
+    atomic_write_text(path, "\n".join(parts) + "\n")
+    return path
+
+
+def write_figures(task, datamodule, out_dir: Path, n: int = 4) -> list[Path]:
+    """PNG per test split: rows of input | prediction | target (depth-shaded, two view axes).
+
+    The first sample of each split is also saved as voxel grids (``occupancy`` uint8 in
+    ``<split>_prediction.npz`` / ``<split>_target.npz``) so that ``lit3d-score`` can
+    compare them by rendering: ``lit3d-score same_target.npz same_prediction.npz``.
+    """
+    out_dir = Path(out_dir)
+    paths = []
+    task.eval()
+    loaders = datamodule.test_dataloader()
+    loaders = loaders if isinstance(loaders, list) else [loaders]
+    names = list(getattr(datamodule, "test_split_names", [f"split{i}" for i in range(len(loaders))]))
+    threshold = float(task.threshold)
+    for name, loader in zip(names, loaders):
+        rows = []
+        for batch in loader:
+            with torch.no_grad():
+                probs = task(batch["input"].to(task.device)).cpu()
+            if not rows:
+                _save_voxels(out_dir / f"{split_key(name)}_prediction.npz", probs[0, 0] >= threshold)
+                _save_voxels(out_dir / f"{split_key(name)}_target.npz", batch["target"][0, 0] > 0.5)
+            for i in range(batch["input"].shape[0]):
+                vols = [batch["input"][i, 0], probs[i, 0], batch["target"][i, 0]]
+                rows.append(panel(vols, threshold=threshold))
+                rows.append(panel([v.transpose(0, 2) for v in vols], threshold=threshold))
+                rows.append(np.full((4, rows[-1].shape[1]), 40, np.uint8))
+                if len(rows) >= 3 * n:
+                    break
+            if len(rows) >= 3 * n:
+                break
+        if rows:
+            path = out_dir / f"completion_{name}.png"
+            Image.fromarray(np.concatenate(rows[:-1], axis=0)).save(path)
+            paths.append(path)
+    return paths
+
+
+def _save_voxels(path: Path, occupancy: torch.Tensor) -> None:
+    """(D, H, W) bool grid -> compressed .npz with key ``occupancy`` (uint8 0/1), atomically."""
+    import io
+
+    buf = io.BytesIO()
+    np.savez_compressed(buf, occupancy=occupancy.cpu().numpy().astype(np.uint8))
+    atomic_write_bytes(path, buf.getvalue())

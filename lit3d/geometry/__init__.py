@@ -1,0 +1,1 @@
+"""Mesh geometry shared by the tasks: geodesics, MDS/SMACOF/GPS canonical forms, simplification."""

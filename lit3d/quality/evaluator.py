@@ -1,0 +1,106 @@
+"""Evaluator of the quality task (interface: :mod:`lit3d.cli.registry`): the thesis's protocol
+after ``trainer.test``, results.md and scatter plots.
+
+:func:`protocol` adds to the module's ``test/ours/...`` metrics
+
+- ``test/<baseline>/<kind>[/<shape>]``: each baseline (Chamfer, Hausdorff, MSE, PSNR, MS-SSIM,
+  single best feature) fitted / chosen on the datamodule's training split, scored on its test split;
+- with the task's ``cv``: ``test/cv/<method>/<kind>[/<shape>]``, leave-one-shape-out over the
+  datamodule's whole matrix (tables 4.2-4.4), the task's learned methods + the baselines;
+- with the task's ``cross_data`` (data configs): ``test/cross/<dataset>/<method>/...``, select +
+  train on this datamodule's matrix, test on each other dataset (table 4.8).
+
+Learned methods are the task's own settings through :mod:`lit3d.quality.task_methods` and are
+trained by the one trainer (:mod:`lit3d.quality.trainer`). What the figures need beyond the
+metrics (the leave-one-shape-out predictions) is kept here per task object (weakly) between
+:func:`protocol` and :func:`write_figures`; the module carries no results.
+"""
+from __future__ import annotations
+
+import weakref
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from lit3d.features.matrix import FeatureMatrix
+from lit3d.quality.correlation import shape_corr_metrics
+from lit3d.quality.protocol import EvalResult, baseline_methods, cross_dataset, leave_one_shape_out, results_to_metrics
+from lit3d.quality.report import write_results, write_scatter_figures
+from lit3d.quality.task_methods import cv_methods, task_baselines
+
+__all__ = ["protocol", "write_figures", "write_results"]
+
+# task -> leave-one-shape-out results of its last protocol() run (for write_figures)
+_CV_RESULTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def protocol(task, datamodule) -> dict[str, float]:
+    """Baselines on the held-out split, and (per the task's settings) leave-one-shape-out and
+    cross-dataset metrics; see the module docstring for the keys."""
+    hp = task.hparams
+    baselines = task_baselines(hp)
+    train, test = datamodule.split("train"), datamodule.split("test")
+    out: dict[str, float] = {}
+    for name, method in baseline_methods(test.names, baselines).items():
+        pred = method.fit(train).predict(test)
+        out.update(shape_corr_metrics(f"test/{name}", pred, test.target, test.shapes))
+    if hp.cv:
+        results = run_cv(task, datamodule.matrix)
+        _CV_RESULTS[task] = results
+        out.update(results_to_metrics(results, "test/cv"))
+    if hp.cross_data:
+        out.update(run_cross(task, datamodule.matrix, hp.cross_data))
+    return out
+
+
+def run_cv(task, fm: FeatureMatrix) -> dict[str, EvalResult]:
+    """Leave-one-shape-out (tables 4.2-4.4) on ``fm``: the task's learned methods + the baselines."""
+    baselines = task_baselines(task.hparams)
+    methods = dict(cv_methods(task.hparams, task.train_config(task.hparams.cv_epochs), fm.names))
+    for name in baseline_methods(fm.names, baselines):
+        methods[name] = lambda name=name: baseline_methods(fm.names, baselines)[name]
+    return leave_one_shape_out(fm, methods)
+
+
+def load_matrices(data_cfgs) -> dict[str, FeatureMatrix]:
+    """Dataset name -> feature matrix of each data config (prepared if needed)."""
+    from hydra.utils import instantiate
+    from omegaconf import OmegaConf
+
+    out = {}
+    for cfg in data_cfgs:
+        other = instantiate(OmegaConf.create(dict(cfg)), _convert_="all")
+        other.prepare_data()
+        other.setup("test")
+        out[other.name] = other.matrix
+    return out
+
+
+def run_cross(task, fm: FeatureMatrix, data_cfgs) -> dict[str, float]:
+    """Select + train on ``fm``; test on each ``data_cfgs`` dataset (table 4.8); "ours_sfs" when
+    the task's ``cv_methods`` has it, else every learned method."""
+    tests = load_matrices(data_cfgs)
+    all_methods = cv_methods(task.hparams, task.train_config(task.hparams.cv_epochs), fm.names)
+    methods = {k: v for k, v in all_methods.items() if k == "ours_sfs"} or all_methods
+    out: dict[str, float] = {}
+    for dname, per_method in cross_dataset(fm, tests, methods).items():
+        out.update(results_to_metrics(per_method, f"test/cross/{dname}"))
+    return out
+
+
+def checkpoint_predictions(task, test: FeatureMatrix) -> Mapping[str, np.ndarray]:
+    """The task's predictions on ``test``: ``{"pred": (N,) float64, "target": (N,), "shapes": (N,) str}``."""
+    x = torch.as_tensor(test.columns(task.features), dtype=torch.float32, device=task.device)
+    task.eval()
+    with torch.no_grad():
+        pred = task(x).double().cpu().numpy()
+    return {"pred": pred, "target": test.target, "shapes": test.shapes}
+
+
+def write_figures(task, datamodule, out_dir: Path, n: int = 4) -> list[Path]:
+    """Scatter plots of predicted vs target per test shape: the checkpoint, and each learned
+    leave-one-shape-out method of the last :func:`protocol` run on ``task``."""
+    ours = checkpoint_predictions(task, datamodule.split("test")) if task.net is not None else None
+    return write_scatter_figures(ours, _CV_RESULTS.get(task), out_dir)
