@@ -23,8 +23,8 @@ def test_experiment_composes_and_instantiates(compose_cfg, name):
     if OmegaConf.is_missing(cfg.data, "root"):  # real-data experiments need data.root
         cfg.data.root = "/path/to/dataset"
     OmegaConf.resolve(cfg.task)
-    assert cfg.task.name in name
-    assert cfg.task.monitor and cfg.task.monitor_mode in ("min", "max")
+    assert cfg.task_info.name in name
+    assert cfg.task_info.monitor and cfg.task_info.monitor_mode in ("min", "max")
     with torch.device("meta"):
         task = build_task(cfg.task)
     assert isinstance(task, LightningModule)

@@ -145,7 +145,7 @@ def test_experiment_configs_compose(compose_cfg, experiment):
     from lit3d.cli.common import task_kwargs
 
     cfg = compose_cfg([f"experiment={experiment}"])
-    assert cfg.task.name == "quality" and cfg.data._target_ == "datamodules.quality.QualityDataModule"
+    assert cfg.task_info.name == "quality" and cfg.data._target_ == "datamodules.quality.QualityDataModule"
     kw = task_kwargs(cfg.task)
     QualityTask(**kw)  # plain kwargs build the task
     assert cfg.data.batch_size == 3

@@ -9,7 +9,7 @@ import scipy.stats
 import torch
 from test_quality_task import make_dm
 
-from datamodules.quality_batches import ShuffledBatches
+from datamodules.quality.batches import ShuffledBatches
 from lit3d.features.matrix import minibatch_count, minibatches
 from lit3d.quality.correlation import pearson, shape_corr_metrics, spearman
 from lit3d.quality.evaluator import checkpoint_predictions

@@ -35,7 +35,6 @@ log = logging.getLogger("lit3d")
 
 CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
 # keys of a task config read by the CLI and not passed to the LightningModule
-CLI_TASK_KEYS = ("_target_", "name", "monitor", "monitor_mode")
 EXIT_USER = 2        # a problem with the command line, a config or an input file
 EXIT_DIVERGED = 1    # training stopped on a NaN/Inf loss
 EXIT_SIGTERM = 128 + signal.SIGTERM
@@ -61,8 +60,7 @@ LEGACY_MODULES = {
 
 def import_object(path: str) -> Any:
     """Import ``pkg.module.Name`` (or ``pkg.module:Name``); old module paths are mapped to the new rooms."""
-    module, _, name = path.replace(":", ".").rpartition(".")
-    module = LEGACY_MODULES.get(module, module)
+    module, name = _split_target(path)
     return getattr(importlib.import_module(module), name)
 
 
@@ -76,8 +74,14 @@ def to_plain(cfg: DictConfig | dict | None) -> dict:
 
 
 def task_kwargs(task_cfg: DictConfig | dict) -> dict:
-    """Constructor arguments of a task config: everything but the CLI keys."""
-    return {k: v for k, v in to_plain(task_cfg).items() if k not in CLI_TASK_KEYS}
+    """Constructor arguments of a task config (``cfg.task``): everything but ``_target_``."""
+    return {k: v for k, v in to_plain(task_cfg).items() if k != "_target_"}
+
+
+def task_meta(cfg: DictConfig) -> dict:
+    """What a checkpoint stores of the task: ``cfg.task`` (``_target_`` + constructor arguments)
+    plus ``cfg.task_info`` (``name``, ``monitor``, ``monitor_mode``), as plain values."""
+    return {**to_plain(cfg.get("task_info")), **to_plain(cfg.task)}
 
 
 def _construct(group: str, make: Callable[[], Any]) -> Any:
@@ -89,24 +93,35 @@ def _construct(group: str, make: Callable[[], Any]) -> Any:
         raise UserError(f"{group} config: {first_line(exc, type(exc).__name__)}") from exc
 
 
+def _instantiate_plain(node: DictConfig | dict):
+    """``hydra.utils.instantiate`` of a config node with plain (dict/list) arguments (not recursive:
+    nested ``_target_`` nodes, e.g. the quality task's ``cross_data``, stay configs), so that what
+    a LightningModule saves as hyper-parameters loads with ``weights_only=True``; the constructor's
+    own ValueError/TypeError is passed on unwrapped."""
+    from hydra.errors import InstantiationException
+    from hydra.utils import instantiate
+
+    plain = to_plain(node)
+    plain["_target_"] = ".".join(filter(None, _split_target(plain["_target_"])))
+    try:
+        return instantiate(OmegaConf.create(plain), _convert_="all", _recursive_=False)
+    except InstantiationException as exc:  # Hydra wraps the constructor's own error
+        raise (exc.__cause__ if isinstance(exc.__cause__, (ValueError, TypeError)) else exc) from exc
+
+
+def _split_target(path: str) -> tuple[str, str]:
+    module, _, name = path.replace(":", ".").rpartition(".")
+    return LEGACY_MODULES.get(module, module), name
+
+
 def build_task(task_cfg: DictConfig | dict):
-    """Instantiate the LightningModule named by ``task_cfg._target_`` with plain kwargs."""
-    cls = import_object(task_cfg["_target_"])
-    return _construct("task", lambda: cls(**task_kwargs(task_cfg)))
+    """The LightningModule of ``cfg.task``: ``hydra.utils.instantiate`` with plain arguments."""
+    return _construct("task", lambda: _instantiate_plain(task_cfg))
 
 
 def build_datamodule(data_cfg: DictConfig | dict):
     """Instantiate a DataModule from its config (plain values only)."""
-    from hydra.errors import InstantiationException
-    from hydra.utils import instantiate
-
-    def make():
-        try:
-            return instantiate(OmegaConf.create(to_plain(data_cfg)), _convert_="all")
-        except InstantiationException as exc:  # Hydra wraps the constructor's own error
-            raise (exc.__cause__ if isinstance(exc.__cause__, (ValueError, TypeError)) else exc) from exc
-
-    return _construct("data", make)
+    return _construct("data", lambda: _instantiate_plain(data_cfg))
 
 
 def read_checkpoint_meta(ckpt_path: str | Path) -> dict:
@@ -289,8 +304,12 @@ def run_evaluation(trainer, task, datamodule, task_name: str, out_dir: Path, *, 
         metrics.update({k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("val/")})
     trainer.test(task, datamodule=datamodule, ckpt_path=ckpt_path, weights_only=True)
     metrics.update({k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("test/")})
-    metrics.update(evaluator.protocol(task, datamodule))
+    protocol_metrics = evaluator.protocol(task, datamodule)  # on every rank: it may synchronise states
+    metrics.update(protocol_metrics)
     if trainer.is_global_zero:
+        for logger in trainer.loggers:  # the module logged its own metrics; these come after the test
+            if protocol_metrics:
+                logger.log_metrics(protocol_metrics, step=trainer.global_step)
         out_dir.mkdir(parents=True, exist_ok=True)
         write_json(out_dir / "metrics.json", {**(extra or {}), **metrics})
         evaluator.write_results(metrics, out_dir)

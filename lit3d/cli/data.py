@@ -24,7 +24,7 @@ def prepare(cfg: DictConfig) -> dict:
     print(json.dumps(info, indent=2, sort_keys=True, default=str))
     n_show = int(cfg.get("show", 0) or 0)
     if n_show > 0:
-        path = Path(cfg.paths.output_dir) / f"{cfg.task.name}_samples.png"
+        path = Path(cfg.paths.output_dir) / f"{cfg.task_info.name}_samples.png"
         dm.show(n_show, path)
         print(f"wrote {path}")
     return info

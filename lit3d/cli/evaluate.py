@@ -32,7 +32,7 @@ def checkpoint_meta_for(cfg: DictConfig) -> dict:
     """The checkpoint's lit3d metadata; refuses a checkpoint of another task than ``task=NAME``."""
     meta = read_checkpoint_meta(cfg.ckpt_path)
     have = (meta.get("task") or {}).get("name")
-    wanted = cfg.get("task")
+    wanted = cfg.get("task_info")
     if wanted is not None and wanted.get("name") != have:
         raise UserError(f"{cfg.ckpt_path}: checkpoint is for task '{have}', not '{wanted.get('name')}'")
     return meta

@@ -18,7 +18,7 @@ def summary(cfg: DictConfig) -> str:
     task_cls = import_object(cfg.task["_target_"])
     with torch.device("meta"):
         rows = task_cls.summary_rows(task_kwargs(cfg.task))
-    text = f"# {cfg.task.name}: per-component summary (batch 1, meta device)\n\n" + format_summary_table(rows)
+    text = f"# {cfg.task_info.name}: per-component summary (batch 1, meta device)\n\n" + format_summary_table(rows)
     print(text)
     return text
 

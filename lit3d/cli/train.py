@@ -5,7 +5,7 @@
     lit3d-train hydra.run.dir=logs/completion/runs/X ckpt_path=last     # resume
     lit3d-train -m +sweep=completion_k                                  # ablation sweep
 
-Returns the monitored metric (``task.monitor``) so Hydra sweepers can optimise it.
+Returns the monitored metric (``task_info.monitor``) so Hydra sweepers can optimise it.
 """
 from __future__ import annotations
 
@@ -28,6 +28,7 @@ from lit3d.cli.common import (
     run_cli,
     run_evaluation,
     scalar_metrics,
+    task_meta,
     to_plain,
 )
 from lit3d.utils.io import atomic_write_text, write_json
@@ -118,7 +119,7 @@ def train(cfg: DictConfig) -> float | None:
     task = build_task(cfg.task)
     loggers = build_loggers(cfg, wandb_id)
     callbacks = [instantiate(c) for c in (cfg.get("callbacks") or {}).values() if c is not None]
-    callbacks.append(MetadataCallback(to_plain(cfg.task), to_plain(cfg.data), wandb_id))
+    callbacks.append(MetadataCallback(task_meta(cfg), to_plain(cfg.data), wandb_id))
     trainer: pl.Trainer = instantiate(cfg.trainer, callbacks=callbacks, logger=loggers or False,
                                       **checkpoint_plugins(cfg.trainer))
     for lg in loggers:
@@ -126,14 +127,14 @@ def train(cfg: DictConfig) -> float | None:
     try:
         fit(trainer, task, datamodule, ckpt_path, output_dir)
         fit_metrics = scalar_metrics(trainer.callback_metrics)
-        monitored = _monitored_value(trainer, cfg.task.monitor, fit_metrics)
+        monitored = _monitored_value(trainer, cfg.task_info.monitor, fit_metrics)
         if cfg.get("test_after_fit", True):
             best = trainer.checkpoint_callback.best_model_path if trainer.checkpoint_callback else ""
-            run_evaluation(trainer, task, datamodule, cfg.task.name, output_dir, ckpt_path=best or None,
+            run_evaluation(trainer, task, datamodule, cfg.task_info.name, output_dir, ckpt_path=best or None,
                            n_figures=int(cfg.get("n_figures", 0)),
-                           extra={"monitor": cfg.task.monitor, "monitored_value": monitored})
+                           extra={"monitor": cfg.task_info.monitor, "monitored_value": monitored})
         elif trainer.is_global_zero:
-            write_json(output_dir / "metrics.json", {"monitor": cfg.task.monitor, "monitored_value": monitored})
+            write_json(output_dir / "metrics.json", {"monitor": cfg.task_info.monitor, "monitored_value": monitored})
         return monitored
     finally:
         finish_wandb(loggers)

@@ -1,6 +1,6 @@
 """Canonical-form data: pairs (posed depth + mask, canonical depth + mask) seen from the same camera.
 
-Sources (:mod:`datamodules.canonical_sources`): ``synth`` (procedural figures, no download),
+Sources (:mod:`datamodules.canonical.sources`): ``synth`` (procedural figures, no download),
 ``tosca`` and ``shrec14`` (meshes under ``root``).
 
 Every shape is centred on its bounding-box centre and scaled so that its longest side is 1
@@ -16,7 +16,7 @@ Batches (``B`` samples, ``S = image_size``):
 
 Cache (:class:`datamodules.cache.CacheBuilder`, the one cache scheme of every DataModule):
 ``data_dir/subjects/<subject>.npz`` per subject (depth as float16, masks packed bits; layout in
-:mod:`datamodules.canonical_images`), written atomically; ``prepare.json`` marks a preparation
+:mod:`datamodules.canonical.images`), written atomically; ``prepare.json`` marks a preparation
 under way, ``manifest.json`` (config, config hash, one item per subject file with its sha256,
 ``manifest_hash`` over them, so the same seed gives the same hash; plus ``complete``,
 ``subjects``, ``categories``, ``skipped``) is written last. An interrupted ``prepare_data``
@@ -28,7 +28,7 @@ Bad input: every depth image is checked when rendered and when the cache is read
 ``skip_bad=True`` a bad posed image or mesh drops that pose and a bad canonical image drops
 the subject, each with a logged warning, counted in ``describe()["skipped_bad_files"]``.
 
-Splits (``split``: ``subject_pose`` or ``pose``): :mod:`datamodules.canonical_splits`.
+Splits (``split``: ``subject_pose`` or ``pose``): :mod:`datamodules.canonical.splits`.
 """
 from __future__ import annotations
 
@@ -43,10 +43,10 @@ import numpy as np
 from torch.utils.data import DataLoader
 
 from datamodules.cache import CacheBuilder, DataError, atomic_save_npz, read_manifest
-from datamodules.canonical_dataset import PairDataset, subject_balanced_sampler
-from datamodules.canonical_images import depth_image_problem, read_subject, unpack_mask
-from datamodules.canonical_sources import SOURCES, Shrec14Source, SynthSource, ToscaSource, make_source
-from datamodules.canonical_splits import SPLITS, deal, split_pose, split_subject_pose
+from datamodules.canonical.dataset import PairDataset, subject_balanced_sampler
+from datamodules.canonical.images import depth_image_problem, read_subject, unpack_mask
+from datamodules.canonical.sources import SOURCES, Shrec14Source, SynthSource, ToscaSource, make_source
+from datamodules.canonical.splits import SPLITS, deal, split_pose, split_subject_pose
 from lit3d.geometry.normalise import normalise_vertices
 from lit3d.render.depth import render_depth
 from lit3d.utils.io import atomic_write_bytes
@@ -121,7 +121,7 @@ class CanonicalDataModule(pl.LightningDataModule):
     # ------------------------------------------------------------------ configuration
     @property
     def source(self):
-        """The mesh source (:mod:`datamodules.canonical_sources`), built on first use."""
+        """The mesh source (:mod:`datamodules.canonical.sources`), built on first use."""
         if self._source is None:
             self._source = make_source(self.hparams)
         return self._source

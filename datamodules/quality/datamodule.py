@@ -18,15 +18,15 @@ the dataset's published range (:class:`lit3d.features.matrix.TargetScaling`).
 ``prepare_data()`` fills ``data_dir/<config hash>/`` through :class:`datamodules.cache.CacheBuilder`
 (atomic, resumable; ``manifest.json`` with generator, version, config hash and the sha256 of
 every item file): the distorted meshes (synth only), one feature table per pair
-(``features/<shape>__<name>.json``: ``name -> float``, :mod:`datamodules.quality_features`,
+(``features/<shape>__<name>.json``: ``name -> float``, :mod:`datamodules.quality.features`,
 computed by ``lit3d.features.table`` in ``feature_workers`` processes), then ``matrix.npz`` (the
 :class:`FeatureMatrix`) and ``pairs.json``. ``setup()`` reads it and splits by shape:
 ``test_shapes`` / ``val_shapes`` are held out, the rest trains.
 
-Batches (:mod:`datamodules.quality_batches`): ``{"x": (B, F) float32 all features, "y": (B,)
+Batches (:mod:`datamodules.quality.batches`): ``{"x": (B, F) float32 all features, "y": (B,)
 float32 in [0, 1], "shape_id": (B,) int64 into ``shape_names``, "shape": list[str], "item":
 list[str]}``; the task picks its selected columns. Training batches follow
-:class:`~datamodules.quality_batches.ShuffledBatches` (seed ``seed``).
+:class:`~datamodules.quality.batches.ShuffledBatches` (seed ``seed``).
 """
 from __future__ import annotations
 
@@ -43,15 +43,15 @@ import trimesh
 from torch.utils.data import DataLoader, SequentialSampler
 
 from datamodules.cache import CacheBuilder, DataError, atomic_save_npz, write_json
-from datamodules.quality_batches import PairDataset, ShuffledBatches
-from datamodules.quality_features import (  # noqa: F401  (re-exported)
+from datamodules.quality.batches import PairDataset, ShuffledBatches
+from datamodules.quality.features import (  # noqa: F401  (re-exported)
     FeatureFn,
     feature_config,
     feature_file,
     resolve_feature_fn,
     write_feature_tables,
 )
-from datamodules.quality_preview import pairs_png
+from datamodules.quality.preview import pairs_png
 from datamodules.cache import stable_int_seed
 from datamodules.loaders import evaluation_loader
 from datamodules.synth.distortions import DISTORTIONS, LEVELS, distort, severity
