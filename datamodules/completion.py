@@ -26,8 +26,13 @@ import numpy as np
 from torch.utils.data import DataLoader
 
 from datamodules.cache import CacheBuilder, DataError, bytes_on_disk, stable_seed
+from datamodules.loaders import evaluation_loader
 from datamodules.voxel_cache import VoxelPairDataset, load_pair, save_pair
-from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, select_seen_categories, select_unseen_categories
+from lit3d.utils.shapenet_categories import (
+    SEEN_CATEGORIES,
+    select_seen_categories,
+    select_unseen_categories,
+)
 
 log = logging.getLogger("lit3d.data")
 
@@ -245,6 +250,9 @@ class CompletionDataModule(pl.LightningDataModule):
     def _loader(self, split: str, shuffle: bool) -> DataLoader:
         if not self.datasets:
             self.setup()
+        if not shuffle:  # val/test: every item once, also under DDP
+            return evaluation_loader(self.datasets[split], self.batch_size, self.num_workers,
+                                     pin_memory=self.pin_memory, persistent_workers=self.num_workers > 0)
         return DataLoader(self.datasets[split], batch_size=self.batch_size, shuffle=shuffle,
                           num_workers=self.num_workers, pin_memory=self.pin_memory,
                           persistent_workers=self.num_workers > 0, drop_last=False)

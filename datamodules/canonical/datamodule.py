@@ -45,8 +45,15 @@ from torch.utils.data import DataLoader
 from datamodules.cache import CacheBuilder, DataError, atomic_save_npz, read_manifest
 from datamodules.canonical.dataset import PairDataset, subject_balanced_sampler
 from datamodules.canonical.images import depth_image_problem, read_subject, unpack_mask
-from datamodules.canonical.sources import SOURCES, Shrec14Source, SynthSource, ToscaSource, make_source
+from datamodules.canonical.sources import (
+    SOURCES,
+    Shrec14Source,
+    SynthSource,
+    ToscaSource,
+    make_source,
+)
 from datamodules.canonical.splits import SPLITS, deal, split_pose, split_subject_pose
+from datamodules.loaders import evaluation_loader
 from lit3d.geometry.normalise import normalise_vertices
 from lit3d.render.depth import render_depth
 from lit3d.utils.io import atomic_write_bytes
@@ -285,6 +292,9 @@ class CanonicalDataModule(pl.LightningDataModule):
         assert not ({(r["subject"], r["pose"]) for r in te} & tr), "test item leaked into training"
 
     def _loader(self, split: str, shuffle: bool) -> DataLoader:
+        if not shuffle:  # val/test: every item once, also under DDP
+            return evaluation_loader(self.datasets[split], self.hparams.batch_size, self.hparams.num_workers,
+                                     persistent_workers=self.hparams.num_workers > 0)
         return DataLoader(self.datasets[split], batch_size=self.hparams.batch_size, shuffle=shuffle,
                           num_workers=self.hparams.num_workers, persistent_workers=self.hparams.num_workers > 0)
 

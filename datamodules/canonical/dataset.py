@@ -31,7 +31,7 @@ class PairDataset(Dataset):
             "depth": t(c["depth"][pk]), "mask": t(c["mask"][pk]),
             "canon_depth": t(c["depth"][ck]), "canon_mask": t(c["mask"][ck]),
             "subject": r["subject"], "subject_idx": self.subject_index[r["subject"]],
-            "pose": int(r["pose"]), "view": int(r["view"]),
+            "pose": int(r["pose"]), "view": int(r["view"]), "index": i,
         }
 
 

@@ -42,7 +42,8 @@ def protocol(task, datamodule) -> dict[str, float]:
     outputs = task.test_outputs.compute()
     if task.hparams.retrieval is None or not outputs:
         return {}
-    outputs = {k: v.cpu() for k, v in outputs.items()}
+    order = torch.argsort(outputs["index"].cpu())  # dataset order: ranks hand in interleaved shares
+    outputs = {k: v.cpu()[order] for k, v in outputs.items()}
     results = retrieval_results(task.hparams, outputs, datamodule)
     return {f"test/retrieval/{source}/{k}": float(scores[k])
             for source, scores in results.items() for k in LOGGED_SCORES if k in scores}

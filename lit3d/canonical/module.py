@@ -42,7 +42,8 @@ from lit3d.metrics.gathered import GatheredTensors
 METRICS = ("depth_mse", "iou", "depth_mse_input", "iou_input")
 # per test item, gathered for the evaluator: prediction (depth, mask probability), posed input,
 # true canonical form ((N, 1, S, S) float32), subject index and pose ((N,) int64)
-TEST_OUTPUTS = ("pred_depth", "pred_mask", "depth", "mask", "canon_depth", "canon_mask", "subject_idx", "pose")
+# "index": the item's place in the test set, so the evaluator sees the items in one order under DDP too
+TEST_OUTPUTS = ("pred_depth", "pred_mask", "depth", "mask", "canon_depth", "canon_mask", "subject_idx", "pose", "index")
 
 
 class CanonicalTask(pl.LightningModule):
@@ -164,7 +165,8 @@ class CanonicalTask(pl.LightningModule):
             pred_depth=out.depth.float(), pred_mask=out.mask.float(), depth=batch["depth"], mask=batch["mask"],
             canon_depth=batch["canon_depth"], canon_mask=batch["canon_mask"],
             subject_idx=torch.as_tensor(batch["subject_idx"], device=self.device),
-            pose=torch.as_tensor(batch["pose"], device=self.device))
+            pose=torch.as_tensor(batch["pose"], device=self.device),
+            index=torch.as_tensor(batch["index"], device=self.device))
 
     def on_test_epoch_end(self) -> None:
         for k, m in self.test_metrics.items():

@@ -38,7 +38,7 @@ class PerShapeCorrelation(Metric):
         self.shape_id.append(shape_id.detach().long().flatten())
 
     def compute(self) -> dict[str, float]:
-        if not self.pred:
+        if isinstance(self.pred, list) and not self.pred:  # after a DDP sync the states are tensors
             return {}
         ids = dim_zero_cat(self.shape_id).cpu().numpy()
         if ids.size and int(ids.max()) >= len(self.shape_names):

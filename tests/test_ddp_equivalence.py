@@ -1,0 +1,61 @@
+"""Two processes (``trainer=ddp_cpu``, gloo) give the same test metrics as one process, per task.
+
+Each case trains a tiny model in-process for two batches (the checkpoint is the same for both
+evaluations), then evaluates it in this process (``lit3d-eval``'s code, one process) and with ``lit3d-eval
+trainer=ddp_cpu``.
+Test splits have odd sizes, so the two ranks get unequal shares: a sampler that pads with repeated
+samples, a metric reduced per rank, or retrieval scored on one rank's half would all show up as a
+difference. The completion case also picks its IoU threshold on validation under DDP.
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from omegaconf import open_dict
+
+from lit3d.cli.evaluate import evaluate
+from lit3d.cli.train import train
+
+REPO = Path(__file__).resolve().parents[1]
+COMMON = ["logger=none", "callbacks.progress_bar=null", "trainer.max_epochs=1", "+trainer.limit_train_batches=2",
+          "+trainer.limit_val_batches=1", "test_after_fit=false", "seed=0"]
+CASES = {
+    "completion": ["experiment=completion_demo", "data.sizes={train:8,val:5,test_same:5,test_cross:3,test_unseen:5}",
+                   "data.batch_size=2"],
+    "canonical": ["experiment=canonical_tiny", "data.n_subjects=6", "data.n_poses=6", "data.image_size=32",
+                  "task.net.image_size=32", "data.batch_size=3", "task.mesh_baselines=[posed]",
+                  "task.retrieval.view_size=32"],
+    "quality": ["experiment=quality_demo", "+data.feature_fn=test_quality_task.fake_features", "~data.feature_options", "data.subdivisions=2",
+                "data.shapes=[blob,bumpy,torus,rock,twist]", "task.cv=false", "task.sfs.epochs=5", "task.sfs.max_features=2"],
+}
+
+
+def _eval(ckpt: Path, trainer: str, out: Path) -> dict[str, float]:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO / "tests"), os.environ.get("PYTHONPATH", "")])}
+    res = subprocess.run([str(Path(sys.executable).parent / "lit3d-eval"), f"ckpt_path={ckpt}", f"trainer={trainer}",
+                          f"hydra.run.dir={out}", "n_figures=0", "seed=0"],
+                         cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    return json.loads((out / "metrics.json").read_text())
+
+
+@pytest.mark.parametrize("task", sorted(CASES))
+def test_two_processes_give_the_test_metrics_of_one(task, compose_cfg, tmp_path):
+    cfg = compose_cfg([*CASES[task], *COMMON], data_dir=tmp_path / "data")
+    train(cfg)  # (tests/ is on sys.path under pytest: the quality case's stand-in feature function)
+    ckpt = Path(cfg.paths.output_dir) / "checkpoints" / "last.ckpt"
+    eval_cfg = compose_cfg([f"ckpt_path={ckpt}", "trainer=cpu", "n_figures=0", "seed=0"], config_name="eval")
+    with open_dict(eval_cfg):
+        eval_cfg.paths.output_dir = str(tmp_path / "eval_1")
+    one = evaluate(eval_cfg)  # one process, in this one (the same code path as lit3d-eval)
+    two = _eval(ckpt, "ddp_cpu", tmp_path / "eval_2")
+    keys = sorted(k for k in one if k.startswith(("test/", "val/")))
+    assert keys and keys == sorted(k for k in two if k.startswith(("test/", "val/")))
+    assert any("retrieval" in k for k in keys) or task != "canonical"
+    differ = {k: (one[k], two[k]) for k in keys if "seconds" not in k and abs(one[k] - two[k]) > 1e-5 * max(1.0, abs(one[k]))}
+    assert not differ, differ
