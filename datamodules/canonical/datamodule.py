@@ -8,6 +8,9 @@ Every shape is centred on its bounding-box centre and scaled so that its longest
 (``scale_mode="subject"``), then rendered with pyrender (EGL) by an orthographic camera on
 +z looking down -z (after turning the shape by each azimuth in ``azimuths``). Depth is
 normalised to [0, 1]: 0 = background, foreground in [0.1, 1], nearer = larger.
+``view_mode`` (:mod:`lit3d.geometry.views`): ``fixed`` = the azimuths as given; ``broadside`` = each
+shape (posed and canonical alike) first turned so that its broad side faces the camera, then
+by each azimuth. ``flip_lr``: training pairs mirrored left-right together with probability 1/2.
 
 Batches (``B`` samples, ``S = image_size``):
     depth, mask              (B, 1, S, S) float32   posed input; mask in {0, 1}
@@ -55,6 +58,7 @@ from datamodules.canonical.sources import (
 from datamodules.canonical.splits import SPLITS, deal, split_pose, split_subject_pose
 from datamodules.loaders import evaluation_loader
 from lit3d.geometry.normalise import normalise_vertices
+from lit3d.geometry.views import VIEW_MODES, base_azimuth
 from lit3d.render.depth import render_depth
 from lit3d.utils.io import atomic_write_bytes
 
@@ -96,6 +100,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         cla: str | None = None,
         # rendering
         azimuths: Sequence[float] = (0.0,),
+        view_mode: str = "fixed",
         scale_mode: str = "shape",
         # splits
         split: str = "subject_pose",
@@ -105,6 +110,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         max_val_items: int | None = 64,
         skip_bad: bool = False,
         balance_subjects: bool = False,
+        flip_lr: bool = False,
     ):
         super().__init__()
         self.save_hyperparameters()
@@ -114,6 +120,8 @@ class CanonicalDataModule(pl.LightningDataModule):
             raise DataError(f"data source '{source}' needs root=<folder with the meshes>")
         if scale_mode not in ("shape", "subject"):
             raise DataError(f"scale_mode must be 'shape' or 'subject', got '{scale_mode}'")
+        if view_mode not in VIEW_MODES:
+            raise DataError(f"view_mode must be one of {', '.join(VIEW_MODES)}, got '{view_mode}'")
         if split not in ("subject_pose", "pose"):
             raise DataError(f"split must be 'subject_pose' or 'pose', got '{split}'")
         self.data_dir = Path(data_dir)
@@ -145,6 +153,8 @@ class CanonicalDataModule(pl.LightningDataModule):
         cfg = {k: (list(hp[k]) if isinstance(hp[k], (list, tuple)) else hp[k]) for k in keys}
         if hp.skip_bad:  # a cache rendered while skipping may lack poses
             cfg["skip_bad"] = True
+        if hp.view_mode != "fixed":  # absent for the old convention: its caches keep their hash
+            cfg["view_mode"] = hp.view_mode
         return cfg
 
     def cache_builder(self) -> CacheBuilder:
@@ -172,9 +182,10 @@ class CanonicalDataModule(pl.LightningDataModule):
         """Depth (float16) and packed mask of every view of one pose; DataError for a bad image."""
         hp = self.hparams
         v, f = self.normalized_mesh(subject, pose)
+        base = base_azimuth(v, f, hp.view_mode)
         out = {}
         for vi, az in enumerate(hp.azimuths):
-            d, m = render_depth(v, f, hp.image_size, az)
+            d, m = render_depth(v, f, hp.image_size, base + az)
             problem = depth_image_problem(d, m, hp.image_size)
             if problem:
                 raise DataError(f"view {vi}: rendered {problem} (mesh outside the view?)")
@@ -267,12 +278,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         self._load_cache()
         hp = self.hparams
         subject_poses = {s: c["poses"] for s, c in self.cache.items()}
-        if hp.split == "subject_pose":
-            all_poses = sorted({p for ps in subject_poses.values() for p in ps})
-            pairs = split_subject_pose(list(subject_poses), all_poses, hp.n_folds, hp.fold, hp.seed)
-            pairs = {k: [(s, p) for s, p in v if p in subject_poses[s]] for k, v in pairs.items()}
-        else:
-            pairs = split_pose(subject_poses, hp.n_folds, hp.fold, hp.seed, hp.val_per_subject)
+        pairs = self._pairs(hp.fold)
         if hp.max_val_items and len(pairs["val"]) > hp.max_val_items:
             idx = np.random.default_rng(hp.seed).choice(len(pairs["val"]), hp.max_val_items, replace=False)
             pairs["val"] = [pairs["val"][i] for i in sorted(idx)]
@@ -283,13 +289,37 @@ class CanonicalDataModule(pl.LightningDataModule):
             if not self.splits[k]:
                 raise DataError(f"split '{k}' is empty (subjects {len(subject_poses)}, folds {hp.n_folds}): "
                                 "use more subjects/poses or fewer folds")
-            self.datasets[k] = PairDataset(self.splits[k], self.cache, self.subject_index)
+            self.datasets[k] = PairDataset(self.splits[k], self.cache, self.subject_index,
+                                           flip_lr=hp.flip_lr and k == "train")
         tr = {(r["subject"], r["pose"]) for r in self.splits["train"]}
         te = self.splits["test"]
         if hp.split == "subject_pose":
             assert not ({r["subject"] for r in te} & {s for s, _ in tr}), "test subject leaked into training"
             assert not ({r["pose"] for r in te} & {p for _, p in tr}), "test pose leaked into training"
         assert not ({(r["subject"], r["pose"]) for r in te} & tr), "test item leaked into training"
+
+    def _pairs(self, fold: int) -> dict[str, list[tuple]]:
+        """``{split: [(subject, pose), ...]}`` of fold ``fold`` over the loaded cache."""
+        hp = self.hparams
+        subject_poses = {s: c["poses"] for s, c in self.cache.items()}
+        if hp.split == "subject_pose":
+            all_poses = sorted({p for ps in subject_poses.values() for p in ps})
+            pairs = split_subject_pose(list(subject_poses), all_poses, hp.n_folds, fold, hp.seed)
+            return {k: [(s, p) for s, p in v if p in subject_poses[s]] for k, v in pairs.items()}
+        return split_pose(subject_poses, hp.n_folds, fold, hp.seed, hp.val_per_subject)
+
+    def held_out_records(self) -> list[dict]:
+        """Every item some fold tests (``{"subject", "pose", "view"}``, sorted): the set that the
+        pooled protocol (:mod:`lit3d.canonical.pooled`) scores, each from the fold that held it out.
+        For ``split=pose`` that is every non-canonical pose of every subject with 2+ poses."""
+        if not self.cache:
+            self.setup()
+        pairs = sorted({sp for f in range(self.hparams.n_folds) for sp in self._pairs(f)["test"]}, key=str)
+        return [{"subject": s, "pose": p, "view": v} for s, p in pairs for v in range(len(self.hparams.azimuths))]
+
+    def held_out_ids(self) -> list[str]:
+        """``"subject/pose/view"`` of :meth:`held_out_records`."""
+        return [f"{r['subject']}/{int(r['pose'])}/{r['view']}" for r in self.held_out_records()]
 
     def _loader(self, split: str, shuffle: bool) -> DataLoader:
         if not shuffle:  # val/test: every item once, also under DDP

@@ -2,7 +2,8 @@
 subject-balanced training sampler.
 
 Items (``S = image_size``): ``depth``, ``mask``, ``canon_depth``, ``canon_mask`` ``(1, S, S)``
-float32; ``subject`` str, ``subject_idx``, ``pose``, ``view`` int.
+float32; ``subject`` str, ``subject_idx``, ``pose``, ``view`` int. With ``flip_lr`` (training
+only) all four images of an item are mirrored left-right together with probability 1/2.
 """
 from __future__ import annotations
 
@@ -16,8 +17,10 @@ from torch.utils.data import Dataset, WeightedRandomSampler
 class PairDataset(Dataset):
     """Indexable pairs from the in-memory cache (see module docstring for the item dict)."""
 
-    def __init__(self, records: list[dict], cache: dict[str, dict], subject_index: dict[str, int]):
+    def __init__(self, records: list[dict], cache: dict[str, dict], subject_index: dict[str, int],
+                 flip_lr: bool = False):
         self.records, self.cache, self.subject_index = records, cache, subject_index
+        self.flip_lr = flip_lr  # mirror input and target left-right together with probability 1/2
 
     def __len__(self):
         return len(self.records)
@@ -26,7 +29,8 @@ class PairDataset(Dataset):
         r = self.records[i]
         c = self.cache[r["subject"]]
         pk, ck = f"{r['pose']}_{r['view']}", f"canonical_{r['view']}"
-        t = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))[None]  # noqa: E731
+        flip = self.flip_lr and bool(torch.rand(()) < 0.5)
+        t = lambda a: torch.from_numpy(np.ascontiguousarray(a[:, ::-1] if flip else a, dtype=np.float32))[None]  # noqa: E731
         return {
             "depth": t(c["depth"][pk]), "mask": t(c["mask"][pk]),
             "canon_depth": t(c["depth"][ck]), "canon_mask": t(c["mask"][ck]),

@@ -11,6 +11,8 @@ Two sources:
 - ``source="liris_epfl" | "liris_masking" | "guo2016"``: the human-rated datasets, read
   from ``root`` in their published layout (``datamodules.readers.mos``). Target: the
   mean opinion score (MOS).
+- ``source="cpcd2"``: coloured point clouds in the CPCD2.0 layout (zipped ASCII PLY +
+  ``mos.csv``, ``datamodules.readers.cpcd2``); the clouds are rendered as points.
 
 Either way targets are oriented "higher = more distorted" and scaled to [0, 1] with
 the dataset's published range (:class:`lit3d.features.matrix.TargetScaling`).
@@ -42,7 +44,14 @@ import torch
 import trimesh
 from torch.utils.data import DataLoader, SequentialSampler
 
-from datamodules.cache import CacheBuilder, DataError, atomic_save_npz, write_json
+from datamodules.cache import (
+    CacheBuilder,
+    DataError,
+    atomic_save_npz,
+    stable_int_seed,
+    write_json,
+)
+from datamodules.loaders import evaluation_loader
 from datamodules.quality.batches import PairDataset, ShuffledBatches
 from datamodules.quality.features import (  # noqa: F401  (re-exported)
     FeatureFn,
@@ -52,8 +61,6 @@ from datamodules.quality.features import (  # noqa: F401  (re-exported)
     write_feature_tables,
 )
 from datamodules.quality.preview import pairs_png
-from datamodules.cache import stable_int_seed
-from datamodules.loaders import evaluation_loader
 from datamodules.synth.distortions import DISTORTIONS, LEVELS, distort, severity
 from datamodules.synth.quality_shapes import (  # noqa: F401  (re-exported)
     MESH_SUFFIXES,
@@ -187,14 +194,17 @@ class QualityDataModule(pl.LightningDataModule):
         return pairs
 
     def _real_pairs(self) -> tuple[list[dict], TargetScaling]:
+        from datamodules.readers.cpcd2 import read_cpcd2
         from datamodules.readers.mos import read_mos_dataset
 
         hp = self.hparams
         if not hp.root:
             raise DataError(f"data source '{self.source}' needs data.root=PATH (the unpacked dataset folder)")
-        ds = read_mos_dataset(hp.root, self.source, spreadsheet=hp.spreadsheet, sheet=hp.sheet,
-                              score_range=tuple(hp.score_range) if hp.score_range else None,
-                              on_error="skip" if hp.skip_bad else "raise")
+        read = read_cpcd2 if self.source == "cpcd2" else read_mos_dataset
+        args = () if self.source == "cpcd2" else (self.source,)
+        ds = read(hp.root, *args, spreadsheet=hp.spreadsheet, sheet=hp.sheet,
+                  score_range=tuple(hp.score_range) if hp.score_range else None,
+                  on_error="skip" if hp.skip_bad else "raise")
         self.skipped += ds.skipped
         for p in ds.unrated:
             warnings.warn(f"{p}: mesh not rated in {ds.spreadsheet.name} (ignored)", stacklevel=2)

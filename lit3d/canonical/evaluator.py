@@ -12,6 +12,9 @@ test (``task.test_outputs``, DDP-correct) and returns ``test/retrieval/<source>/
 - each of ``mesh_baselines`` (cmds, smacof, nmds, gps, posed): the non-learned canonical forms of
   the full test meshes, one per unique (subject, pose), from ``datamodule.normalized_mesh``.
 
+``write_results`` also saves the fold's held-out items to ``<run dir>/heldout.npz`` (:mod:`lit3d.canonical.heldout`)
+for the pooled cross-validated protocol (:mod:`lit3d.canonical.pooled`).
+
 Settings come from the task config (``retrieval``: descriptor config or null = off,
 ``retrieval_min_subjects``, ``chance_trials``, ``mask_threshold``, ``mesh_baselines``,
 ``baseline_max_vertices``, ``baseline_smacof_eps``).
@@ -20,11 +23,13 @@ from __future__ import annotations
 
 import logging
 import time
+from pathlib import Path
 
 import numpy as np
 import torch
 
-from lit3d.canonical.report import write_figures, write_results  # noqa: F401
+from lit3d.canonical.report import write_figures  # noqa: F401
+from lit3d.canonical.report import write_results as report_write_results
 from lit3d.metrics.depth import composite_depth
 
 log = logging.getLogger("lit3d")
@@ -44,9 +49,44 @@ def protocol(task, datamodule) -> dict[str, float]:
         return {}
     order = torch.argsort(outputs["index"].cpu())  # dataset order: ranks hand in interleaved shares
     outputs = {k: v.cpu()[order] for k, v in outputs.items()}
+    save_heldout_items(task, outputs, datamodule)
     results = retrieval_results(task.hparams, outputs, datamodule)
     return {f"test/retrieval/{source}/{k}": float(scores[k])
             for source, scores in results.items() for k in LOGGED_SCORES if k in scores}
+
+
+# this process's last held-out items (rank 0), written by write_results into the run dir
+_PENDING_HELDOUT: dict = {}
+
+
+def save_heldout_items(task, outputs: dict[str, torch.Tensor], datamodule) -> None:
+    """Keep this fold's held-out items (:mod:`lit3d.canonical.heldout`) for :func:`write_results`,
+    which writes them to ``<out_dir>/heldout.npz`` for the pooled protocol
+    (:mod:`lit3d.canonical.pooled`); nothing off rank 0 or for a datamodule that does not list its
+    held-out items."""
+    from lit3d.canonical.heldout import heldout_arrays
+    from lit3d.canonical.pooled import settings_of
+
+    trainer = getattr(task, "_trainer", None)
+    _PENDING_HELDOUT.clear()
+    if (trainer is not None and not trainer.is_global_zero) or not hasattr(datamodule, "held_out_ids"):
+        return
+    hp = datamodule.hparams
+    _PENDING_HELDOUT.update(heldout_arrays(
+        outputs, {i: s for s, i in datamodule.subject_index.items()}, datamodule.held_out_ids(),
+        PREDICTION_SOURCE.get(task.hparams.arch, "model"), dict(hp), hp.fold, hp.n_folds, settings_of(dict(task.hparams))))
+
+
+def write_results(metrics: dict, out_dir: Path, dataset: str | None = None) -> Path:
+    """results.md (:func:`lit3d.canonical.report.write_results`) and, after a test with retrieval on,
+    ``heldout.npz`` with the test items of :func:`protocol` (once; :mod:`lit3d.canonical.heldout`)."""
+    from lit3d.canonical.heldout import HELDOUT_FILE, save_heldout
+
+    if _PENDING_HELDOUT:
+        path = save_heldout(Path(out_dir) / HELDOUT_FILE, dict(_PENDING_HELDOUT))
+        _PENDING_HELDOUT.clear()
+        log.info("held-out items: %s", path)
+    return report_write_results(metrics, out_dir, dataset)
 
 
 def retrieval_results(hp, outputs: dict[str, torch.Tensor], datamodule=None) -> dict[str, dict]:
@@ -101,6 +141,7 @@ def mesh_baseline_retrieval(hp, outputs: dict[str, torch.Tensor], datamodule) ->
     t0 = time.perf_counter()
     meshes = [datamodule.normalized_mesh(names[s], p) for s, p in keys]
     out = baseline_retrieval(meshes, [s for s, _ in keys], methods, DescriptorConfig(**(hp.retrieval or {})),
-                             hp.baseline_max_vertices, eps=hp.baseline_smacof_eps)
+                             hp.baseline_max_vertices, eps=hp.baseline_smacof_eps,
+                             landmarks=hp.get("baseline_landmarks", 300))
     log.info("mesh baselines %s on %d test shapes: %.0fs", methods, len(keys), time.perf_counter() - t0)
     return out

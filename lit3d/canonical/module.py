@@ -41,9 +41,10 @@ from lit3d.metrics.gathered import GatheredTensors
 
 METRICS = ("depth_mse", "iou", "depth_mse_input", "iou_input")
 # per test item, gathered for the evaluator: prediction (depth, mask probability), posed input,
-# true canonical form ((N, 1, S, S) float32), subject index and pose ((N,) int64)
+# true canonical form ((N, 1, S, S) float32), subject index, pose and view ((N,) int64)
 # "index": the item's place in the test set, so the evaluator sees the items in one order under DDP too
-TEST_OUTPUTS = ("pred_depth", "pred_mask", "depth", "mask", "canon_depth", "canon_mask", "subject_idx", "pose", "index")
+TEST_OUTPUTS = ("pred_depth", "pred_mask", "depth", "mask", "canon_depth", "canon_mask", "subject_idx", "pose", "view",
+                "index")
 
 
 class CanonicalTask(pl.LightningModule):
@@ -70,8 +71,9 @@ class CanonicalTask(pl.LightningModule):
         retrieval_min_subjects: int = 2,
         chance_trials: int = 100,
         mesh_baselines: Sequence[str] | None = None,
-        baseline_max_vertices: int = 1000,
+        baseline_max_vertices: int | None = None,
         baseline_smacof_eps: float = 1e-4,
+        baseline_landmarks: int | None = 300,
         on_nonfinite: str = "raise",
         unet_baseline: bool = False,
     ):
@@ -166,6 +168,7 @@ class CanonicalTask(pl.LightningModule):
             canon_depth=batch["canon_depth"], canon_mask=batch["canon_mask"],
             subject_idx=torch.as_tensor(batch["subject_idx"], device=self.device),
             pose=torch.as_tensor(batch["pose"], device=self.device),
+            view=torch.as_tensor(batch["view"], device=self.device),
             index=torch.as_tensor(batch["index"], device=self.device))
 
     def on_test_epoch_end(self) -> None:

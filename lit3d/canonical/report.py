@@ -122,6 +122,51 @@ def write_results(metrics: dict, out_dir: Path, dataset: str | None = None) -> P
     return path
 
 
+POOLED_ROWS = (("lit3d model (ours)", "model"), ("plain U-Net, same data and losses (ours)", "unet"),
+               ("posed input depth, no canonicalisation (ours)", "input"),
+               ("true canonical depth, ceiling of the depth rows (ours)", "target"),
+               ("classical MDS, full mesh, landmark geodesics (ours)", "cmds"),
+               ("SMACOF, full mesh, landmark geodesics (ours)", "smacof"),
+               ("non-metric MDS, full mesh, landmark geodesics (ours)", "nmds"), ("GPS, full mesh (ours)", "gps"),
+               ("posed full mesh, no canonicalisation (ours)", "posed"),
+               ("ShapeDNA of the posed full mesh, intrinsic ceiling (ours)", "shapedna"),
+               ("chance: random distances (ours)", "chance"))
+
+
+def _mean_sd(pair) -> str:
+    return f"{fmt(pair[0], 2)} ± {fmt(pair[1], 2)}"
+
+
+def write_pooled_results(result: dict, out_dir: Path) -> Path:
+    """``pooled_results.md``: the pooled cross-validated rows (:mod:`lit3d.canonical.pooled`, mean ± sd
+    over the codebook seeds) beside the thesis's table for the data source (5.3 for TOSCA)."""
+    summary = result["summary"]
+    number = TABLE_OF_SOURCE.get((result.get("data") or {}).get("source") or "", "5.3")
+    title, thesis = THESIS[number]
+    table = [[f"{k} (thesis)"] + [fmt(v, 2) for v in vals[:3]] + ["–", fmt(vals[3], 2)] for k, vals in thesis.items()]
+    for label, key in POOLED_ROWS:
+        if key in summary:
+            table.append([label] + [_mean_sd(summary[key][c]) for c in ("nn", "ft", "st", "e", "dcg")])
+    secs = ", ".join(f"{k} {v:.0f}s" for k, v in (result.get("seconds") or {}).items())
+    d = result.get("data") or {}
+    parts = [f"# Pooled cross-validated retrieval: table {number} ({title})", "",
+             f"{result['n_items']} held-out items of {result['n_subjects']} subjects (data: {d.get('source')}, "
+             f"{d.get('image_size')}², view_mode {d.get('view_mode', 'fixed')}, azimuths {d.get('azimuths')}, "
+             f"split {d.get('split')}, {d.get('n_folds')} folds), every item scored once from the fold that held it "
+             f"out; every row on the same items; mean ± sd over codebook seeds {result['seeds']}. "
+             "Classes = subjects" + ("; every test subject is also in training (its other poses: a pose split). "
+                                     if d.get("split") == "pose" else ". ") + "Thesis rows: the thesis's published figures on its data (no E reported).", "",
+             markdown_table(["method", "NN", "FT", "ST", "E", "DCG"], table), "",
+             f"Descriptor: {result.get('descriptor')}. Mesh rows: one per held-out subject x pose, full resolution "
+             f"(settings {({k: v for k, v in (result.get('settings') or {}).items() if k.startswith('baseline')})}); "
+             "ShapeDNA: first 30 cotangent-Laplacian eigenvalues x surface area, Euclidean distance after dividing "
+             "each by 4 pi i (no codebook: sd 0). Chance: 100 random distance matrices per seed.", "",
+             f"Time: {secs}; wall {result.get('wall_seconds', 0):.0f}s."]
+    path = Path(out_dir) / "pooled_results.md"
+    atomic_write_text(path, "\n".join(parts) + "\n")
+    return path
+
+
 def _png(path: Path, img: np.ndarray) -> Path:
     buf = io.BytesIO()
     Image.fromarray(img).save(buf, format="PNG")

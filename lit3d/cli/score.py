@@ -8,7 +8,9 @@ Examples::
     lit3d-score ref.obj dist.ply --ckpt logs/quality/runs/X/checkpoints/best-059.ckpt
 
 The overall score is the mean Mask-SSIM over styles, shadings and the 12 views
-(1 = identical renders). With ``--ckpt`` (a quality model saved by
+(1 = identical renders). Two point clouds (.xyz, a .ply without faces, a .zip holding one
+.ply) are rendered as points, with colour styles when both carry colour (the overall score
+then weighs geometry and colour styles equally) and the D1/D2/Y-PSNR baselines. With ``--ckpt`` (a quality model saved by
 ``lit3d-train task=quality``) the overall score is the model's prediction instead:
 the features are computed with the render size, styles, measures and shadings the
 model was trained on (``--size``/``--styles`` are then ignored, with a note), its
@@ -34,7 +36,7 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="lit3d-score", description=__doc__.split("\n\n")[0],
                                 epilog="\n\n".join(__doc__.split("\n\n")[1:]).replace("``", "'"),
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("ref", help="reference shape (.obj .off .ply .stl .glb, points .xyz, voxel/SDF .npz)")
+    p.add_argument("ref", help="reference shape (.obj .off .ply .stl .glb, points .xyz/.ply/.zip, voxel/SDF .npz)")
     p.add_argument("dist", help="distorted / predicted shape (same formats)")
     p.add_argument("--size", type=int, default=None,
                    help=f"render size in pixels (default {DEFAULT_SIZE}; with --ckpt: the model's)")
@@ -65,7 +67,7 @@ def _summary(table, ref: str, dist: str, seconds: float, prediction: dict | None
             for m, d in measures.items()]
     lines = [f"reference: {ref}", f"distorted: {dist}",
              markdown_table(["measure (mean over styles, 12 views)"] + shadings, rows)]
-    for k in ("chamfer", "hausdorff"):
+    for k in ("chamfer", "hausdorff", "d1_psnr", "d2_psnr", "y_psnr"):
         if k in feats:
             lines.append(f"{k}: {feats[k]:.5f}")
     lines.append(f"features: {len(feats)}  ({'cached' if table.cached else f'{seconds:.1f} s'})")
@@ -136,12 +138,15 @@ def main(argv: list[str] | None = None) -> int:
 
 def _run(args) -> int:
     from lit3d.render.convert import to_mesh
+    from lit3d.render.points import is_point_source, load_points
 
     if args.size is not None and not 16 <= args.size <= 4096:
         raise ValueError(f"--size {args.size}: expected 16..4096 pixels")
     # shapes first: a bad file is reported before torch and the renderer are imported (about 1 s, not 10)
-    ref = to_mesh(args.ref)
-    dist = to_mesh(args.dist)
+    if is_point_source(args.ref) and is_point_source(args.dist):  # two point clouds: rendered as points
+        ref, dist = load_points(args.ref), load_points(args.dist)
+    else:
+        ref, dist = to_mesh(args.ref), to_mesh(args.dist)
     from lit3d.features.table import FeatureConfig, default_cache_dir, feature_table
     from lit3d.render.gbuffer import RenderConfig
     from lit3d.render.styles import resolve_styles

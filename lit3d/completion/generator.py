@@ -56,6 +56,7 @@ class CascadeStage(nn.Module):
         k: int,
         selector_mode: str,
         fixed_latent_dim: int | None,
+        selector_norm: bool = False,
         up_channels: Sequence[int] = (),
         global_skip_channels: Sequence[int] | None = None,
         attention_res: int | None = None,
@@ -78,7 +79,7 @@ class CascadeStage(nn.Module):
         n = latent_dim if selector else fixed_latent_dim
         self.latent_dim = n
         self.fc_enc = nn.Linear(flat, n)
-        self.selector = LatentSelector(n, k, selector_mode) if selector else None
+        self.selector = LatentSelector(n, k, selector_mode, selector_norm) if selector else None
         self.fc_dec = nn.Linear(n, flat)
         gsc = list(global_skip_channels) if global_skip_channels else [0] * L
         # decoder level j works at resolution b * 2^j on a map with cur channels; skip = enc[L-1-j]
@@ -168,6 +169,7 @@ class CascadeGenerator(nn.Module):
         fixed_latent_dim: int | None = None,
         selector: bool = True,
         selector_mode: str = "straight_through",
+        selector_norm: bool = False,
         global_skips: bool = True,
         input_skip: bool = False,
         attention: str = "none",
@@ -190,6 +192,7 @@ class CascadeGenerator(nn.Module):
             self.stages.append(CascadeStage(
                 in_res=in_res, in_channels=s + 1, enc_channels=enc_channels, latent_dim=latent_dim,
                 selector=selector, k=k, selector_mode=selector_mode, fixed_latent_dim=fixed_latent_dim,
+                selector_norm=selector_norm,
                 up_channels=up_channels if is_last else (),
                 global_skip_channels=enc_channels if (is_last and self.use_global_skips) else None,
                 attention_res=attention_res if attention == "generator" else None,

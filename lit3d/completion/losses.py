@@ -33,6 +33,22 @@ def weighted_bce_with_logits(logits: torch.Tensor, target: torch.Tensor, alpha: 
         return -(y * F.logsigmoid(z) + alpha * (1.0 - y) * F.logsigmoid(-z)).mean()
 
 
+def resolve_loss_scale(loss_scale: float | str, out_res: int) -> float:
+    """``task.loss_scale`` as a number: ``"voxels"`` -> ``out_res**3`` (the weighted BCE summed over
+    a shape's voxels, averaged over the batch), a number -> itself (1 = the per-voxel mean).
+
+    Raises:
+        ValueError: for another string or a non-positive number.
+    """
+    if isinstance(loss_scale, str):
+        if loss_scale != "voxels":
+            raise ValueError(f"task.loss_scale={loss_scale!r}: use 'voxels' or a positive number")
+        return float(out_res) ** 3
+    if not float(loss_scale) > 0:
+        raise ValueError(f"task.loss_scale={loss_scale!r} must be positive")
+    return float(loss_scale)
+
+
 def gradient_penalty(
     critic: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
     partial: torch.Tensor,

@@ -24,13 +24,13 @@ import lightning.pytorch as pl
 import torch
 import torch.nn.functional as F
 
-from lit3d.completion.losses import critic_loss, generator_adv_loss, gradient_penalty, weighted_bce_with_logits
+from lit3d.completion.losses import (critic_loss, generator_adv_loss, gradient_penalty, resolve_loss_scale,
+                                     weighted_bce_with_logits)
 from lit3d.metrics.voxel import VoxelSweepMetrics, best_threshold, default_thresholds
 from lit3d.completion.nets import build_completion_nets, validate_net_config
 from lit3d.completion.prior import mean_training_target
 from lit3d.callbacks.nonfinite import NonFiniteLossError, guard_step, validate_mode  # noqa: F401 (re-exported)
 from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, select_seen_categories, select_unseen_categories
-from lit3d.utils.voxel_images import panel
 
 log = logging.getLogger("lit3d.completion")
 
@@ -58,6 +58,7 @@ class CompletionTask(pl.LightningModule):
         lr_d: float = 1e-4,
         betas: Sequence[float] = (0.9, 0.999),
         eps: float = 1e-8,
+        loss_scale: float | str = 1.0,
         alpha: float = 0.35,
         gamma: float = 0.8,
         zeta: float = 0.01,
@@ -79,6 +80,7 @@ class CompletionTask(pl.LightningModule):
         nets = dict(nets)
         if nets.pop("preset", None) is not None:  # checkpoints written before issue 12 name one beside every size
             log.info("task.nets.preset is ignored: the sizes come from the config alone")
+        nets.setdefault("selector_norm", False)  # checkpoints written before issue 13 have none
         self.net_cfg = validate_net_config(nets)
         if self.net_cfg["classifier"] and self.net_cfg["n_classes"] != len(SEEN_CATEGORIES):
             raise ValueError(f"task.nets.n_classes={self.net_cfg['n_classes']}: class labels index the "
@@ -104,6 +106,7 @@ class CompletionTask(pl.LightningModule):
         )
         self.generator_steps = 0
         self.skipped_steps = 0
+        self.loss_scale = resolve_loss_scale(loss_scale, res)
 
     # ------------------------------------------------------------------ helpers
     def forward(self, partial: torch.Tensor) -> torch.Tensor:
@@ -132,11 +135,34 @@ class CompletionTask(pl.LightningModule):
         g_params = list(self.generator.parameters())
         if self.classifier is not None:
             g_params += list(self.classifier.parameters())
-        opt_g = torch.optim.Adam(g_params, lr=hp.lr_g, betas=tuple(hp.betas), eps=hp.eps)
+        # Adam(scale * g, eps) == Adam(g, eps / scale) exactly: the loss scale is applied as the
+        # generator's eps (no overflow risk under 16-mixed, logged losses stay per-voxel means)
+        opt_g = torch.optim.Adam(g_params, lr=hp.lr_g, betas=tuple(hp.betas), eps=hp.eps / self.loss_scale)
         if self.critic is None:
             return opt_g
         opt_d = torch.optim.Adam(self.critic.parameters(), lr=hp.lr_d, betas=tuple(hp.betas), eps=hp.eps)
         return [opt_g, opt_d]
+
+    def health_groups(self) -> dict[str, list[torch.nn.Parameter]]:
+        """Named parameter groups watched by :class:`lit3d.callbacks.health.TrainingHealth` and
+        ``scripts/latent_gradients.py``: per generator stage its encoder convs, latent FCs
+        (``fc_enc`` + ``fc_dec``), selector weight net and decoder (+ up-sampling, attention);
+        then the critic and the classifier. Every trainable parameter is in exactly one group."""
+        groups: dict[str, list[torch.nn.Parameter]] = {}
+        for s, stage in enumerate(self.generator.stages, start=1):
+            latent = list(stage.fc_enc.parameters()) + list(stage.fc_dec.parameters())
+            selector = list(stage.selector.parameters()) if stage.selector is not None else []
+            taken = {id(p) for p in latent + selector + list(stage.encoder.parameters())}
+            groups[f"stage {s} encoder"] = list(stage.encoder.parameters())
+            groups[f"stage {s} latent fc"] = latent
+            if selector:
+                groups[f"stage {s} selector"] = selector
+            groups[f"stage {s} decoder"] = [p for p in stage.parameters() if id(p) not in taken]
+        for name in ("critic", "classifier"):
+            net = getattr(self, name)
+            if net is not None:
+                groups[name] = list(net.parameters())
+        return groups
 
     def _optimizers(self):
         opts = self.optimizers()
@@ -166,12 +192,7 @@ class CompletionTask(pl.LightningModule):
         with self.toggled_optimizer(opt_g):
             out = self.generator(x)
             probs = torch.sigmoid(out.logits)
-            bce = weighted_bce_with_logits(out.logits, y, hp.alpha)
-            loss_g = hp.gamma * bce if opt_d is not None else bce
-            terms = {"bce": bce}
-            if hp.stage_weight > 0 and len(out.stage_logits) > 1:
-                terms["bce_stages"] = self._stage_bce(out.stage_logits[:-1], y)
-                loss_g = loss_g + hp.stage_weight * terms["bce_stages"]
+            loss_g, terms = self.reconstruction_loss(out, y, hp.gamma if opt_d is not None else 1.0)
             if opt_d is not None:
                 terms["adv"] = generator_adv_loss(self.critic(x, probs))
                 loss_g = loss_g + (1 - hp.gamma) * terms["adv"]
@@ -190,6 +211,24 @@ class CompletionTask(pl.LightningModule):
         self.log_dict({f"train/{k}": v.detach().float() for k, v in logs.items()},
                       prog_bar=False, on_step=True, on_epoch=True, batch_size=x.shape[0])
         self.log("train/generator_steps", float(self.generator_steps), on_step=True, on_epoch=False)
+
+    def reconstruction_loss(self, out, target: torch.Tensor, weight: float = 1.0) -> tuple[torch.Tensor, dict]:
+        """``weight * BCE(final) + stage_weight * BCE(intermediate stages)`` and its terms.
+
+        Args:
+            out: :class:`lit3d.completion.generator.GeneratorOutput` of the partial inputs.
+            target: ``(B, 1, R, R, R)`` float32 in {0, 1}.
+            weight: factor of the final-stage BCE (``gamma`` with the critic on, else 1).
+        Returns:
+            (scalar fp32 loss, ``{"bce": ..., ["bce_stages": ...]}``).
+        """
+        hp = self.hparams
+        bce = weighted_bce_with_logits(out.logits, target, hp.alpha)
+        loss, terms = weight * bce, {"bce": bce}
+        if hp.stage_weight > 0 and len(out.stage_logits) > 1:
+            terms["bce_stages"] = self._stage_bce(out.stage_logits[:-1], target)
+            loss = loss + hp.stage_weight * terms["bce_stages"]
+        return loss, terms
 
     def _stage_bce(self, stage_logits: list[torch.Tensor], target: torch.Tensor) -> torch.Tensor:
         """Mean weighted BCE of the intermediate stages' (B, 1, r, r, r) logits against the
@@ -304,20 +343,20 @@ class CompletionTask(pl.LightningModule):
 
     # ------------------------------------------------------------------ images
     def _log_panels(self, batch: dict) -> None:
+        """Rendered figure of the batch's first sample (input | stages | prediction | target) to
+        W&B loggers every ``image_every_n_epochs`` epochs (:mod:`lit3d.completion.figures`)."""
         every = max(int(self.hparams.image_every_n_epochs), 1)
         if self.current_epoch % every or not self.trainer.is_global_zero:
             return
         loggers = [lg for lg in self.loggers if type(lg).__name__ == "WandbLogger"]
         if not loggers:
             return
-        with torch.no_grad():
-            out = self.generator(self._fmt(batch["input"][:1]))
-        vols = [batch["input"][0, 0]] + [torch.sigmoid(s[0, 0].float()) for s in out.stage_logits]
-        vols += [torch.sigmoid(out.logits[0, 0].float()), batch["target"][0, 0]]
-        image = panel(vols, threshold=float(self.threshold))
-        caption = "input | " + " | ".join(f"stage {i + 1}" for i in range(len(out.stage_logits))) + " | final | target"
+        from lit3d.completion.figures import split_figure
+
+        sample = {"input": batch["input"][0].cpu(), "target": batch["target"][0].cpu(), "category": batch["category"][0]}
+        image = split_figure(self, [sample], f"validation, epoch {self.current_epoch}")
         for lg in loggers:
-            lg.log_image(key="val/panels", images=[image], caption=[caption], step=self.global_step)
+            lg.log_image(key="val/panels", images=[image], step=self.global_step)
 
     # ------------------------------------------------------------------ state
     def on_save_checkpoint(self, checkpoint: dict) -> None:

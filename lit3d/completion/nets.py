@@ -30,6 +30,7 @@ ATTENTION_PLACES = ("discriminator", "generator", "both", "none")
 # The keys of ``task.nets`` (values: conf/task/completion.yaml, which documents each one).
 NET_KEYS = (
     "in_res", "out_res", "stages", "enc_channels", "up_channels", "latent_dim", "selector", "selector_mode",
+    "selector_norm",
     "k", "fixed_latent_dim", "global_skips", "input_skip", "attention", "generator_attention_res",
     "critic_channels", "critic_attention_res", "critic_sigmoid", "classifier", "classifier_res",
     "classifier_channels", "n_classes",
@@ -65,7 +66,8 @@ def generator_kwargs(cfg: dict) -> dict:
     return dict(
         in_res=c["in_res"], stages=c["stages"], enc_channels=list(c["enc_channels"]),
         up_channels=list(c["up_channels"]), latent_dim=c["latent_dim"], selector=bool(c["selector"]),
-        k=c["k"], selector_mode=c["selector_mode"], fixed_latent_dim=c["fixed_latent_dim"],
+        k=c["k"], selector_mode=c["selector_mode"], selector_norm=bool(c["selector_norm"]),
+        fixed_latent_dim=c["fixed_latent_dim"],
         global_skips=bool(c["global_skips"]),
         input_skip=bool(c["input_skip"]),
         attention="generator" if c["attention"] in ("generator", "both") else "none",
@@ -77,7 +79,7 @@ def build_completion_nets(cfg: dict) -> dict[str, nn.Module]:
     """Build ``{"generator", "critic"[, "classifier"]}`` from a plain (nested-free) ``task.nets`` dict.
 
     Every key of :data:`NET_KEYS` must be present (see :func:`validate_net_config`). Ablation
-    switches: ``stages`` (1..3), ``selector`` (bool), ``selector_mode``, ``k``,
+    switches: ``stages`` (1..3), ``selector`` (bool), ``selector_mode``, ``selector_norm``, ``k``,
     ``attention`` (discriminator|generator|both|none), ``classifier`` (bool), ``critic_sigmoid`` (bool).
     """
     c = validate_net_config(cfg)

@@ -1,21 +1,20 @@
-"""results.md and PNG figures for shape completion, in the layout of thesis tables 3.1-3.6.
+"""results.md (in the layout of thesis tables 3.1-3.6) and the PNG figures of shape completion.
 
 Thesis rows are the thesis's published figures on the full 3D-RecGAN++ ShapeNet
 data; ours are measured on whatever data the evaluation ran on.
 """
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
 import torch
-from PIL import Image
 
 from lit3d.completion.module import split_key
 from lit3d.utils.io import atomic_write_bytes, atomic_write_text
 from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, UNSEEN_CATEGORIES
 from lit3d.utils.tables import fmt, markdown_table
-from lit3d.utils.voxel_images import panel
 
 # (title, split, categories, {thesis method: [IoU per category]}) from SPEC.md / the thesis.
 # lit3d trains one multi-category model, so its row sits beside both the thesis's
@@ -75,12 +74,16 @@ def write_results(metrics: dict, out_dir: Path) -> Path:
 
 
 def write_figures(task, datamodule, out_dir: Path, n: int = 4) -> list[Path]:
-    """PNG per test split: rows of input | prediction | target (depth-shaded, two view axes).
+    """``completion_<split>.png`` per test split (:mod:`lit3d.completion.figures`: labelled shaded
+    renders, input | stages | prediction | target, front and back views), ``max(1, n // 4)``
+    samples per category; logged as ``eval/<split>`` images to a W&B logger when the task has one.
 
     The first sample of each split is also saved as voxel grids (``occupancy`` uint8 in
     ``<split>_prediction.npz`` / ``<split>_target.npz``) so that ``lit3d-score`` can
     compare them by rendering: ``lit3d-score same_target.npz same_prediction.npz``.
     """
+    from lit3d.completion.figures import collect_samples, split_figure
+
     out_dir = Path(out_dir)
     paths = []
     task.eval()
@@ -89,33 +92,36 @@ def write_figures(task, datamodule, out_dir: Path, n: int = 4) -> list[Path]:
     names = list(getattr(datamodule, "test_split_names", [f"split{i}" for i in range(len(loaders))]))
     threshold = float(task.threshold)
     for name, loader in zip(names, loaders):
-        rows = []
-        for batch in loader:
-            with torch.no_grad():
-                probs = task(batch["input"].to(task.device)).cpu()
-            if not rows:
-                _save_voxels(out_dir / f"{split_key(name)}_prediction.npz", probs[0, 0] >= threshold)
-                _save_voxels(out_dir / f"{split_key(name)}_target.npz", batch["target"][0, 0] > 0.5)
-            for i in range(batch["input"].shape[0]):
-                vols = [batch["input"][i, 0], probs[i, 0], batch["target"][i, 0]]
-                rows.append(panel(vols, threshold=threshold))
-                rows.append(panel([v.transpose(0, 2) for v in vols], threshold=threshold))
-                rows.append(np.full((4, rows[-1].shape[1]), 40, np.uint8))
-                if len(rows) >= 3 * n:
-                    break
-            if len(rows) >= 3 * n:
-                break
-        if rows:
-            path = out_dir / f"completion_{name}.png"
-            Image.fromarray(np.concatenate(rows[:-1], axis=0)).save(path)
-            paths.append(path)
+        samples = collect_samples(loader, max(1, n // 4))
+        if not samples:
+            continue
+        with torch.no_grad():
+            probs = task(samples[0]["input"][None].to(task.device)).cpu()
+        _save_voxels(out_dir / f"{split_key(name)}_prediction.npz", probs[0, 0] >= threshold)
+        _save_voxels(out_dir / f"{split_key(name)}_target.npz", samples[0]["target"][0] > 0.5)
+        image = split_figure(task, samples, f"{split_key(name)} test split")
+        path = out_dir / f"completion_{name}.png"
+        buf = io.BytesIO()
+        image.save(buf, format="PNG")
+        atomic_write_bytes(path, buf.getvalue())
+        paths.append(path)
+        _log_wandb(task, f"eval/{split_key(name)}", image)
     return paths
+
+
+def _log_wandb(task, key: str, image) -> None:
+    """Log a PIL image to the task's W&B loggers (none outside a trainer)."""
+    try:
+        loggers = task.loggers
+    except RuntimeError:
+        return
+    for lg in loggers:
+        if type(lg).__name__ == "WandbLogger":
+            lg.log_image(key=key, images=[image], step=task.global_step)
 
 
 def _save_voxels(path: Path, occupancy: torch.Tensor) -> None:
     """(D, H, W) bool grid -> compressed .npz with key ``occupancy`` (uint8 0/1), atomically."""
-    import io
-
     buf = io.BytesIO()
     np.savez_compressed(buf, occupancy=occupancy.cpu().numpy().astype(np.uint8))
     atomic_write_bytes(path, buf.getvalue())

@@ -37,6 +37,7 @@ from lit3d.metrics import image as im
 from lit3d.metrics.mesh import chamfer_hausdorff
 from lit3d.render.convert import mesh_hash, to_mesh
 from lit3d.render.gbuffer import RenderConfig, render_gbuffers
+from lit3d.render.points import is_point_source
 from lit3d.render.styles import apply_styles, resolve_styles
 
 FEATURE_VERSION = 2
@@ -117,9 +118,15 @@ class ShapeViews:
 
 
 def render_views(mesh, cfg: FeatureConfig | None = None, device=None, rgb: bool = False) -> ShapeViews:
-    """Render every style x view x shading of ``mesh`` (grey unless ``rgb``)."""
+    """Render every style x view x shading of ``mesh`` (grey unless ``rgb``); point clouds as points."""
     cfg = cfg or FeatureConfig()
-    gbs = render_gbuffers(mesh, cfg.render)
+    if is_point_source(mesh):  # a point cloud, splatted in its own frame (lit3d.render.splat)
+        from lit3d.render.points import load_points
+        from lit3d.render.splat import render_point_gbuffers
+
+        gbs = render_point_gbuffers(load_points(mesh), cfg.render)
+    else:
+        gbs = render_gbuffers(mesh, cfg.render)
     names = cfg.resolved_styles()
     images, masks, normals = {}, {}, {}
     for shading, gb in gbs.items():
@@ -271,19 +278,33 @@ class FeatureTable:
 
 
 def overall_score(features: dict[str, float], measure: str = "mask_ssim") -> float:
-    """Mean of ``measure/<style>/<shading>`` over all styles and shadings (default Mask-SSIM)."""
-    vals = [v for k, v in features.items() if k.split("/")[0] == measure and k.count("/") == 2]
-    if not vals:
+    """Mean of ``measure/<style>/<shading>`` over all styles and shadings (default Mask-SSIM).
+
+    With colour styles in the table (:data:`lit3d.render.colour_styles.COLOUR_STYLES`, coloured
+    point clouds) geometry and colour count equally: the mean of the MatCap styles' mean and the
+    colour styles' mean (fixed a priori, not fitted). Colour-less tables: the plain mean.
+    """
+    from lit3d.render.colour_styles import COLOUR_STYLES
+
+    geo, col = [], []
+    for k, v in features.items():
+        if k.split("/")[0] == measure and k.count("/") == 2:
+            (col if k.split("/")[1] in COLOUR_STYLES else geo).append(v)
+    if not geo and not col:
         raise ValueError(f"no {measure}/* features in the table")
-    return float(np.mean(vals))
+    return float(np.mean([np.mean(g) for g in (geo, col) if g]))
 
 
 def feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_dir: str | os.PathLike | None = None,
                   device=None, keep_views: bool = False) -> FeatureTable:
-    """Compute (or load from cache) the feature table of a mesh pair.
+    """Compute (or load from cache) the feature table of a shape pair.
+
+    Two point clouds (:func:`lit3d.render.points.is_point_source`) are rendered as points
+    (:func:`lit3d.features.points.point_feature_table`; ``keep_views`` is ignored there);
+    everything else goes through :func:`lit3d.render.convert.to_mesh` and the mesh G-buffer.
 
     Args:
-        ref, dist: anything :func:`lit3d.render.convert.to_mesh` accepts.
+        ref, dist: anything :func:`lit3d.render.convert.to_mesh` accepts, or two point clouds.
         cfg: feature configuration.
         cache_dir: folder of cached JSON tables (None: no caching).
         device: torch device for the measures (default CPU).
@@ -293,6 +314,10 @@ def feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_dir: str
         :class:`FeatureTable`.
     """
     cfg = cfg or FeatureConfig()
+    if is_point_source(ref) and is_point_source(dist):  # native point rendering, no meshing
+        from lit3d.features.points import point_feature_table
+
+        return point_feature_table(ref, dist, cfg, cache_dir=cache_dir, device=device)
     mref, mdist = to_mesh(ref), to_mesh(dist)
     key = content_key(mesh_hash(mref), mesh_hash(mdist), cfg)
     path = Path(cache_dir) / f"{key}.json" if cache_dir is not None else None

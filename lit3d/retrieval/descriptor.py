@@ -15,6 +15,8 @@ rotations cover it).
     cfg = DescriptorConfig(level=2, view_size=128, vocab=1000)
     D = distance_matrix_from_meshes([(verts, faces), ...], cfg)    # (n, n)
     D = distance_matrix_from_depths(depths, masks, cfg)            # back-projected depth images
+    feats = mesh_features(meshes, cfg)                             # once; then per codebook seed:
+    D = distance_matrix_from_features(feats, cfg, seed=3)
 """
 from __future__ import annotations
 
@@ -197,22 +199,41 @@ def view_features(verts: np.ndarray, faces: np.ndarray, cfg: DescriptorConfig, d
     return [sift_features(img, cfg.dense_step) for img in views]
 
 
+def mesh_features(meshes: list[tuple[np.ndarray, np.ndarray]], cfg: DescriptorConfig) -> list[list[np.ndarray]]:
+    """Per mesh, per view: the SIFT descriptors ``(n, 128) float32`` (the expensive part: rendering
+    and SIFT; independent of the codebook seed)."""
+    dirs = octahedron_views(cfg.level)
+    return [view_features(v, f, cfg, dirs) for v, f in meshes]
+
+
+def distance_matrix_from_features(feats: list[list[np.ndarray]], cfg: DescriptorConfig, seed: int | None = None,
+                                  return_hists: bool = False):
+    """``(n, n)`` distances from :func:`mesh_features`: codebook (k-means seeded by ``seed``, default
+    ``cfg.seed``), histograms, view-matched distances. Cheap next to the features, so a study over
+    codebook seeds computes the features once."""
+    centres = fit_codebook([d for fs in feats for d in fs], cfg.vocab, cfg.kmeans_samples,
+                           cfg.seed if seed is None else int(seed))
+    hists = [np.stack([bow_histogram(d, centres) for d in fs]) for fs in feats]
+    D = shape_distances(hists, view_permutations(octahedron_views(cfg.level)) if cfg.rotations else None)
+    return (D, hists) if return_hists else D
+
+
 def distance_matrix_from_meshes(meshes: list[tuple[np.ndarray, np.ndarray]], cfg: DescriptorConfig | None = None,
                                 return_hists: bool = False):
     """``(n, n)`` descriptor distances of meshes ``[(verts, faces), ...]``."""
     cfg = cfg or DescriptorConfig()
-    dirs = octahedron_views(cfg.level)
-    feats = [view_features(v, f, cfg, dirs) for v, f in meshes]
-    centres = fit_codebook([d for fs in feats for d in fs], cfg.vocab, cfg.kmeans_samples, cfg.seed)
-    hists = [np.stack([bow_histogram(d, centres) for d in fs]) for fs in feats]
-    D = shape_distances(hists, view_permutations(dirs) if cfg.rotations else None)
-    return (D, hists) if return_hists else D
+    return distance_matrix_from_features(mesh_features(meshes, cfg), cfg, return_hists=return_hists)
+
+
+def depth_meshes(depths: np.ndarray, masks: np.ndarray, cfg: DescriptorConfig | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each ``(S, S)`` normalised depth + mask back-projected to a surface ``(verts, faces)``."""
+    from lit3d.render.depth import depth_to_mesh
+
+    cfg = cfg or DescriptorConfig()
+    return [depth_to_mesh(np.asarray(d, np.float64), np.asarray(m), cfg.max_jump) for d, m in zip(depths, masks)]
 
 
 def distance_matrix_from_depths(depths: np.ndarray, masks: np.ndarray, cfg: DescriptorConfig | None = None) -> np.ndarray:
     """Back-project each ``(S, S)`` normalised depth + mask to a surface, then as above."""
-    from lit3d.render.depth import depth_to_mesh
-
     cfg = cfg or DescriptorConfig()
-    meshes = [depth_to_mesh(np.asarray(d, np.float64), np.asarray(m), cfg.max_jump) for d, m in zip(depths, masks)]
-    return distance_matrix_from_meshes(meshes, cfg)
+    return distance_matrix_from_meshes(depth_meshes(depths, masks, cfg), cfg)

@@ -1,13 +1,61 @@
-"""Pictures of voxel grids without a renderer: depth-shaded projections.
+"""Pictures of voxel grids.
 
-A grid is looked at along one axis; each pixel shows how near the first
-occupied voxel is (near = bright), so shapes read as 3D in a flat PNG.
+:func:`render_voxels`: shaded 3D renders (marching cubes -> the project's G-buffer pass ->
+a MatCap style), what a person reads; used by the completion figures.
+:func:`depth_shaded` / :func:`panel`: renderer-free depth-shaded projections along one grid
+axis (near = bright), for quick previews (``lit3d-data`` show).
+
+Grid axes (``datamodules.synth.depth_voxels``): index ``[i, j, k]`` is GL ``x = i`` (right),
+``y = j`` (up), ``z = -k`` (``k = 0`` nearest the depth camera, which looks down GL ``-z``).
 """
 from __future__ import annotations
 
 import numpy as np
 import torch
 import torch.nn.functional as F
+
+# GL directions from the shape towards the camera: front (the depth camera's side) and back,
+# both from above and from the right/left, so the visible and the completed parts both show
+FRONT_VIEW = (0.55, 0.45, 0.70)
+BACK_VIEW = (-0.55, 0.45, -0.70)
+
+
+def render_voxels(volume: torch.Tensor | np.ndarray, threshold: float = 0.5, size: int = 256,
+                  directions=(FRONT_VIEW,), style: str = "clay_studio", extent: float = 0.78) -> np.ndarray:
+    """Shaded renders of one grid: ``(V, size, size, 3) uint8``, white background.
+
+    Args:
+        volume: ``(D, D, D)`` occupancy or probabilities (any float/bool dtype); the surface is
+            the marching-cubes level set at ``threshold`` (nearest-upsample coarse grids first
+            with :func:`to_resolution` to show them as voxels next to finer ones).
+        size: image side in pixels.
+        directions: ``V`` GL view directions (shape -> camera), see :data:`FRONT_VIEW`.
+        style: a MatCap style name of :mod:`lit3d.render.styles`.
+        extent: orthographic half-width in units of the grid side (the grid cube spans
+            [-0.5, 0.5]^3, so every grid of a figure is drawn at the same scale).
+    An empty grid (nothing above ``threshold``) gives blank images.
+    """
+    from lit3d.render.convert import ShapeError, voxels_to_mesh
+    from lit3d.render.gbuffer import RenderConfig, render_gbuffer
+    from lit3d.render.styles import apply_styles
+
+    vol = volume.detach().float().cpu().numpy() if isinstance(volume, torch.Tensor) else np.asarray(volume, np.float32)
+    dirs = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    blank = np.full((len(dirs), size, size, 3), 255, np.uint8)
+    try:
+        mesh = voxels_to_mesh(vol, "<render_voxels>", level=threshold)
+    except ShapeError:
+        return blank
+    d = vol.shape[0]
+    # index space (+1 pad of voxels_to_mesh) -> GL, grid cube in [-0.5, 0.5]^3; z flipped
+    t = np.diag([1.0 / d, 1.0 / d, -1.0 / d, 1.0])
+    t[:3, 3] = [-(0.5 + 1.0 / d), -(0.5 + 1.0 / d), 0.5 + 1.0 / d]
+    mesh.apply_transform(t)  # a reflection: trimesh flips the faces, normals stay outward
+    dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    gb = render_gbuffer(mesh, RenderConfig(size=size, extent=extent, distance=3.0), shading="smooth",
+                        normalise=False, directions=dirs)
+    img = apply_styles(gb.normals, gb.mask, [style], background=1.0)[0]  # (V, 3, S, S)
+    return (img.clamp(0, 1) * 255).round().to(torch.uint8).permute(0, 2, 3, 1).numpy()
 
 
 def depth_shaded(volume: torch.Tensor, threshold: float = 0.5, axis: int = 0) -> np.ndarray:

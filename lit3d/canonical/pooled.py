@@ -1,0 +1,241 @@
+"""Pooled, cross-validated retrieval of the canonical task: every held-out item scored once, every
+row on the same items and the same codebook seeds, mean +- sd over the seeds.
+
+    python -m lit3d.canonical.pooled RUN_DIR... --seeds 0 1 2 3 4 --out DIR
+    python -m lit3d.canonical.pooled --seeds 0 1 2 3 4 --out DIR -- experiment=canonical_tosca \\
+        data.root=../shared/data/tosca8k data.view_mode=broadside        # non-learned rows only
+
+With run dirs (one per fold, each with the ``heldout.npz`` that
+:func:`lit3d.canonical.evaluator.protocol` writes), the folds are merged
+(:func:`lit3d.canonical.heldout.pool`: each item held out exactly once) and the rows are the
+prediction (``model`` or ``unet``), the posed input depth and the true canonical depth, plus the
+mesh rows. Without run dirs the Hydra overrides after ``--`` compose the data and task config (as
+``lit3d-train`` would) and the items are every item some fold holds out
+(:meth:`datamodules.canonical.CanonicalDataModule.held_out_records`): the posed-input and true
+canonical depth rows plus the mesh rows. Mesh rows (one per held-out subject x pose, full
+resolution): the non-learned canonical forms ``task.mesh_baselines`` (landmark geodesics,
+:mod:`lit3d.geometry.canonical_forms`), ShapeDNA of the posed full mesh (the intrinsic ceiling,
+:func:`lit3d.geometry.spectral.shape_dna`; no codebook, so sd 0), and chance (random distances,
+seeded by the codebook seed). Writes ``DIR/pooled_results.md`` (thesis table 5.x layout) and
+``DIR/pooled.json`` (every seed's scores).
+"""
+from __future__ import annotations
+
+import json
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+
+from lit3d.canonical.heldout import HELDOUT_FILE, pool
+
+log = logging.getLogger("lit3d")
+
+DEPTH_ROWS = ("model", "unet", "input", "target")
+SCORES = ("nn", "ft", "st", "e", "dcg")
+
+
+def depth_meshes_of(pooled: dict, cfg, mask_threshold: float) -> dict[str, list]:
+    """``{row: [(verts, faces)]}`` back-projected from the pooled depth images: the prediction
+    (mask probability thresholded at ``mask_threshold``), the posed input, the true canonical."""
+    from lit3d.metrics.depth import composite_depth
+    from lit3d.retrieval.descriptor import depth_meshes
+    import torch
+
+    def meshes(d, m):
+        d, m = torch.from_numpy(d.astype(np.float32)), torch.from_numpy(m.astype(np.float32))
+        return depth_meshes(composite_depth(d, m).numpy(), m.numpy(), cfg)
+
+    out = {}
+    if "pred_depth" in pooled:
+        pm = (pooled["pred_mask"].astype(np.float32) >= mask_threshold).astype(np.float32)
+        out[str(pooled.get("source", "model"))] = meshes(pooled["pred_depth"], pm)
+    out["input"] = meshes(pooled["depth"], pooled["mask"])
+    out["target"] = meshes(pooled["canon_depth"], pooled["canon_mask"])
+    return out
+
+
+def score_rows(features: dict[str, list], labels: np.ndarray, cfg, seeds, extra_dists: dict | None = None,
+               chance_trials: int = 100) -> dict[str, dict[str, list[float]]]:
+    """``{row: {score: [value per seed]}}``: each row's descriptor features
+    (:func:`lit3d.retrieval.descriptor.mesh_features`) through a codebook per seed; ``extra_dists``
+    ``{row: (n, n)}`` (seed-free, e.g. ShapeDNA) scored once per seed alike; chance per seed."""
+    from lit3d.metrics.retrieval import chance_scores, retrieval_scores
+    from lit3d.retrieval.descriptor import distance_matrix_from_features
+
+    out: dict[str, dict[str, list[float]]] = {}
+    for seed in seeds:
+        per = {row: retrieval_scores(distance_matrix_from_features(f, cfg, seed), labels) for row, f in features.items()}
+        per.update({row: retrieval_scores(D, labels) for row, D in (extra_dists or {}).items()})
+        per["chance"] = chance_scores(labels, chance_trials, seed=int(seed))
+        for row, sc in per.items():
+            for k in SCORES:
+                out.setdefault(row, {}).setdefault(k, []).append(float(sc[k]))
+    return out
+
+
+def summarise(per_seed: dict[str, dict[str, list[float]]]) -> dict[str, dict[str, tuple[float, float]]]:
+    """``{row: {score: (mean, sd)}}`` (sd with ddof=1; 0 for one seed)."""
+    return {row: {k: (float(np.mean(v)), float(np.std(v, ddof=1)) if len(v) > 1 else 0.0) for k, v in sc.items()}
+            for row, sc in per_seed.items()}
+
+
+def study(items: dict, datamodule, settings: dict, seeds, rows=None) -> dict:
+    """Every row's per-seed scores on the pooled ``items`` (``subject``, ``pose`` and the depth
+    images of :func:`lit3d.canonical.heldout.pool`); ``settings``: the task's ``retrieval``,
+    ``mask_threshold``, ``chance_trials``, ``mesh_baselines``, ``baseline_max_vertices``,
+    ``baseline_landmarks``, ``baseline_smacof_eps``. ``rows``: restrict to these row names."""
+    from lit3d.canonical.baselines import mesh_rows
+    from lit3d.retrieval.descriptor import DescriptorConfig, mesh_features
+
+    cfg = DescriptorConfig(**(settings.get("retrieval") or {}))
+    want = (lambda r: rows is None or r in rows)  # noqa: E731
+    labels = np.asarray(items["subject"])
+    seconds, features = {}, {}
+    for row, meshes in depth_meshes_of(items, cfg, settings.get("mask_threshold", 0.5)).items():
+        if want(row):
+            t0 = time.perf_counter()
+            features[row] = mesh_features(meshes, cfg)
+            seconds[row] = time.perf_counter() - t0
+            log.info("%s: descriptor features of %d items, %.0fs", row, len(meshes), seconds[row])
+    pairs = list(zip(items["subject"], items["pose"]))
+    if len(set(pairs)) != len(pairs):  # several views per pose: mesh rows would rank other items
+        log.warning("several views per pose: mesh rows skipped (they score one item per subject x pose)")
+        methods = []
+    else:
+        methods = [m for m in [*(settings.get("mesh_baselines") or []), "shapedna"] if want(m)]
+    meshes = [datamodule.normalized_mesh(str(s), int(p)) for s, p in pairs] if methods else []
+    mesh_feats, dists, mesh_secs = mesh_rows(meshes, methods, cfg, settings.get("baseline_max_vertices"),
+                                             settings.get("baseline_landmarks", 300),
+                                             settings.get("baseline_smacof_eps", 1e-4))
+    features.update(mesh_feats)
+    seconds.update(mesh_secs)
+    log.info("mesh rows %s: %s", methods, {k: round(v) for k, v in mesh_secs.items()})
+    t0 = time.perf_counter()
+    per_seed = score_rows(features, labels, cfg, seeds, dists, int(settings.get("chance_trials", 100)))
+    return {"per_seed": per_seed, "summary": summarise(per_seed), "seeds": [int(s) for s in seeds],
+            "n_items": int(len(labels)), "n_subjects": int(len(set(labels.tolist()))),
+            "seconds": {**seconds, "codebooks_and_scores": time.perf_counter() - t0},
+            "descriptor": cfg.__dict__}
+
+
+def compose(overrides: list[str]):
+    """The ``lit3d-train`` config for ``overrides`` (Hydra compose of ``conf/train.yaml`` with task=canonical)."""
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
+
+    conf = str(Path(__file__).resolve().parents[2] / "conf")
+    with initialize_config_dir(config_dir=conf, version_base="1.3"):
+        return hydra_compose(config_name="train", overrides=["task=canonical", *overrides])
+
+
+def settings_of(task_cfg: dict) -> dict:
+    keys = ("retrieval", "mask_threshold", "chance_trials", "mesh_baselines", "baseline_max_vertices",
+            "baseline_landmarks", "baseline_smacof_eps")
+    return {k: task_cfg[k] for k in keys if k in task_cfg}
+
+
+def build_datamodule(data: dict):
+    from datamodules.canonical import CanonicalDataModule
+
+    data = {k: v for k, v in data.items() if k != "_target_"}
+    return CanonicalDataModule(**data)
+
+
+def run(run_dirs, seeds, out_dir, overrides=(), rows=None, strict: bool = True, mesh_baselines=None) -> Path:
+    """Pool (or, without run dirs, take every held-out item of the composed config), score, write
+    ``pooled_results.md`` and ``pooled.json`` into ``out_dir``; returns the .md path.
+    ``mesh_baselines``: the canonical-form rows (default: the task's ``mesh_baselines``)."""
+    from omegaconf import OmegaConf
+
+    from lit3d.canonical.report import write_pooled_results
+
+    t0 = time.perf_counter()
+    if run_dirs:
+        items = pool(run_dirs, strict=strict)
+        data, settings = json.loads(str(items["data"])), json.loads(str(items["settings"]))
+        dm = build_datamodule(data)
+        meta = {"runs": [str(d) for d in run_dirs], "folds": items["folds"].tolist()}
+    else:
+        cfg = compose(list(overrides))
+        data = OmegaConf.to_container(cfg.data, resolve=True)
+        settings = settings_of(OmegaConf.to_container(cfg.task, resolve=True))
+        dm = build_datamodule(data)
+        dm.prepare_data()
+        dm.setup()
+        from datamodules.canonical.dataset import PairDataset
+
+        ds = PairDataset(dm.held_out_records(), dm.cache, dm.subject_index)
+        its = [ds[i] for i in range(len(ds))]
+        items = {k: np.stack([it[k][0].numpy() for it in its]) for k in ("depth", "mask", "canon_depth", "canon_mask")}
+        items.update(subject=np.array([it["subject"] for it in its]), pose=np.array([it["pose"] for it in its]))
+        meta = {"overrides": list(overrides)}
+    if mesh_baselines is not None:
+        settings["mesh_baselines"] = list(mesh_baselines)
+    result = study(items, dm, settings, seeds, rows)
+    result.update(meta, data={k: data.get(k) for k in ("source", "root", "image_size", "azimuths", "view_mode",
+                                                       "split", "n_folds", "seed")},
+                  settings=settings, wall_seconds=time.perf_counter() - t0)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    from lit3d.utils.io import write_json
+
+    write_json(out_dir / "pooled.json", result)
+    return write_pooled_results(result, out_dir)
+
+
+def job_dirs(sweep_dir: Path) -> list[Path]:
+    """The jobs of a multirun that wrote ``heldout.npz``."""
+    return sorted(p for p in Path(sweep_dir).iterdir() if (p / HELDOUT_FILE).is_file())
+
+
+try:
+    from hydra.experimental.callback import Callback as _HydraCallback
+except ImportError:  # pragma: no cover
+    _HydraCallback = object
+
+
+class PooledResults(_HydraCallback):
+    """Hydra callback (``sweeps/canonical_cv.yaml``): when the multirun over ``data.fold`` ends, pool
+    its jobs' held-out items and write ``pooled_results.md`` into the sweep dir."""
+
+    def __init__(self, seeds=(0, 1, 2, 3, 4), rows=None, mesh_baselines=None):
+        self.seeds, self.rows = list(seeds), (list(rows) if rows else None)
+        self.mesh_baselines = list(mesh_baselines) if mesh_baselines is not None else None
+
+    def on_multirun_end(self, config, **kwargs) -> None:
+        sweep_dir = Path(config.hydra.sweep.dir)
+        jobs = job_dirs(sweep_dir) if sweep_dir.is_dir() else []
+        if not jobs:
+            log.warning("%s: no job wrote %s; nothing pooled", sweep_dir, HELDOUT_FILE)
+            return
+        path = run(jobs, self.seeds, sweep_dir, rows=self.rows, mesh_baselines=self.mesh_baselines)
+        print(path.read_text())
+
+
+def main(argv: list[str] | None = None) -> None:
+    import argparse
+    import sys
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    overrides = argv[argv.index("--") + 1:] if "--" in argv else []
+    argv = argv[:argv.index("--")] if "--" in argv else argv
+    parser = argparse.ArgumentParser(prog="python -m lit3d.canonical.pooled", description=__doc__.split("\n")[0])
+    parser.add_argument("runs", nargs="*", type=Path, help="run dirs with heldout.npz (one per fold)")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4], help="codebook seeds")
+    parser.add_argument("--out", type=Path, required=True, help="folder for pooled_results.md and pooled.json")
+    parser.add_argument("--rows", nargs="+", default=None, help="only these rows (e.g. input cmds shapedna)")
+    parser.add_argument("--mesh-baselines", nargs="*", default=None,
+                        help="canonical-form rows (cmds smacof nmds gps posed; default: the task's mesh_baselines)")
+    parser.add_argument("--allow-partial", action="store_true", help="score folds that do not cover every item")
+    args = parser.parse_args(argv)
+    if not args.runs and not overrides:
+        parser.error("give run dirs, or Hydra overrides after -- for the non-learned rows")
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    print(run(args.runs, args.seeds, args.out, overrides, args.rows, strict=not args.allow_partial,
+              mesh_baselines=args.mesh_baselines).read_text())
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,246 @@
+"""``lit3d-reconstruct DEPTH... --ckpt CKPT --out DIR``: depth images -> completed meshes.
+
+Examples::
+
+    lit3d-reconstruct scan.png --ckpt logs/demo/train/checkpoints/best-009.ckpt --out out/
+    lit3d-reconstruct depth_dir/ --ckpt CKPT --out out/ --fx 570.3 --fy 570.3 --cx 320 --cy 240
+    lit3d-reconstruct d.npy --ckpt CKPT --out out/ --far 2.0 --remove-plane --format ply
+    lit3d-reconstruct d.png --ckpt CKPT --out out/ --reference chair.obj --quality-ckpt Q.ckpt
+    lit3d-reconstruct d.png --ckpt CKPT --out out/ --canonical logs/canonical/.../best.ckpt
+
+Inputs: 16-bit PNG/TIFF (depth units x --depth-scale metres, default millimetres), .npy/.npz
+float metres, .exr metres; 0 = background. A folder gives all its depth files. Camera: --fov
+(one field of view across width and height, principal point at the centre) or --fx --fy --cx
+--cy in pixels (OpenCV convention); the default is the 3D-RecGAN++ camera (fov 49.124 deg).
+Per input NAME, DIR gets NAME.obj (camera frame: x right, y down, z forward, metres),
+NAME_occupancy.npz (packed bits), NAME.png (labelled picture) and NAME.json (timings, grid
+sizes, threshold, checkpoint, score). A bad input gets one line naming the file and the
+problem, the batch goes on, and the exit status is 2.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from lit3d.cli.common import EXIT_USER  # light: no torch or Lightning
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="lit3d-reconstruct", description=__doc__.split("\n\n")[0],
+                                epilog="\n\n".join(__doc__.split("\n\n")[1:]).replace("``", "'"),
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("depth", nargs="+", help="depth image(s) or folder(s) of them")
+    p.add_argument("--ckpt", required=True, help="completion checkpoint (lit3d-train task=completion)")
+    p.add_argument("--out", required=True, help="output folder")
+    cam = p.add_argument_group("camera")
+    cam.add_argument("--fov", type=float, default=None, help="field of view in degrees (default 49.124)")
+    for k in ("fx", "fy", "cx", "cy"):
+        cam.add_argument(f"--{k}", type=float, default=None, help=f"intrinsic {k} in pixels (give all four)")
+    cam.add_argument("--depth-scale", type=float, default=0.001,
+                     help="metres per unit of integer depth images (default 0.001: millimetres)")
+    cut = p.add_argument_group("object")
+    cut.add_argument("--mask", help="object mask image (non-zero = object), or a folder of NAME.png/.npy masks")
+    cut.add_argument("--near", type=float, default=None, help="ignore depth nearer than this (metres)")
+    cut.add_argument("--far", type=float, default=None, help="ignore depth farther than this (metres)")
+    cut.add_argument("--remove-plane", action="store_true", help="remove the dominant plane (table, floor)")
+    cut.add_argument("--largest-cluster", action="store_true",
+                     help="keep only the largest depth-connected region")
+    p.add_argument("--no-fuse", action="store_true",
+                   help="do not add the visible surface voxels to the completed grid (network output only)")
+    p.add_argument("--format", choices=("obj", "ply", "glb"), default="obj", help="mesh format (default obj)")
+    p.add_argument("--canonical", metavar="CKPT", help="canonical-task checkpoint: complete the canonical pose")
+    p.add_argument("--reference", metavar="REF", help="reference shape (camera frame) to score the result against")
+    p.add_argument("--quality-ckpt", metavar="Q", help="quality model checkpoint for the score (with --reference)")
+    p.add_argument("--size", type=int, default=256, help="picture panel size in pixels (default 256)")
+    p.add_argument("--no-figure", action="store_true", help="skip the picture")
+    p.add_argument("--device", default="cpu", help="torch device (cpu, cuda, cuda:1 ...)")
+    p.add_argument("--debug", action="store_true", help="show full tracebacks")
+    return p
+
+
+def _say(msg: str) -> None:
+    print(f"lit3d-reconstruct: {msg}", file=sys.stderr, flush=True)
+
+
+def _intrinsics(args, width: int, height: int, label: str):
+    from lit3d.reconstruct.backproject import RECGAN_FOV_DEG, Intrinsics
+
+    given = [getattr(args, k) for k in ("fx", "fy", "cx", "cy")]
+    if any(v is not None for v in given):
+        return Intrinsics(*given).check(width, height, label)
+    return Intrinsics.from_fov(args.fov or RECGAN_FOV_DEG, width, height).check(width, height, label)
+
+
+def _check_args(args) -> None:
+    from lit3d.reconstruct.depth_io import InputError
+
+    given = [getattr(args, k) for k in ("fx", "fy", "cx", "cy")]
+    if any(v is not None for v in given) and not all(v is not None for v in given):
+        raise InputError("--fx --fy --cx --cy: give all four intrinsics (or --fov)")
+    if args.fov is not None and any(v is not None for v in given):
+        raise InputError("--fov and --fx/--fy/--cx/--cy: give one camera, not both")
+    if args.quality_ckpt and not args.reference:
+        raise InputError("--quality-ckpt needs --reference (the shape to score against)")
+    if not 64 <= args.size <= 2048:
+        raise InputError(f"--size {args.size}: expected 64..2048 pixels")
+    if args.near is not None and args.far is not None and args.near >= args.far:
+        raise InputError(f"--near {args.near} >= --far {args.far}: empty depth range")
+
+
+def _mask_for(args, depth_path: Path, shape):
+    from lit3d.reconstruct.depth_io import InputError, read_mask
+
+    if not args.mask:
+        return None
+    m = Path(args.mask)
+    if m.is_dir():
+        found = [q for q in sorted(m.glob(depth_path.stem + ".*")) if q.is_file()]
+        if not found:
+            raise InputError(f"{depth_path}: no mask {m}/{depth_path.stem}.* in the mask folder")
+        m = found[0]
+    return read_mask(m, shape)
+
+
+class _Scorer:
+    """``--reference``/``--quality-ckpt``: lit3d-score's rendering-based features of (REF, result)."""
+
+    def __init__(self, args):
+        from lit3d.cli.score import DEFAULT_SIZE, _model_features
+        from lit3d.features.table import FeatureConfig
+        from lit3d.render.convert import to_mesh
+        from lit3d.render.gbuffer import RenderConfig
+        from lit3d.render.styles import resolve_styles
+
+        self.ref = to_mesh(args.reference)
+        self.cfg = FeatureConfig(render=RenderConfig(size=DEFAULT_SIZE), styles=tuple(resolve_styles("all")))
+        self.predictor, self.notes = None, []
+        if args.quality_ckpt:
+            ns = argparse.Namespace(ckpt=args.quality_ckpt, size=None, styles=None)
+            self.predictor, self.cfg, self.notes = _model_features(ns, self.cfg)
+        self.args = args
+
+    def score(self, mesh) -> dict:
+        from lit3d.features.table import feature_table
+
+        table = feature_table(self.ref, mesh, self.cfg, cache_dir=None, device=self.args.device)
+        out = {"reference": str(self.args.reference), "overall_score_mean_mask_ssim": table.overall_score(),
+               "chamfer": table.features.get("chamfer"), "hausdorff": table.features.get("hausdorff"),
+               "notes": list(self.notes)}
+        if self.predictor is not None:
+            pred = self.predictor.predict(table.features)
+            out.update(predicted_score=pred.pop("score"), quality_ckpt=str(self.args.quality_ckpt),
+                       score_source=pred)
+        return out
+
+
+def _one(args, path: Path, completer, mapper, scorer) -> dict:
+    from lit3d.reconstruct.depth_io import read_depth
+    from lit3d.reconstruct.figure import figure_png
+    from lit3d.reconstruct.outputs import mesh_bytes, occupancy_npz, write_outputs
+    from lit3d.reconstruct.pipeline import Options, reconstruct
+
+    t_all = time.perf_counter()
+    t0 = time.perf_counter()
+    depth = read_depth(path, args.depth_scale)
+    t_read = time.perf_counter() - t0
+    h, w = depth.shape
+    intr = _intrinsics(args, w, h, str(path))
+    opts = Options(mask=_mask_for(args, path, depth.shape), near=args.near, far=args.far,
+                   remove_plane=args.remove_plane, largest_cluster=args.largest_cluster, fuse_input=not args.no_fuse)
+    res = reconstruct(depth, intr, completer, opts, label=str(path), canonical=mapper)
+    timings = {"read": t_read, **res.timings}
+    files = {f".{args.format}": mesh_bytes(res.mesh, args.format),
+             "_occupancy.npz": occupancy_npz(res, completer.threshold)}
+    if not args.no_figure:
+        t0 = time.perf_counter()
+        title = f"{path.name}: {len(res.points)} visible points -> {completer.geometry.target_res}^3 grid, " \
+                f"threshold {completer.threshold:.2f}" + (" (canonical pose)" if mapper else "")
+        files[".png"] = figure_png(depth, res.keep, res.points, res.mesh, title, args.size)
+        timings["figure"] = time.perf_counter() - t0
+    summary = {
+        "input": str(path), "image_size": [w, h], "intrinsics": intr.as_dict(), "depth_scale": args.depth_scale,
+        "checkpoint": completer.path, "threshold": completer.threshold, "device": args.device,
+        "geometry": completer.geometry.as_dict(), "placement": res.placement.as_dict(),
+        "grids": {"input": [completer.geometry.input_res] * 3, "output": [completer.geometry.target_res] * 3},
+        "fuse_input": opts.fuse_input, "counts": res.info, "mesh_frame": "camera (x right, y down, z forward), metres",
+        "notes": list(completer.notes),
+    }
+    if mapper is not None:
+        summary["mesh_frame"] += "; canonical pose placed at the posed subject's position and size"
+    if scorer is not None:
+        t0 = time.perf_counter()
+        summary["score"] = scorer.score(res.mesh)
+        timings["score"] = time.perf_counter() - t0
+    timings["total"] = time.perf_counter() - t_all
+    summary["timings_s"] = timings
+    write_outputs(args.out, path.stem, files, summary)
+    return summary
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        return _run(args)
+    except KeyboardInterrupt:
+        _say("interrupted")
+        return 130
+    except Exception as exc:
+        if args.debug:
+            raise
+        return _report(exc)
+
+
+def _report(exc: Exception, prefix: str = "") -> int:
+    from lit3d.render.convert import ShapeError
+    from lit3d.utils.checkpoints import first_line
+
+    user = isinstance(exc, (ShapeError, ValueError, FileNotFoundError, NotImplementedError))
+    kind = "error" if user else f"internal error ({type(exc).__name__}; rerun with --debug)"
+    _say(f"{kind}: {prefix}{first_line(exc, type(exc).__name__)}")
+    return EXIT_USER if user else 1
+
+
+def _run(args) -> int:
+    from lit3d.reconstruct.depth_io import list_inputs
+
+    _check_args(args)
+    inputs = list_inputs(args.depth)  # a missing folder or file list is answered before the imports
+    from tqdm import tqdm
+
+    from lit3d.reconstruct.pipeline import load_completer
+
+    completer = load_completer(args.ckpt, args.device)
+    for note in completer.notes:
+        _say(f"note: {note}")
+    mapper = None
+    if args.canonical:
+        from lit3d.reconstruct.canonical import load_canonical
+
+        mapper = load_canonical(args.canonical, args.device)
+    scorer = _Scorer(args) if args.reference else None
+    failed = 0
+    status = 0
+    bar = tqdm(inputs, desc="reconstruct", unit="image", disable=len(inputs) < 2, file=sys.stderr)
+    for path in bar:
+        try:
+            s = _one(args, path, completer, mapper, scorer)
+            if len(inputs) < 2:
+                _say(f"wrote {Path(args.out) / path.stem}.{{{args.format},png,json}} and "
+                     f"{path.stem}_occupancy.npz ({s['timings_s']['total']:.1f} s)")
+        except Exception as exc:
+            if args.debug:
+                raise
+            failed += 1
+            with bar.external_write_mode(file=sys.stderr):
+                code = _report(exc, "" if str(path) in str(exc) else f"{path}: ")
+            status = max(status, code)
+    if len(inputs) > 1:
+        _say(f"{len(inputs) - failed} of {len(inputs)} images reconstructed into {args.out}"
+             + (f"; {failed} failed (see above)" if failed else ""))
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,178 @@
+"""Feature table of a point-cloud pair, rendered as points (no meshing).
+
+Same table as :func:`lit3d.features.table.feature_table` for meshes — every image
+measure of every MatCap style, shading and view, names ``measure/style/shading`` — from
+the native splat renderer (:mod:`lit3d.render.splat`), plus:
+
+- colour styles (:mod:`lit3d.render.colour_styles`) when both clouds carry colour:
+  ``albedo_luma`` and ``lit_luma`` get every image measure (they are grey images);
+  ``albedo_rgb`` and ``lit_rgb`` get the SSIM family and MSE/RMSE/PSNR on RGB
+  (:data:`RGB_MEASURES`; SSIM maps averaged over the channels, PSNR from the mean
+  channel MSE);
+- the point-cloud baselines of :mod:`lit3d.metrics.pointcloud` (``d1_psnr``,
+  ``d2_psnr``, ``y_psnr``, their MSEs, ``hausdorff``, ``chamfer``) in the reference's
+  normalised frame (longest bounding-box side 1), when ``mesh_measures`` is on.
+
+Both clouds are placed in the reference's frame. Local frames (PCA normals, spacing)
+of recently seen clouds are kept in memory, so a dataset with one reference computes
+the reference's once.
+"""
+from __future__ import annotations
+
+import json
+from collections import OrderedDict
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from lit3d.features.table import (
+    _CROP_MARGIN,
+    FeatureConfig,
+    FeatureTable,
+    _crop_box,
+    content_key,
+    pair_measures,
+)
+from lit3d.metrics.pointcloud import pointcloud_baselines
+from lit3d.render.colour_styles import apply_colour_styles
+from lit3d.render.points import PointShape, load_points, local_frames
+from lit3d.render.splat import point_frame, render_point_gbuffers
+from lit3d.render.styles import apply_styles
+
+POINT_PATH_VERSION = 2
+RGB_MEASURES = ("mask_ssim", "mask_ssim_window", "mask_ssim_negative", "mask_ssim_merge", "ssim", "mse", "rmse",
+                "psnr")
+GREY_COLOUR_STYLES = ("albedo_luma", "lit_luma")
+RGB_COLOUR_STYLES = ("albedo_rgb", "lit_rgb")
+_FRAMES: OrderedDict[str, dict[str, np.ndarray]] = OrderedDict()
+_FRAMES_KEEP = 4
+
+
+def cached_frames(shape: PointShape, key: str) -> dict[str, np.ndarray]:
+    """:func:`lit3d.render.points.local_frames` of ``shape``, memoised for the last few clouds."""
+    if key in _FRAMES:
+        _FRAMES.move_to_end(key)
+        return _FRAMES[key]
+    lf = local_frames(shape.points)
+    _FRAMES[key] = lf
+    while len(_FRAMES) > _FRAMES_KEEP:
+        _FRAMES.popitem(last=False)
+    return lf
+
+
+def _rgb_measures(a: torch.Tensor, b: torch.Tensor, ma, mb, crop, measures) -> dict[str, torch.Tensor]:
+    """RGB pairs ``(N, 3, h, w)`` -> ``{measure: (N,)}`` for ``measures`` within :data:`RGB_MEASURES`."""
+    want = [m for m in measures if m in RGB_MEASURES]
+    if not want:
+        return {}
+    n = a.shape[0]
+    grey = [m for m in want if m not in ("rmse", "psnr")] + (["mse"] if {"rmse", "psnr"} & set(want) else [])
+    res = pair_measures(a.reshape(n * 3, 1, *a.shape[-2:]), b.reshape(n * 3, 1, *b.shape[-2:]), ma, mb, crop,
+                        tuple(dict.fromkeys(grey)))
+    out = {k: v.view(n, 3).mean(1) for k, v in res.items()}
+    if "mse" in out:
+        from lit3d.metrics.image import PSNR_MAX_DB
+
+        out["rmse"] = out["mse"].sqrt()
+        out["psnr"] = (10.0 * torch.log10(1.0 / out["mse"].clamp_min(1e-30))).clamp(max=PSNR_MAX_DB)
+    return {k: v for k, v in out.items() if k in want}
+
+
+def _view_measures(ga, gb, v: int, names: list[str], cfg: FeatureConfig, colour: bool) -> dict[str, torch.Tensor]:
+    """``{(measure, style): (1,) float32}`` for view ``v`` of two point G-buffers (crop of the union of masks)."""
+    hh, ww = ga.mask.shape[-2:]
+    y0, y1, x0, x1 = _crop_box(torch.cat([ga.mask[v:v + 1], gb.mask[v:v + 1]]), _CROP_MARGIN)
+    sl = (slice(v, v + 1), slice(None), slice(y0, y1), slice(x0, x1))
+    ma, mb = ga.mask[sl], gb.mask[sl]
+    ia = apply_styles(ga.normals[sl], ma, names, grey=True)[:, 0]  # (S, 1, h, w)
+    ib = apply_styles(gb.normals[sl], mb, names, grey=True)[:, 0]
+    styles = list(names)
+    crop = (y0, x0, hh, ww)
+    out: dict[tuple[str, str], torch.Tensor] = {}
+    if colour:
+        ca = apply_colour_styles(ga.colour[sl], ga.normals[sl], ma)
+        cb = apply_colour_styles(gb.colour[sl], gb.normals[sl], mb)
+        ia = torch.cat([ia] + [ca[s] for s in GREY_COLOUR_STYLES])
+        ib = torch.cat([ib] + [cb[s] for s in GREY_COLOUR_STYLES])
+        styles += list(GREY_COLOUR_STYLES)
+        rgb = _rgb_measures(torch.cat([ca[s] for s in RGB_COLOUR_STYLES]), torch.cat([cb[s] for s in RGB_COLOUR_STYLES]),
+                            ma, mb, crop, cfg.measures)
+        for k, t in rgb.items():
+            for j, s in enumerate(RGB_COLOUR_STYLES):
+                out[(k, s)] = t[j:j + 1].float().cpu()
+    step = cfg.chunk if cfg.chunk > 0 else len(styles)
+    for i in range(0, len(styles), step):
+        j = min(i + step, len(styles))
+        res = pair_measures(ia[i:j], ib[i:j], ma, mb, crop, cfg.measures, cfg.fsim_downsample)
+        for k, t in res.items():
+            for o, s in enumerate(styles[i:j]):
+                out[(k, s)] = t[o:o + 1].float().cpu()
+    return out
+
+
+def point_feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_dir=None, device=None) -> FeatureTable:
+    """Compute (or load from cache) the feature table of a point-cloud pair (see the module doc).
+
+    Args:
+        ref, dist: anything :func:`lit3d.render.points.load_points` accepts.
+        cfg: feature configuration (render size, styles, measures, shadings, workers).
+        cache_dir: folder of cached JSON tables (None: no caching).
+        device: torch device for the measures (default CPU).
+    """
+    cfg = cfg or FeatureConfig()
+    pa, pb = load_points(ref), load_points(dist)
+    ha, hb = pa.content_hash(), pb.content_hash()
+    key = content_key(f"points{POINT_PATH_VERSION}:{ha}", f"points{POINT_PATH_VERSION}:{hb}", cfg)
+    path = Path(cache_dir) / f"{key}.json" if cache_dir is not None else None
+    if path is not None and path.is_file():
+        try:
+            data = json.loads(path.read_text())
+            if data.get("key") == key:
+                return FeatureTable({k: float(v) for k, v in data["features"].items()}, key, cached=True)
+        except (OSError, ValueError, KeyError):
+            pass
+    names = cfg.resolved_styles()
+    colour = pa.colours is not None and pb.colours is not None
+    on_cpu = device is None or torch.device(device).type == "cpu"
+    workers = (cfg.workers if cfg.workers > 0 else torch.get_num_threads()) if on_cpu else 1
+    prev = torch.get_num_threads()
+    pool = None
+    if on_cpu:  # one intra-op thread, whole views per worker (see lit3d.features.table)
+        torch.set_num_threads(1)
+    if workers > 1:
+        from concurrent.futures import ThreadPoolExecutor
+
+        pool = ThreadPoolExecutor(workers, initializer=torch.set_num_threads, initargs=(1,))
+    try:
+        fa, fb = cached_frames(pa, ha), cached_frames(pb, hb)
+        frame = point_frame(pa.points)
+        pending = []
+        for shading in cfg.render.shadings:
+            one = replace(cfg.render, shadings=(shading,))
+            ga = render_point_gbuffers(pa, one, frame=frame, frames=fa)[shading]
+            gb = render_point_gbuffers(pb, one, frame=frame, frames=fb)[shading]
+            if device is not None:
+                ga, gb = ga.to(device), gb.to(device)
+            for v in range(ga.mask.shape[0]):
+                args = (ga, gb, v, names, cfg, colour)
+                pending.append((shading, pool.submit(_view_measures, *args) if pool else _view_measures(*args)))
+        per: dict[str, list[float]] = {}
+        for shading, res in pending:
+            for (k, s), t in (res.result() if pool else res).items():
+                per.setdefault(f"{k}/{s}/{shading}", []).append(float(t[0]))
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True)
+        torch.set_num_threads(prev)
+    feats = {k: float(np.mean(v)) for k, v in per.items()}
+    if cfg.mesh_measures:
+        c, s = frame
+        feats.update(pointcloud_baselines((pa.points - c) * s, (pb.points - c) * s, fa["smooth"], fb["smooth"],
+                                          pa.colours if colour else None, pb.colours if colour else None))
+    if path is not None:
+        from lit3d.utils.io import write_json
+
+        write_json(path, {"key": key, "config": cfg.key_dict(), "features": feats})
+    return FeatureTable(feats, key, cached=False, per_view={k: np.asarray(v) for k, v in per.items()})

@@ -1,0 +1,151 @@
+"""Depth and mask image readers: every problem is one :class:`InputError` line naming the file.
+
+Formats (``read_depth``), all returned as ``(H, W) float32`` metres, 0 = background:
+
+- ``.png`` / ``.tif``: 16-bit single channel, integer depth units times ``depth_scale``
+  metres (default 0.001: millimetres, as Kinect/RealSense write them); 0 = no reading;
+- ``.npy`` / ``.npz``: a 2-D float array in metres (an ``.npz`` holds one array, or a key
+  named ``depth``); 0 = background;
+- ``.exr``: a float depth channel in metres, read with OpenCV's OpenEXR codec.
+
+Pixels beyond ``1e4`` m (renderers' "infinitely far" background) count as background.
+"""
+from __future__ import annotations
+
+import os
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+DEPTH_SUFFIXES = (".png", ".tif", ".tiff", ".npy", ".npz", ".exr")
+MASK_SUFFIXES = (".png", ".tif", ".tiff", ".npy", ".npz", ".bmp", ".jpg")
+FAR_BACKGROUND = 1e4
+
+
+class InputError(ValueError):
+    """A bad input file or option: the message is one line naming the file and the problem."""
+
+
+def _image(path: Path) -> np.ndarray:
+    """Pixels of an image file as an array (PIL; ``I;16`` stays uint16)."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as im:
+            im.load()
+            return np.asarray(im)
+    except UnidentifiedImageError:
+        raise InputError(f"{path}: not an image (unreadable as {path.suffix.lstrip('.').upper()})") from None
+    except OSError as exc:
+        raise InputError(f"{path}: not a readable image ({exc})") from None
+
+
+def _array(path: Path) -> np.ndarray:
+    try:
+        if path.suffix == ".npy":
+            return np.load(path, allow_pickle=False)
+        with np.load(path, allow_pickle=False) as z:
+            keys = list(z.keys())
+            if "depth" in keys:
+                return z["depth"]
+            if len(keys) != 1:
+                raise InputError(f"{path}: expected one array or a key 'depth', found keys {keys}")
+            return z[keys[0]]
+    except InputError:
+        raise
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
+        raise InputError(f"{path}: not a readable numpy file ({type(exc).__name__})") from None
+
+
+def _exr(path: Path) -> np.ndarray:
+    os.environ.setdefault("OPENCV_IO_ENABLE_OPENEXR", "1")
+    try:
+        import cv2
+    except ImportError:
+        raise InputError(f"{path}: reading .exr needs OpenCV (pip install opencv-python-headless)") from None
+    arr = cv2.imread(str(path), cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
+    if arr is None:
+        raise InputError(f"{path}: not a readable OpenEXR image (OpenCV could not decode it)")
+    return arr[..., 0] if arr.ndim == 3 else arr  # depth renderers write it in every channel
+
+
+def read_depth(path: str | os.PathLike, depth_scale: float = 0.001) -> np.ndarray:
+    """Depth image -> ``(H, W) float32`` metres, 0 = background (see the module doc for formats).
+
+    Raises:
+        InputError: missing file, unknown format, not an image, wrong shape or type, NaN/inf,
+            negative depth, all background.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: no such file")
+    suffix = p.suffix.lower()
+    if suffix not in DEPTH_SUFFIXES:
+        raise InputError(f"{p}: unknown depth format '{p.suffix}' (expected {' '.join(DEPTH_SUFFIXES)})")
+    if not depth_scale > 0 or not np.isfinite(depth_scale):
+        raise InputError(f"--depth-scale {depth_scale}: expected a positive number of metres per unit")
+    if suffix in (".png", ".tif", ".tiff"):
+        raw = _image(p)
+        if raw.ndim != 2:
+            raise InputError(f"{p}: expected a single-channel 16-bit depth image, got {raw.ndim}-D pixels "
+                             f"{tuple(raw.shape)} (a colour picture?)")
+        if raw.dtype == np.uint8:
+            raise InputError(f"{p}: 8-bit image: not a depth map (expected 16-bit depth units)")
+        depth = raw.astype(np.float64) * depth_scale if raw.dtype.kind in "iu" else raw.astype(np.float64)
+    else:
+        arr = _exr(p) if suffix == ".exr" else _array(p)
+        arr = np.squeeze(np.asarray(arr))
+        if arr.ndim != 2 or arr.dtype.kind not in "fiu":
+            raise InputError(f"{p}: expected a 2-D numeric depth array, got {arr.dtype} {tuple(arr.shape)}")
+        depth = arr.astype(np.float64)
+    return check_depth(depth, p)
+
+
+def check_depth(depth: np.ndarray, label: str | os.PathLike) -> np.ndarray:
+    """Validate ``(H, W)`` depth in metres -> float32 copy with far background set to 0."""
+    if min(depth.shape) < 2:
+        raise InputError(f"{label}: depth image of shape {tuple(depth.shape)} is too small")
+    bad = ~np.isfinite(depth)
+    if bad.any():
+        kind = "NaN" if np.isnan(depth).any() else "inf"
+        raise InputError(f"{label}: {int(bad.sum())} depth pixels are {kind} (write 0 for background)")
+    if (depth < 0).any():
+        raise InputError(f"{label}: negative depth ({float(depth.min()):.4g}); expected metres >= 0, 0 = background")
+    depth = np.where(depth >= FAR_BACKGROUND, 0.0, depth)
+    if not (depth > 0).any():
+        raise InputError(f"{label}: all background (every depth pixel is 0)")
+    return depth.astype(np.float32)
+
+
+def read_mask(path: str | os.PathLike, shape: tuple[int, int]) -> np.ndarray:
+    """Object mask image or array -> ``(H, W) bool`` (non-zero = object); must match ``shape``."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: no such mask file")
+    suffix = p.suffix.lower()
+    arr = _array(p) if suffix in (".npy", ".npz") else _image(p)
+    arr = np.asarray(arr)
+    if arr.ndim == 3:  # colour or RGBA mask: any channel set
+        arr = arr[..., :3].max(-1) if arr.shape[-1] in (3, 4) else arr.max(-1)
+    if arr.shape != tuple(shape):
+        raise InputError(f"{p}: mask is {tuple(arr.shape)}, the depth image is {tuple(shape)}")
+    mask = arr > 0
+    if not mask.any():
+        raise InputError(f"{p}: mask is empty (no non-zero pixel)")
+    return mask
+
+
+def list_inputs(paths: list[str]) -> list[Path]:
+    """Command-line inputs -> depth files: a folder gives its depth files (sorted, not recursive)."""
+    out: list[Path] = []
+    for s in paths:
+        p = Path(s)
+        if p.is_dir():
+            found = sorted(q for q in p.iterdir() if q.is_file() and q.suffix.lower() in DEPTH_SUFFIXES)
+            if not found:
+                raise InputError(f"{p}: folder holds no depth files ({' '.join(DEPTH_SUFFIXES)})")
+            out += found
+        else:
+            out.append(p)
+    return out

@@ -1,0 +1,262 @@
+"""Point clouds as points: loading (PLY ASCII/binary, zipped PLY, ``.xyz``), colour, PCA normals, spacing.
+
+Point clouds are rendered natively (:mod:`lit3d.render.splat`), not meshed. This module
+is the loading and local-geometry half:
+
+- :func:`load_points` reads (and sorts into a canonical order) ``.ply`` (ASCII with any property order, or binary through
+  trimesh), a ``.zip`` holding one ``.ply`` (the CPCD2 layout), ``.xyz/.pts/.txt`` text,
+  an ``(N, 3)``/``(N, 6)`` array or a ``trimesh.PointCloud`` into a :class:`PointShape`;
+- :func:`is_point_source` says whether an input is a point cloud (a PLY without faces
+  is one);
+- :func:`local_frames` gives per-point PCA normals at two scales (``flat``: 8
+  neighbours, ``smooth``: 16) and the local spacing (mean distance to the 6 nearest
+  neighbours), from one SciPy KD-tree query; the smallest eigenvector of each 3x3
+  covariance in closed form (:func:`smallest_eigenvector`, vectorised; ``numpy.linalg.eigh``
+  of 370k matrices takes 2 s here).
+
+Problems raise :class:`lit3d.render.convert.ShapeError` with one line naming the file.
+"""
+from __future__ import annotations
+
+import hashlib
+import io
+import os
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lit3d.render.convert import POINT_SUFFIXES, ShapeError, _name
+
+K_FLAT, K_SMOOTH, K_SPACING = 8, 16, 6
+
+
+@dataclass
+class PointShape:
+    """A point cloud.
+
+    Attributes:
+        points: ``(N, 3) float64`` positions (file units).
+        colours: ``(N, 3) float32`` RGB in ``[0, 1]``, or ``None`` (colour-less).
+        label: name used in messages (the path).
+    """
+
+    points: np.ndarray
+    colours: np.ndarray | None = None
+    label: str = "<points>"
+
+    def content_hash(self) -> str:
+        """SHA-256 of positions and colours (cache key)."""
+        h = hashlib.sha256(b"points")
+        h.update(np.ascontiguousarray(self.points, dtype=np.float64).tobytes())
+        if self.colours is not None:
+            h.update(np.ascontiguousarray(self.colours, dtype=np.float32).tobytes())
+        return h.hexdigest()
+
+
+def _ply_header(head: bytes, label: str) -> tuple[str, list[tuple[str, int, list[str]]], int]:
+    """(format, [(element, count, property names)], header byte length) of a PLY file."""
+    end = head.find(b"end_header")
+    if not head.startswith(b"ply") or end < 0:
+        raise ShapeError(f"{label}: not a PLY file (no 'ply' magic or no end_header)")
+    nl = head.find(b"\n", end)
+    lines = head[:end].decode("ascii", "replace").splitlines()
+    fmt, elements = "", []
+    for ln in lines:
+        tok = ln.split()
+        if not tok:
+            continue
+        if tok[0] == "format" and len(tok) > 1:
+            fmt = tok[1]
+        elif tok[0] == "element" and len(tok) == 3:
+            try:
+                elements.append((tok[1], int(tok[2]), []))
+            except ValueError as exc:
+                raise ShapeError(f"{label}: bad PLY element line '{ln.strip()}'") from exc
+        elif tok[0] == "property" and elements:
+            elements[-1][2].append(tok[-1])
+    return fmt, elements, (nl + 1 if nl >= 0 else len(head))
+
+
+def read_ply_points(data: bytes, label: str) -> PointShape:
+    """A point-only PLY (bytes) -> :class:`PointShape` (ASCII parsed here, binary via trimesh)."""
+    fmt, elements, start = _ply_header(data[:65536], label)
+    faces = [c for e, c, _ in elements if e == "face"]
+    if faces and faces[0] > 0:
+        raise ShapeError(f"{label}: PLY has {faces[0]} faces; it is a mesh, not a point cloud")
+    vert = [(c, props) for e, c, props in elements if e == "vertex"]
+    if not vert or vert[0][0] == 0:
+        raise ShapeError(f"{label}: PLY has no vertices")
+    n, props = vert[0]
+    if not {"x", "y", "z"} <= set(props):
+        raise ShapeError(f"{label}: PLY vertex has no x, y, z properties (has {', '.join(props)})")
+    if fmt != "ascii":
+        import trimesh
+
+        try:
+            pc = trimesh.load(io.BytesIO(data), file_type="ply", process=False)
+        except Exception as exc:
+            raise ShapeError(f"{label}: unreadable ply file ({type(exc).__name__}: {exc})") from exc
+        col = getattr(pc, "colors", None)
+        col = np.asarray(col, np.float32)[:, :3] / 255.0 if col is not None and len(col) == len(pc.vertices) else None
+        return _checked(np.asarray(pc.vertices, np.float64), col, label)
+    try:
+        vals = np.loadtxt(io.BytesIO(data[start:]), dtype=np.float64, max_rows=n, ndmin=2)
+    except Exception as exc:
+        raise ShapeError(f"{label}: unreadable ASCII PLY body ({type(exc).__name__}: {str(exc)[:80]})") from exc
+    if vals.shape != (n, len(props)):
+        raise ShapeError(f"{label}: PLY header declares {n} vertices of {len(props)} properties, "
+                         f"body has {vals.shape[0]} rows of {vals.shape[1] if vals.ndim == 2 else 0}")
+    col_idx = [props.index(c) for c in ("red", "green", "blue") if c in props]
+    pts = vals[:, [props.index(c) for c in "xyz"]]
+    colours = (vals[:, col_idx] / 255.0).astype(np.float32) if len(col_idx) == 3 else None
+    return _checked(pts, colours, label)
+
+
+def _checked(points: np.ndarray, colours: np.ndarray | None, label: str) -> PointShape:
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3 or len(p) == 0:
+        raise ShapeError(f"{label}: expected (N, 3) points, got shape {tuple(p.shape)}")
+    if not np.isfinite(p).all():
+        raise ShapeError(f"{label}: points contain NaN or inf")
+    ext = float(np.ptp(p, axis=0).max())
+    if len(p) < 4 or ext <= 0:
+        raise ShapeError(f"{label}: degenerate point cloud ({len(p)} points, extent {ext:.3g})")
+    # canonical (lexicographic) order: the renders, normals and cache key are functions of the
+    # point set, not of the file's point order (a KD-tree breaks distance ties on a voxel lattice
+    # by index, and the z-buffer breaks depth ties by index)
+    order = np.lexsort((p[:, 2], p[:, 1], p[:, 0]))
+    p = p[order]
+    if colours is not None:
+        colours = np.clip(np.asarray(colours, np.float32), 0.0, 1.0)[order]
+    return PointShape(p, colours, label)
+
+
+def _zip_ply(path: Path, label: str) -> bytes:
+    try:
+        with zipfile.ZipFile(path) as z:
+            names = [n for n in z.namelist() if n.lower().endswith(".ply") and not n.endswith("/")]
+            if len(names) != 1:
+                raise ShapeError(f"{label}: zip holds {len(names)} .ply files, expected exactly one")
+            return z.read(names[0])
+    except zipfile.BadZipFile as exc:
+        raise ShapeError(f"{label}: not a readable zip file ({exc})") from exc
+
+
+def _has_faces(path: Path) -> bool:
+    with open(path, "rb") as f:
+        head = f.read(4096)
+    try:
+        _, elements, _ = _ply_header(head, str(path))
+    except ShapeError:
+        return True  # let the mesh loader report it
+    return any(e == "face" and c > 0 for e, c, _ in elements)
+
+
+def is_point_source(src: Any) -> bool:
+    """True for point-cloud inputs: ``.zip``, ``.xyz/.pts/.txt``, a PLY without faces, a
+    :class:`PointShape`, a ``trimesh.PointCloud`` or an ``(N, 3)``/``(N, 6)`` numpy array."""
+    if isinstance(src, PointShape):
+        return True
+    if isinstance(src, (str, os.PathLike)):
+        p = Path(src)
+        suf = p.suffix.lower()
+        if suf == ".zip" or suf in POINT_SUFFIXES:
+            return True
+        return suf == ".ply" and p.is_file() and p.stat().st_size > 0 and not _has_faces(p)
+    if isinstance(src, np.ndarray):
+        return src.ndim == 2 and src.shape[1] in (3, 6)
+    return type(src).__name__ == "PointCloud"
+
+
+def load_points(src: Any, name: str | None = None) -> PointShape:
+    """Read any point input of :func:`is_point_source` into a validated :class:`PointShape`.
+
+    Colours: PLY ``red/green/blue`` (uchar 0..255, any order), columns 4..6 of an ``(N, 6)``
+    array or text file (0..255), ``trimesh.PointCloud.colors``.
+    """
+    label = name or _name(src)
+    if isinstance(src, PointShape):  # validated and put in canonical order
+        return _checked(src.points, src.colours, src.label if name is None else label)
+    if isinstance(src, (str, os.PathLike)):
+        path = Path(src)
+        if not path.exists():
+            raise ShapeError(f"{label}: file not found")
+        if path.is_dir():
+            raise ShapeError(f"{label}: is a directory, expected a shape file")
+        if path.stat().st_size == 0:
+            raise ShapeError(f"{label}: empty file")
+        suf = path.suffix.lower()
+        if suf == ".zip":
+            return read_ply_points(_zip_ply(path, label), label)
+        if suf == ".ply":
+            return read_ply_points(path.read_bytes(), label)
+        try:
+            arr = np.loadtxt(path, ndmin=2, dtype=np.float64)
+        except Exception as exc:
+            raise ShapeError(f"{label}: unreadable point file ({type(exc).__name__}: {exc})") from exc
+        src = arr
+    if isinstance(src, np.ndarray):
+        arr = np.asarray(src, dtype=np.float64)
+        col = arr[:, 3:6] / 255.0 if arr.ndim == 2 and arr.shape[1] >= 6 else None
+        return _checked(arr[:, :3] if arr.ndim == 2 and arr.shape[1] >= 3 else arr, col, label)
+    col = getattr(src, "colors", None)
+    col = np.asarray(col, np.float32)[:, :3] / 255.0 if col is not None and len(col) else None
+    return _checked(np.asarray(src.vertices), col, label)
+
+
+def local_frames(points: np.ndarray, workers: int = -1) -> dict[str, np.ndarray]:
+    """PCA normals and spacing of a point cloud from one KD-tree query of ``K_SMOOTH`` neighbours.
+
+    Args:
+        points: ``(N, 3) float`` positions.
+        workers: SciPy query threads (-1: all).
+
+    Returns:
+        ``{"flat": (N, 3) float32, "smooth": (N, 3) float32}`` unit normals (sign arbitrary:
+        the renderer turns each towards its camera) from the ``K_FLAT`` / ``K_SMOOTH``
+        nearest points (self included), and ``"spacing": (N,) float32``, the mean distance
+        to the ``K_SPACING`` nearest other points.
+    """
+    from scipy.spatial import cKDTree
+
+    p = np.asarray(points, dtype=np.float64)
+    k = min(K_SMOOTH, len(p))
+    dist, idx = cKDTree(p).query(p, k=k, workers=workers)
+    out: dict[str, np.ndarray] = {"spacing": dist[:, 1:1 + K_SPACING].mean(1).astype(np.float32)}
+    p32 = (p - p.mean(0)).astype(np.float32)
+    nb = p32[idx] - p32[:, None, :]  # (N, k, 3) offsets from the centre point
+    for name, kk in (("flat", min(K_FLAT, k)), ("smooth", k)):
+        x = nb[:, :kk]
+        x = x - x.mean(1, keepdims=True)
+        out[name] = smallest_eigenvector(np.matmul(x.transpose(0, 2, 1), x))
+    return out
+
+
+def smallest_eigenvector(cov: np.ndarray) -> np.ndarray:
+    """Unit eigenvector ``(N, 3) float32`` of the smallest eigenvalue of symmetric ``(N, 3, 3)`` matrices.
+
+    Closed form: the eigenvalue from the trigonometric solution of the characteristic cubic,
+    the vector as the longest cross product of two rows of ``A - lambda I``. Isotropic
+    neighbourhoods (all eigenvalues equal) give ``(0, 0, 1)``.
+    """
+    a = np.asarray(cov, dtype=np.float64)
+    q = np.trace(a, axis1=1, axis2=2) / 3.0
+    p1 = a[:, 0, 1] ** 2 + a[:, 0, 2] ** 2 + a[:, 1, 2] ** 2
+    p2 = (a[:, 0, 0] - q) ** 2 + (a[:, 1, 1] - q) ** 2 + (a[:, 2, 2] - q) ** 2 + 2.0 * p1
+    p = np.sqrt(p2 / 6.0)
+    eye = np.eye(3)[None]
+    b = (a - q[:, None, None] * eye) / np.maximum(p, 1e-30)[:, None, None]
+    r = np.clip(np.linalg.det(b) / 2.0, -1.0, 1.0)
+    lam = q + 2.0 * p * np.cos(np.arccos(r) / 3.0 + 2.0 * np.pi / 3.0)
+    m = a - lam[:, None, None] * eye
+    cands = np.stack([np.cross(m[:, 0], m[:, 1]), np.cross(m[:, 0], m[:, 2]), np.cross(m[:, 1], m[:, 2])], 1)
+    norms = np.linalg.norm(cands, axis=2)
+    best = norms.argmax(1)
+    vec = cands[np.arange(len(a)), best]
+    nrm = norms[np.arange(len(a)), best]
+    ok = nrm > 1e-12 * np.maximum(np.abs(a).reshape(len(a), -1).max(1), 1e-300)
+    vec = np.where(ok[:, None], vec / np.where(ok, nrm, 1.0)[:, None], np.array([0.0, 0.0, 1.0]))
+    return vec.astype(np.float32)

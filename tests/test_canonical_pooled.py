@@ -1,0 +1,111 @@
+"""Pooled cross-validated retrieval (issue 14): held-out items saved per fold, merged with every
+item exactly once, every row scored on the same items over several codebook seeds."""
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import torch
+from lightning.fabric.utilities.data import AttributeDict
+
+from datamodules.canonical import CanonicalDataModule
+from lit3d.canonical import evaluator, heldout, pooled
+
+RETRIEVAL = {"level": 0, "view_size": 32, "vocab": 16, "dense_step": 6}
+
+
+def _dm(tmp_path, fold=0, **kw):
+    args = dict(image_size=32, n_subjects=4, n_poses=3, mesh_resolution=16, n_folds=3, batch_size=4,
+                kinds=["humanoid", "quadruped"], seed=1, split="pose", val_per_subject=1, fold=fold)
+    args.update(kw)
+    dm = CanonicalDataModule(str(tmp_path / "data"), **args)
+    dm.prepare_data()
+    dm.setup()
+    return dm
+
+
+def _fold_outputs(dm):
+    """What CanonicalTask.test_outputs gathers, with the posed input as the 'prediction'."""
+    ds = dm.datasets["test"]
+    items = [ds[i] for i in range(len(ds))]
+    t = lambda k: torch.stack([it[k] for it in items])  # noqa: E731
+    out = {k: t(k) for k in ("depth", "mask", "canon_depth", "canon_mask")}
+    out.update(pred_depth=out["depth"], pred_mask=out["mask"])
+    for k in ("subject_idx", "pose", "view", "index"):
+        out[k] = torch.tensor([it[k] for it in items])
+    return out
+
+
+def test_held_out_ids_cover_every_posed_item_once_over_the_folds(tmp_path):
+    dm = _dm(tmp_path, view_mode="broadside", flip_lr=True)
+    ids = dm.held_out_ids()
+    assert len(ids) == 4 * 3 and len(set(ids)) == len(ids)  # every non-canonical pose of every subject
+    tested = []
+    for f in range(3):
+        tested += [f"{r['subject']}/{r['pose']}/{r['view']}" for r in _dm(tmp_path, f, view_mode="broadside").splits["test"]]
+    assert sorted(tested) == sorted(ids)
+    assert dm.datasets["train"].flip_lr and not dm.datasets["test"].flip_lr
+    assert dm.cache_config()["view_mode"] == "broadside"
+    assert "view_mode" not in _dm(tmp_path / "fixed").cache_config()  # old caches keep their hash
+
+
+def test_pool_checks_coverage():
+    def fold(items, f):
+        n = len(items)
+        z = np.zeros((n, 4, 4), np.float16)
+        return {**{k: z for k in heldout.IMAGES}, "subject": np.array([i.split("/")[0] for i in items]),
+                "pose": np.ones(n, np.int64), "view": np.zeros(n, np.int64), "item": np.array(items),
+                "expected": np.array(["a/1/0", "a/2/0", "b/1/0"]), "source": np.array("model"),
+                "fold": np.array(f), "n_folds": np.array(2), "data": np.array("{}"), "settings": np.array("{}")}
+
+    def pool_of(tmp, *folds):
+        dirs = []
+        for i, items in enumerate(folds):
+            d = tmp / f"f{i}"
+            d.mkdir()
+            heldout.save_heldout(d / heldout.HELDOUT_FILE, fold(items, i))
+            dirs.append(d)
+        return dirs
+
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory() as t:
+        merged = heldout.pool(pool_of(Path(t), ["b/1/0", "a/1/0"], ["a/2/0"]))
+        assert merged["item"].tolist() == ["a/1/0", "a/2/0", "b/1/0"] and merged["folds"].tolist() == [0, 1]
+    with tempfile.TemporaryDirectory() as t:
+        with pytest.raises(ValueError, match="more than once"):
+            heldout.pool(pool_of(Path(t), ["a/1/0", "b/1/0"], ["a/1/0", "a/2/0"]))
+    with tempfile.TemporaryDirectory() as t:
+        dirs = pool_of(Path(t), ["a/1/0"], ["a/2/0"])
+        with pytest.raises(ValueError, match="never held out"):
+            heldout.pool(dirs)
+        assert len(heldout.pool(dirs, strict=False)["item"]) == 2
+
+
+def test_folds_write_heldout_and_the_pooled_evaluator_scores_every_row(tmp_path):
+    hp = AttributeDict(arch="canonical", retrieval=RETRIEVAL, mask_threshold=0.5, chance_trials=5,
+                       mesh_baselines=["gps"], baseline_landmarks=30, baseline_max_vertices=None,
+                       baseline_smacof_eps=1e-4)
+    runs = []
+    for f in range(3):
+        dm = _dm(tmp_path, f)
+        evaluator.save_heldout_items(SimpleNamespace(hparams=hp, _trainer=None), _fold_outputs(dm), dm)
+        run = tmp_path / f"run{f}"
+        evaluator.write_results({"test/depth_mse": 0.1}, run)
+        assert (run / heldout.HELDOUT_FILE).is_file() and (run / "results.md").is_file()
+        runs.append(run)
+    assert not evaluator._PENDING_HELDOUT  # written once
+    with pytest.raises(ValueError, match="never held out"):
+        pooled.run(runs[:2], [0], tmp_path / "partial")
+    path = pooled.run(runs, [0, 1], tmp_path / "pooled")
+    text = path.read_text()
+    res = json.loads((tmp_path / "pooled" / "pooled.json").read_text())
+    assert res["n_items"] == 12 and res["seeds"] == [0, 1]
+    for row in ("model", "input", "target", "gps", "shapedna", "chance"):
+        assert len(res["per_seed"][row]["nn"]) == 2, row
+        assert all(0 <= v <= 1 for v in res["per_seed"][row]["nn"])
+    # the 'prediction' is the posed input here: the same images, so the same scores for every seed
+    assert res["per_seed"]["model"] == res["per_seed"]["input"]
+    assert res["summary"]["shapedna"]["nn"][1] == 0  # no codebook: no spread over seeds
+    assert "table 5.1" in text and "±" in text and "ShapeDNA of the posed full mesh" in text
