@@ -68,6 +68,18 @@ def completion_paper_nets() -> dict:
     return _composed_task_nets("completion_paper")
 
 
+@pytest.fixture(scope="module")
+def one_torch_thread():
+    """Tiny nets: one intra-op thread is faster than two, and much faster on a shared CPU
+    (``pytestmark = pytest.mark.usefixtures("one_torch_thread")`` in a module)."""
+    import torch
+
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
 def pytest_collection_modifyitems(config, items):
     """GPU tests skip on machines without CUDA (they still run with -m gpu on a GPU box)."""
     try:

@@ -12,13 +12,7 @@ from lit3d.completion.nets import NET_KEYS, build_completion_nets, validate_net_
 from lit3d.completion.selector import LatentSelector
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    """Tiny nets: one intra-op thread is faster than two, and much faster on a shared CPU."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def _partial(b=2, r=16, seed=0):

@@ -12,12 +12,7 @@ from lit3d.completion.losses import critic_loss, generator_adv_loss, gradient_pe
 from lit3d.completion.nets import Critic
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def test_weighted_bce_matches_hand_computation():

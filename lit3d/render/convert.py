@@ -113,15 +113,20 @@ def mesh_hash(mesh) -> str:
 
 
 # ------------------------------------------------------------------ loaders
-def _load_path(path: Path, label: str, point_resolution: int):
-    import trimesh
-
+def check_shape_file(path: Path, label: str) -> None:
+    """Raise :class:`ShapeError` naming ``label`` when ``path`` is missing, a folder or empty."""
     if not path.exists():
         raise ShapeError(f"{label}: file not found")
     if path.is_dir():
         raise ShapeError(f"{label}: is a directory, expected a shape file")
     if path.stat().st_size == 0:
         raise ShapeError(f"{label}: empty file")
+
+
+def _load_path(path: Path, label: str, point_resolution: int):
+    import trimesh
+
+    check_shape_file(path, label)
     suffix = path.suffix.lower()
     if suffix in GRID_SUFFIXES:
         return _array_to_mesh(_load_array(path, label), label, point_resolution)

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from lit3d.render.convert import POINT_SUFFIXES, ShapeError, _name
+from lit3d.render.convert import POINT_SUFFIXES, ShapeError, _name, check_shape_file
 
 K_FLAT, K_SMOOTH, K_SPACING = 8, 16, 6
 
@@ -182,12 +182,7 @@ def load_points(src: Any, name: str | None = None) -> PointShape:
         return _checked(src.points, src.colours, src.label if name is None else label)
     if isinstance(src, (str, os.PathLike)):
         path = Path(src)
-        if not path.exists():
-            raise ShapeError(f"{label}: file not found")
-        if path.is_dir():
-            raise ShapeError(f"{label}: is a directory, expected a shape file")
-        if path.stat().st_size == 0:
-            raise ShapeError(f"{label}: empty file")
+        check_shape_file(path, label)
         suf = path.suffix.lower()
         if suf == ".zip":
             return read_ply_points(_zip_ply(path, label), label)
