@@ -71,45 +71,13 @@ class SynthSource(_Source):
                                   self.res, yaw_deg=yaw)
 
 
-class ToscaSource(_Source):
-    kind = "tosca"
+class _MeshFileSource(_Source):
+    """Subjects and poses indexed from mesh files: ``items`` maps (subject, pose) -> path; pose
+    ``canon`` of every subject is its canonical pose; ``up_axis`` "z" meshes are turned to y-up."""
 
-    def __init__(self, root: str, classes: Sequence[str] | None, canonical_pose: int, up_axis: str):
-        from datamodules.readers import tosca
-
-        self.t = tosca
-        items = tosca.index_tosca(root, list(classes) if classes else None)
-        self.items = {(it.cls, it.pose): it.path for it in items}
-        self.canon = canonical_pose
-        self.up_axis = up_axis
-        missing = sorted({c for c, _ in self.items} - {c for c, p in self.items if p == canonical_pose})
-        if missing:
-            raise DataError(f"{root}: no canonical pose {canonical_pose} for class(es) {', '.join(missing)}")
-
-    def subjects(self):
-        return sorted({c for c, _ in self.items})
-
-    def poses(self, subject):
-        return sorted(p for c, p in self.items if c == subject and p != self.canon)
-
-    def canonical_pose(self, subject):
-        return self.canon
-
-    def mesh(self, subject, pose):
-        v, f = self.t.read_mesh(self.items[(subject, int(pose))])
-        return (self.t.z_up_to_y_up(v) if self.up_axis == "z" else v), f
-
-
-class Shrec14Source(_Source):
-    kind = "shrec14"
-
-    def __init__(self, root: str, cla: str | None, canonical_pose: int, up_axis: str):
-        from datamodules.readers import shrec14, tosca
-
-        self.t = tosca
-        items = shrec14.index_shrec14(root, cla)
-        self.items = {(it.subject, it.pose): it.path for it in items}
-        self.canon, self.up_axis = canonical_pose, up_axis
+    items: dict
+    canon: int
+    up_axis: str
 
     def subjects(self):
         return sorted({s for s, _ in self.items})
@@ -121,8 +89,36 @@ class Shrec14Source(_Source):
         return self.canon
 
     def mesh(self, subject, pose):
-        v, f = self.t.read_mesh(self.items[(subject, int(pose))])
-        return (self.t.z_up_to_y_up(v) if self.up_axis == "z" else v), f
+        from datamodules.readers import tosca
+
+        v, f = tosca.read_mesh(self.items[(subject, int(pose))])
+        return (tosca.z_up_to_y_up(v) if self.up_axis == "z" else v), f
+
+
+class ToscaSource(_MeshFileSource):
+    kind = "tosca"
+
+    def __init__(self, root: str, classes: Sequence[str] | None, canonical_pose: int, up_axis: str):
+        from datamodules.readers import tosca
+
+        items = tosca.index_tosca(root, list(classes) if classes else None)
+        self.items = {(it.cls, it.pose): it.path for it in items}
+        self.canon = canonical_pose
+        self.up_axis = up_axis
+        missing = sorted({c for c, _ in self.items} - {c for c, p in self.items if p == canonical_pose})
+        if missing:
+            raise DataError(f"{root}: no canonical pose {canonical_pose} for class(es) {', '.join(missing)}")
+
+
+class Shrec14Source(_MeshFileSource):
+    kind = "shrec14"
+
+    def __init__(self, root: str, cla: str | None, canonical_pose: int, up_axis: str):
+        from datamodules.readers import shrec14
+
+        items = shrec14.index_shrec14(root, cla)
+        self.items = {(it.subject, it.pose): it.path for it in items}
+        self.canon, self.up_axis = canonical_pose, up_axis
 
 
 def make_source(hp) -> _Source:

@@ -265,11 +265,11 @@ def run_cli(fn: Callable[[DictConfig], Any], cfg: DictConfig) -> Any:
     """
     from omegaconf.errors import MissingMandatoryValue
 
-    log_once_through_hydra()
     try:
         missing = sorted(OmegaConf.missing_keys(cfg))
         if missing:  # before any work or logging: the one line is all the user sees
             raise UserError(f"missing value for {missing[0]}: set {missing[0]}=... on the command line")
+        log_once_through_hydra()  # imports Lightning: only once the command line is known to be whole
         return fn(cfg)
     except Exception as exc:
         code = exit_code_for(exc)
