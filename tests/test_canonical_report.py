@@ -121,15 +121,23 @@ def test_write_figures_one_contact_sheet_per_test_subject(tmp_path, compose_cfg)
     paths = report.write_figures(task, dm, out, n=3)
     test_subjects = sorted({r["subject"] for r in dm.splits["test"]})
     assert [p.name for p in paths] == [f"canonical_{s}.png" for s in test_subjects]
+    from lit3d.canonical.figures import CELL, COLUMNS
+
+    left, header = 170, 44
     for p, s in zip(paths, test_subjects):
         img = np.asarray(Image.open(p))
         rows = min(3, sum(r["subject"] == s for r in dm.splits["test"]))
-        # rows of input | predicted | true canonical | error, each tile padded by 1 px
-        assert img.shape == (rows * (S + 2), 4 * (S + 2)) and img.dtype == np.uint8
-        # first tile column = the posed input depth of the first test item of that subject
+        # labelled grid: title + header band, a label margin, one 256-px cell per column
+        assert img.shape == (2 * header + rows * CELL, left + len(COLUMNS) * CELL, 3) and img.dtype == np.uint8
+        # first cell = the posed input depth of the first test item of that subject, upsampled
         first = dm.datasets["test"][[i for i, r in enumerate(dm.splits["test"]) if r["subject"] == s][0]]
         expect = (first["depth"][0].clamp(0, 1).numpy() * 255).astype(np.uint8)
-        assert np.abs(img[1:S + 1, 1:S + 1].astype(int) - expect.astype(int)).max() <= 1
+        k = CELL // S
+        cell = img[2 * header:2 * header + CELL, left:left + CELL, 0]
+        assert np.abs(cell[k // 2::k, k // 2::k].astype(int) - expect.astype(int)).max() <= 1
+        # the shaded surface of the true canonical form is a rendered shape, not blank
+        true_shaded = img[2 * header:2 * header + CELL, left + 4 * CELL:left + 5 * CELL]
+        assert (true_shaded < 250).any(axis=2).mean() > 0.05 and np.ptp(true_shaded) > 50
     # results.md rewritten for the datamodule's source (synth -> table 5.1)
     text = (out / "results.md").read_text()
     assert "lit3d model (ours)" in _section(text, "5.1") and "(ours)" not in _section(text, "5.3")

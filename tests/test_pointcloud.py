@@ -182,6 +182,11 @@ def test_colour_noise_only_changes_colour_features_monotonically():
         ypsnr.append(f["y_psnr"])
     assert scores[0] > scores[1] > scores[2] and scores[0] < 1.0
     assert ypsnr[0] > ypsnr[1] > ypsnr[2]
+    geo = []  # the colour-based overall score still sees geometry: same colours, noisier positions
+    for sigma in (0.0, 0.004, 0.012):
+        q = ref.points + np.random.default_rng(5).normal(0, sigma, ref.points.shape) if sigma else ref.points
+        geo.append(overall_score(feature_table(ref, PointShape(q, ref.colours), FAST).features))
+    assert geo[0] == pytest.approx(1.0) and geo[0] > geo[1] > geo[2]
 
 
 def test_colourless_points_have_no_colour_features_and_geometry_noise_is_monotone():

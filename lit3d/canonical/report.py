@@ -9,9 +9,6 @@ from __future__ import annotations
 import io
 from pathlib import Path
 
-import numpy as np
-import torch
-from PIL import Image
 
 from lit3d.utils.tables import fmt, markdown_table
 from lit3d.utils.io import atomic_write_bytes, atomic_write_text
@@ -167,33 +164,24 @@ def write_pooled_results(result: dict, out_dir: Path) -> Path:
     return path
 
 
-def _png(path: Path, img: np.ndarray) -> Path:
-    buf = io.BytesIO()
-    Image.fromarray(img).save(buf, format="PNG")
-    return atomic_write_bytes(path, buf.getvalue())
-
-
 def write_figures(task, datamodule, out_dir: Path, n: int = 4) -> list[Path]:
-    """One contact sheet per test subject ``canonical_<subject>.png``: rows (test poses/views) of
-    input | predicted canonical | true canonical | |error|. Also rewrites ``results.md`` for the datamodule's source when ``metrics.json`` is in
-    ``out_dir`` (lit3d-eval writes them before the figures, without knowing the data source)."""
+    """One contact sheet per test subject ``canonical_<subject>.png`` (:mod:`lit3d.canonical.figures`:
+    posed input | predicted canonical (depth, shaded surface) | true canonical (depth, shaded
+    surface) | |error|, one row per test pose/view). Also rewrites ``results.md`` for the
+    datamodule's source when ``metrics.json`` is in ``out_dir`` (lit3d-eval writes them before the
+    figures, without knowing the data source)."""
     import json
+
+    from lit3d.canonical.figures import subject_sheets
 
     out_dir = Path(out_dir)
     task.eval()
     datamodule.setup("test")
-    ds = datamodule.datasets["test"]
-    by_subject: dict[str, list[int]] = {}
-    for i, r in enumerate(ds.records):
-        by_subject.setdefault(r["subject"], []).append(i)
     paths = []
-    dev = next(task.parameters()).device
-    for subject, idx in sorted(by_subject.items()):
-        items = [ds[i] for i in idx[:n]]
-        batch = {k: torch.stack([it[k] for it in items]).to(dev) for k in ("depth", "mask", "canon_depth", "canon_mask")}
-        with torch.no_grad():
-            out = task(batch["depth"], batch["mask"])
-        paths.append(_png(out_dir / f"canonical_{subject}.png", task.panel(batch, out, n=len(items))))
+    for subject, sheet in subject_sheets(task, datamodule.datasets["test"], n).items():
+        buf = io.BytesIO()
+        sheet.save(buf, format="PNG")
+        paths.append(atomic_write_bytes(out_dir / f"canonical_{subject}.png", buf.getvalue()))
     mpath = out_dir / "metrics.json"
     source = getattr(getattr(datamodule, "hparams", None), "get", lambda k: None)("source")
     if mpath.is_file() and source:

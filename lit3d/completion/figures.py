@@ -13,21 +13,14 @@ from __future__ import annotations
 from collections import defaultdict
 
 import torch
-from PIL import Image, ImageDraw, ImageFont
 
 from lit3d.metrics.voxel import iou_at_thresholds
+from lit3d.utils.figures import labelled_grid
 from lit3d.utils.voxel_images import BACK_VIEW, FRONT_VIEW, render_voxels, to_resolution
 
 CELL = 256          # px per rendered cell (each view)
 HEADER, LEFT = 44, 210
 INPUT_STYLE, SHAPE_STYLE, TARGET_STYLE = "matt_blue", "clay_studio", "clay_brown"
-
-
-def _font(size: int):
-    try:
-        return ImageFont.load_default(size=size)
-    except TypeError:  # Pillow < 10.1
-        return ImageFont.load_default()
 
 
 def sample_columns(task, partial: torch.Tensor, target: torch.Tensor) -> tuple[list[str], list[torch.Tensor], list[str]]:
@@ -51,34 +44,9 @@ def sample_columns(task, partial: torch.Tensor, target: torch.Tensor) -> tuple[l
     return names, vols, styles
 
 
-def figure(rows: list[dict], columns: list[str], title: str, cell: int = CELL) -> Image.Image:
-    """Lay out labelled cells.
-
-    Args:
-        rows: ``{"label": str, "cells": [(H, W, 3) uint8 per column]}`` (H = W = ``cell``).
-        columns: column headers.
-        title: text above the headers.
-    """
-    ncol = len(columns)
-    w, h = LEFT + ncol * cell, 2 * HEADER + len(rows) * cell
-    img = Image.new("RGB", (w, h), "white")
-    draw = ImageDraw.Draw(img)
-    draw.text((8, 8), title, fill="black", font=_font(22))
-    head = _font(20)
-    for c, name in enumerate(columns):
-        x = LEFT + c * cell + cell // 2
-        draw.text((x, HEADER + HEADER // 2), name, fill="black", font=head, anchor="mm")
-    small = _font(17)
-    for r, row in enumerate(rows):
-        y = 2 * HEADER + r * cell
-        for c, tile in enumerate(row["cells"]):
-            img.paste(Image.fromarray(tile), (LEFT + c * cell, y))
-        draw.multiline_text((8, y + cell // 2), row["label"], fill="black", font=small, anchor="lm", spacing=6)
-        draw.line([(0, y), (w, y)], fill=(200, 200, 200), width=1)
-    for c in range(1, ncol):
-        x = LEFT + c * cell
-        draw.line([(x, HEADER), (x, h)], fill=(200, 200, 200), width=1)
-    return img
+def figure(rows: list[dict], columns: list[str], title: str, cell: int = CELL):
+    """Labelled cells (:func:`lit3d.utils.figures.labelled_grid` with this figure's margins)."""
+    return labelled_grid(rows, columns, title, cell, LEFT, HEADER)
 
 
 def collect_samples(loader, per_category: int) -> list[dict]:
@@ -99,7 +67,7 @@ def _iou(probs: torch.Tensor, target: torch.Tensor, threshold: float) -> float:
     return float(iou_at_thresholds(probs[None, None], target[None], torch.tensor([threshold]))[0, 0])
 
 
-def split_figure(task, samples: list[dict], split: str, cell: int = CELL) -> Image.Image:
+def split_figure(task, samples: list[dict], split: str, cell: int = CELL):
     """The figure of one split (``split`` names it in the title, e.g. "same-view test split"):
     two rows (front, back view) per sample."""
     threshold = float(task.threshold)

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import json
 from collections import OrderedDict
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +44,7 @@ POINT_PATH_VERSION = 2
 RGB_MEASURES = ("mask_ssim", "mask_ssim_window", "mask_ssim_negative", "mask_ssim_merge", "ssim", "mse", "rmse",
                 "psnr")
 GREY_COLOUR_STYLES = ("albedo_luma", "lit_luma")
+ALBEDO_STYLES = ("albedo_luma", "albedo_rgb")  # unlit: independent of the normals
 RGB_COLOUR_STYLES = ("albedo_rgb", "lit_rgb")
 _FRAMES: OrderedDict[str, dict[str, np.ndarray]] = OrderedDict()
 _FRAMES_KEEP = 4
@@ -80,8 +80,12 @@ def _rgb_measures(a: torch.Tensor, b: torch.Tensor, ma, mb, crop, measures) -> d
     return {k: v for k, v in out.items() if k in want}
 
 
-def _view_measures(ga, gb, v: int, names: list[str], cfg: FeatureConfig, colour: bool) -> dict[str, torch.Tensor]:
-    """``{(measure, style): (1,) float32}`` for view ``v`` of two point G-buffers (crop of the union of masks)."""
+def _view_measures(ga, gb, v: int, names: list[str], cfg: FeatureConfig, colour: bool,
+                   albedo: bool = True) -> dict[tuple[str, str], torch.Tensor]:
+    """``{(measure, style): (1,) float32}`` for view ``v`` of two point G-buffers (crop of the union of masks).
+
+    ``albedo=False`` skips the unlit colour styles (they do not depend on the shading's normals,
+    so one shading's values serve both)."""
     hh, ww = ga.mask.shape[-2:]
     y0, y1, x0, x1 = _crop_box(torch.cat([ga.mask[v:v + 1], gb.mask[v:v + 1]]), _CROP_MARGIN)
     sl = (slice(v, v + 1), slice(None), slice(y0, y1), slice(x0, x1))
@@ -94,13 +98,15 @@ def _view_measures(ga, gb, v: int, names: list[str], cfg: FeatureConfig, colour:
     if colour:
         ca = apply_colour_styles(ga.colour[sl], ga.normals[sl], ma)
         cb = apply_colour_styles(gb.colour[sl], gb.normals[sl], mb)
-        ia = torch.cat([ia] + [ca[s] for s in GREY_COLOUR_STYLES])
-        ib = torch.cat([ib] + [cb[s] for s in GREY_COLOUR_STYLES])
-        styles += list(GREY_COLOUR_STYLES)
-        rgb = _rgb_measures(torch.cat([ca[s] for s in RGB_COLOUR_STYLES]), torch.cat([cb[s] for s in RGB_COLOUR_STYLES]),
+        grey = [s for s in GREY_COLOUR_STYLES if albedo or s not in ALBEDO_STYLES]
+        rgb_styles = [s for s in RGB_COLOUR_STYLES if albedo or s not in ALBEDO_STYLES]
+        ia = torch.cat([ia] + [ca[s] for s in grey])
+        ib = torch.cat([ib] + [cb[s] for s in grey])
+        styles += grey
+        rgb = _rgb_measures(torch.cat([ca[s] for s in rgb_styles]), torch.cat([cb[s] for s in rgb_styles]),
                             ma, mb, crop, cfg.measures)
         for k, t in rgb.items():
-            for j, s in enumerate(RGB_COLOUR_STYLES):
+            for j, s in enumerate(rgb_styles):
                 out[(k, s)] = t[j:j + 1].float().cpu()
     step = cfg.chunk if cfg.chunk > 0 else len(styles)
     for i in range(0, len(styles), step):
@@ -110,6 +116,16 @@ def _view_measures(ga, gb, v: int, names: list[str], cfg: FeatureConfig, colour:
             for o, s in enumerate(styles[i:j]):
                 out[(k, s)] = t[o:o + 1].float().cpu()
     return out
+
+
+class _Now:
+    """The result of a call made at once, with a :class:`concurrent.futures.Future`'s ``result()``."""
+
+    def __init__(self, fn, *args, **kwargs):
+        self.value = fn(*args, **kwargs)
+
+    def result(self):
+        return self.value
 
 
 def point_feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_dir=None, device=None) -> FeatureTable:
@@ -122,19 +138,6 @@ def point_feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_di
         device: torch device for the measures (default CPU).
     """
     cfg = cfg or FeatureConfig()
-    pa, pb = load_points(ref), load_points(dist)
-    ha, hb = pa.content_hash(), pb.content_hash()
-    key = content_key(f"points{POINT_PATH_VERSION}:{ha}", f"points{POINT_PATH_VERSION}:{hb}", cfg)
-    path = Path(cache_dir) / f"{key}.json" if cache_dir is not None else None
-    if path is not None and path.is_file():
-        try:
-            data = json.loads(path.read_text())
-            if data.get("key") == key:
-                return FeatureTable({k: float(v) for k, v in data["features"].items()}, key, cached=True)
-        except (OSError, ValueError, KeyError):
-            pass
-    names = cfg.resolved_styles()
-    colour = pa.colours is not None and pb.colours is not None
     on_cpu = device is None or torch.device(device).type == "cpu"
     workers = (cfg.workers if cfg.workers > 0 else torch.get_num_threads()) if on_cpu else 1
     prev = torch.get_num_threads()
@@ -145,34 +148,68 @@ def point_feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_di
         from concurrent.futures import ThreadPoolExecutor
 
         pool = ThreadPoolExecutor(workers, initializer=torch.set_num_threads, initargs=(1,))
+    submit = pool.submit if pool is not None else _Now
     try:
-        fa, fb = cached_frames(pa, ha), cached_frames(pb, hb)
+        pa, pb = load_points(ref), load_points(dist)  # one after the other: parsing holds the GIL
+        ha, hb = pa.content_hash(), pb.content_hash()
+        key = content_key(f"points{POINT_PATH_VERSION}:{ha}", f"points{POINT_PATH_VERSION}:{hb}", cfg)
+        path = Path(cache_dir) / f"{key}.json" if cache_dir is not None else None
+        cached = _cached_table(path, key)
+        if cached is not None:
+            return cached
+        names = cfg.resolved_styles()
+        colour = pa.colours is not None and pb.colours is not None
+        # both clouds' frames, then both renders (every shading at once), side by side on the workers
         frame = point_frame(pa.points)
+        fa, fb = submit(cached_frames, pa, ha), submit(cached_frames, pb, hb)
+        fa, fb = fa.result(), fb.result()
+        ga, gb = (submit(render_point_gbuffers, s, cfg.render, frame=frame, frames=f) for s, f in ((pa, fa), (pb, fb)))
+        ga, gb = ga.result(), gb.result()
+        base = submit(_baselines, pa, pb, fa, fb, frame, colour) if cfg.mesh_measures else None
         pending = []
-        for shading in cfg.render.shadings:
-            one = replace(cfg.render, shadings=(shading,))
-            ga = render_point_gbuffers(pa, one, frame=frame, frames=fa)[shading]
-            gb = render_point_gbuffers(pb, one, frame=frame, frames=fb)[shading]
+        for i, shading in enumerate(cfg.render.shadings):
+            sa, sb = ga[shading], gb[shading]
             if device is not None:
-                ga, gb = ga.to(device), gb.to(device)
-            for v in range(ga.mask.shape[0]):
-                args = (ga, gb, v, names, cfg, colour)
-                pending.append((shading, pool.submit(_view_measures, *args) if pool else _view_measures(*args)))
+                sa, sb = sa.to(device), sb.to(device)
+            for v in range(sa.mask.shape[0]):
+                pending.append((shading, submit(_view_measures, sa, sb, v, names, cfg, colour, i == 0)))
         per: dict[str, list[float]] = {}
         for shading, res in pending:
-            for (k, s), t in (res.result() if pool else res).items():
+            for (k, s), t in res.result().items():
                 per.setdefault(f"{k}/{s}/{shading}", []).append(float(t[0]))
+        first = cfg.render.shadings[0]
+        for name in [n for n in per if n.split("/")[1] in ALBEDO_STYLES and n.endswith(f"/{first}")]:
+            for shading in cfg.render.shadings[1:]:  # unlit colour: the same images under every shading
+                per[name[: -len(first)] + shading] = per[name]
+        baselines = base.result() if base is not None else {}
     finally:
         if pool is not None:
             pool.shutdown(wait=True)
         torch.set_num_threads(prev)
     feats = {k: float(np.mean(v)) for k, v in per.items()}
-    if cfg.mesh_measures:
-        c, s = frame
-        feats.update(pointcloud_baselines((pa.points - c) * s, (pb.points - c) * s, fa["smooth"], fb["smooth"],
-                                          pa.colours if colour else None, pb.colours if colour else None))
+    feats.update(baselines)
     if path is not None:
         from lit3d.utils.io import write_json
 
         write_json(path, {"key": key, "config": cfg.key_dict(), "features": feats})
     return FeatureTable(feats, key, cached=False, per_view={k: np.asarray(v) for k, v in per.items()})
+
+
+def _cached_table(path: Path | None, key: str) -> FeatureTable | None:
+    """The table cached at ``path`` under ``key``, or None (absent, unreadable or another key)."""
+    if path is None or not path.is_file():
+        return None
+    try:
+        data = json.loads(path.read_text())
+        if data.get("key") == key:
+            return FeatureTable({k: float(v) for k, v in data["features"].items()}, key, cached=True)
+    except (OSError, ValueError, KeyError):
+        pass
+    return None
+
+
+def _baselines(pa: PointShape, pb: PointShape, fa, fb, frame, colour: bool) -> dict[str, float]:
+    """The point-cloud baselines of the pair in the reference's normalised frame."""
+    c, s = frame
+    return pointcloud_baselines((pa.points - c) * s, (pb.points - c) * s, fa["smooth"], fb["smooth"],
+                                pa.colours if colour else None, pb.colours if colour else None)

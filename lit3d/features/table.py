@@ -278,11 +278,15 @@ class FeatureTable:
 
 
 def overall_score(features: dict[str, float], measure: str = "mask_ssim") -> float:
-    """Mean of ``measure/<style>/<shading>`` over all styles and shadings (default Mask-SSIM).
+    """The unlearned score: mean of ``measure/<style>/<shading>`` (default Mask-SSIM).
 
-    With colour styles in the table (:data:`lit3d.render.colour_styles.COLOUR_STYLES`, coloured
-    point clouds) geometry and colour count equally: the mean of the MatCap styles' mean and the
-    colour styles' mean (fixed a priori, not fitted). Colour-less tables: the plain mean.
+    Colour-less tables: the mean over every style and shading. Tables with colour styles
+    (:data:`lit3d.render.colour_styles.COLOUR_STYLES`: coloured point clouds or meshes): the
+    mean over the colour styles only, i.e. over the images an observer of the coloured shape
+    sees (its colours, silhouette and, in the lit styles, the shading of its geometry); the
+    MatCap styles stay in the table as features for the learned score. (Until this revision the
+    two blocks were weighted equally; README "Point clouds, colour and CPCD2" gives both
+    figures and says which data the choice was made on.)
     """
     from lit3d.render.colour_styles import COLOUR_STYLES
 
@@ -292,7 +296,7 @@ def overall_score(features: dict[str, float], measure: str = "mask_ssim") -> flo
             (col if k.split("/")[1] in COLOUR_STYLES else geo).append(v)
     if not geo and not col:
         raise ValueError(f"no {measure}/* features in the table")
-    return float(np.mean([np.mean(g) for g in (geo, col) if g]))
+    return float(np.mean(col if col else geo))
 
 
 def feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_dir: str | os.PathLike | None = None,

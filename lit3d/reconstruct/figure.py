@@ -13,19 +13,12 @@ import io
 
 import numpy as np
 
+from lit3d.utils.figures import font
+
 # view directions (towards the camera) in the GL frame of the input camera (x right, y up, z back)
 VIEWS = {"camera view": (0.0, 0.0, 1.0), "side view": (1.0, 0.25, 0.15), "back view": (-0.35, 0.35, -1.0)}
 STYLE = "basic_1"
 LABEL_PX = 22
-
-
-def _font(size: int = 15):
-    from PIL import ImageFont
-
-    try:
-        return ImageFont.load_default(size=size)
-    except TypeError:  # Pillow < 10.1
-        return ImageFont.load_default()
 
 
 def depth_panel(depth: np.ndarray, keep: np.ndarray | None, size: int) -> np.ndarray:
@@ -83,13 +76,9 @@ def points_panels(points_gl: np.ndarray, directions: np.ndarray, size: int, exte
 
 def mesh_panels(mesh_gl, directions: np.ndarray, size: int, extent: float = 0.9) -> list[np.ndarray]:
     """Shaded renders of a normalised GL-frame mesh from each view: ``(size, size, 3) uint8`` each."""
-    from lit3d.render.gbuffer import RenderConfig, render_gbuffer
-    from lit3d.render.styles import apply_styles
+    from lit3d.render.shaded import shaded_views
 
-    g = render_gbuffer(mesh_gl, RenderConfig(size=size, extent=extent, shadings=("smooth",)), shading="smooth",
-                       normalise=False, directions=directions)
-    img = apply_styles(g.normals, g.mask, [STYLE])[0]  # (V, 3, H, W)
-    return [(v.permute(1, 2, 0).numpy().clip(0, 1) * 255).astype(np.uint8) for v in img]
+    return list(shaded_views(mesh_gl, directions, size, STYLE, extent, background=0.0))
 
 
 def _labelled(tile: np.ndarray, text: str):
@@ -97,7 +86,7 @@ def _labelled(tile: np.ndarray, text: str):
 
     img = Image.new("RGB", (tile.shape[1], tile.shape[0] + LABEL_PX), (255, 255, 255))
     img.paste(Image.fromarray(tile), (0, LABEL_PX))
-    ImageDraw.Draw(img).text((4, 3), text, fill=(0, 0, 0), font=_font())
+    ImageDraw.Draw(img).text((4, 3), text, fill=(0, 0, 0), font=font())
     return img
 
 
@@ -124,7 +113,7 @@ def figure_png(depth: np.ndarray, keep: np.ndarray, points: np.ndarray, mesh, ti
     tw, th = rows[0][0].size
     gap, head = 4, 26
     sheet = Image.new("RGB", (4 * tw + 3 * gap, head + 2 * th + gap), (255, 255, 255))
-    ImageDraw.Draw(sheet).text((4, 5), title, fill=(0, 0, 0), font=_font(16))
+    ImageDraw.Draw(sheet).text((4, 5), title, fill=(0, 0, 0), font=font(16))
     for r, row in enumerate(rows):
         for c, tile in enumerate(row):
             sheet.paste(tile, (c * (tw + gap), head + r * (th + gap)))

@@ -98,15 +98,17 @@ def render_point_gbuffers(shape: PointShape, config: RenderConfig | None = None,
     r_int = radius_px.round().clamp(0, MAX_RADIUS_PX).long()
     vbase = (torch.arange(v) * (s * s))[:, None]
     big = torch.iinfo(torch.int64).max
-    buf = torch.full((v * s * s,), big, dtype=torch.int64)
+    buf = torch.full((v * s * s + 1,), big, dtype=torch.int64)  # last slot: off-image splat pixels
+    dump = v * s * s
     for r in torch.unique(r_int).tolist():
         sel = (r_int == r).nonzero().squeeze(1)
         rr, cc, kk = row[:, sel], col[:, sel], key[:, sel]
+        base = vbase + rr * s + cc
         for dy, dx in _disc(int(r)).tolist():
             y, x = rr + dy, cc + dx
             ok = (y >= 0) & (y < s) & (x >= 0) & (x < s)
-            pix = (vbase + y * s + x)[ok]
-            buf.scatter_reduce_(0, pix, kk[ok], "amin")
+            buf.scatter_reduce_(0, torch.where(ok, base + (dy * s + dx), dump).flatten(), kk.flatten(), "amin")
+    buf = buf[:dump]
     mask = buf != big
     idx = torch.where(mask, buf % n, torch.zeros_like(buf)).view(v, s * s)
     mask = mask.view(v, s * s)

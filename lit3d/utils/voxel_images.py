@@ -36,8 +36,7 @@ def render_voxels(volume: torch.Tensor | np.ndarray, threshold: float = 0.5, siz
     An empty grid (nothing above ``threshold``) gives blank images.
     """
     from lit3d.render.convert import ShapeError, voxels_to_mesh
-    from lit3d.render.gbuffer import RenderConfig, render_gbuffer
-    from lit3d.render.styles import apply_styles
+    from lit3d.render.shaded import shaded_views
 
     vol = volume.detach().float().cpu().numpy() if isinstance(volume, torch.Tensor) else np.asarray(volume, np.float32)
     dirs = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
@@ -51,11 +50,7 @@ def render_voxels(volume: torch.Tensor | np.ndarray, threshold: float = 0.5, siz
     t = np.diag([1.0 / d, 1.0 / d, -1.0 / d, 1.0])
     t[:3, 3] = [-(0.5 + 1.0 / d), -(0.5 + 1.0 / d), 0.5 + 1.0 / d]
     mesh.apply_transform(t)  # a reflection: trimesh flips the faces, normals stay outward
-    dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
-    gb = render_gbuffer(mesh, RenderConfig(size=size, extent=extent, distance=3.0), shading="smooth",
-                        normalise=False, directions=dirs)
-    img = apply_styles(gb.normals, gb.mask, [style], background=1.0)[0]  # (V, 3, S, S)
-    return (img.clamp(0, 1) * 255).round().to(torch.uint8).permute(0, 2, 3, 1).numpy()
+    return shaded_views(mesh, dirs, size, style, extent)
 
 
 def depth_shaded(volume: torch.Tensor, threshold: float = 0.5, axis: int = 0) -> np.ndarray:

@@ -85,6 +85,16 @@ def _fsim_filters_complex(h: int, w: int, device: str):
     return bank.to(torch.complex64), em_n.tolist(), sum_an2.tolist(), sum_aiaj.tolist()
 
 
+def _kth_smallest(x: torch.Tensor, k: int) -> torch.Tensor:
+    """``(B,)``: the ``k``-th smallest (1-based) of each row of ``(B, n)``. On CPU through NumPy's
+    introselect (``np.partition``), about 6x faster than ``torch.kthvalue`` there; same values."""
+    if x.device.type != "cpu":
+        return x.kthvalue(k, dim=1).values
+    import numpy as np
+
+    return torch.from_numpy(np.partition(x.detach().numpy(), k - 1, axis=1)[:, k - 1].copy())
+
+
 def _phase_congruency(img: torch.Tensor, k: float, eps: float, rank: int) -> torch.Tensor:
     bsz, h, w = img.shape
     bank, em_n, sum_an2, sum_aiaj = _fsim_filters_complex(h, w, str(img.device))
@@ -103,7 +113,7 @@ def _phase_congruency(img: torch.Tensor, k: float, eps: float, rank: int) -> tor
         dev = torch.addcmul(od * mean_e[:, None], e, mean_o[:, None], value=-1.0).abs_().sum(1)
         energy = xe * xe / den - dev
         if rank >= 1:
-            median = an2[:, 0].flatten(1).kthvalue(rank, dim=1).values  # MATLAB median (odd) / lower middle
+            median = _kth_smallest(an2[:, 0].flatten(1), rank)  # MATLAB median (odd) / lower middle
             mean_e2n = -median / math.log(0.5)
             noise_power = mean_e2n / em_n[o]
             est_noise2 = 2 * noise_power * sum_an2[o] + 4 * noise_power * sum_aiaj[o]
