@@ -36,8 +36,8 @@ from lit3d.utils.shapenet_categories import (
 
 log = logging.getLogger("lit3d.data")
 
-SPLITS = ("train", "val", "test_same", "test_cross", "test_unseen")
-TEST_SPLITS = ("test_same", "test_cross", "test_unseen")
+SPLITS = ("train", "val", "test_same", "test_cross", "test_unseen", "test_unseen_cross")
+TEST_SPLITS = ("test_same", "test_cross", "test_unseen", "test_unseen_cross")
 DEFAULT_SIZES = {"train": 240, "val": 40, "test_same": 40, "test_cross": 40, "test_unseen": 40}
 SYNTH_VERSION = "1"
 RECGAN_VERSION = "1"
@@ -62,11 +62,12 @@ def synth_items(sizes: dict, categories: Sequence[str], unseen_categories: Seque
     items = []
     for split in SPLITS:
         n = int(sizes.get(split, 0) or 0)
-        cats = list(unseen_categories) if split == "test_unseen" else list(categories)
+        cats = list(unseen_categories) if split.startswith("test_unseen") else list(categories)
         if n <= 0 or not cats:
             continue
-        group = {"test_same": "test", "test_cross": "test", "test_unseen": "unseen"}.get(split, split)
-        view_set = {"test_cross": "cross", "test_unseen": unseen_view_set}.get(split, "same")
+        group = {"test_same": "test", "test_cross": "test", "test_unseen": "unseen",
+                 "test_unseen_cross": "unseen"}.get(split, split)
+        view_set = {"test_cross": "cross", "test_unseen": unseen_view_set, "test_unseen_cross": "cross"}.get(split, "same")
         views = VIEW_SETS[view_set]
         for i in range(n):
             category = cats[i % len(cats)]
@@ -106,11 +107,12 @@ class CompletionDataModule(pl.LightningDataModule):
         root: raw 3D-RecGAN++ folder (source=recgan only).
         target_res: R, the target grid (64 demo, 256 paper).
         input_factor: r = R / input_factor (4: 64 -> 16, 256 -> 64).
-        sizes: synthetic items per split (train, val, test_same, test_cross, test_unseen); splits
+        sizes: synthetic items per split (train, val, test_same, test_cross, test_unseen,
+            test_unseen_cross = unseen categories from the cross-view set, 0 when absent); splits
             left out keep the demo defaults (240/40/40/40/40); 0 drops a split.
         categories: seen categories used for train/val/test_same/test_cross (None: all of
             :data:`~lit3d.utils.shapenet_categories.SEEN_CATEGORIES`; labels always index that list).
-        unseen_categories: categories of test_unseen (None: all unseen categories).
+        unseen_categories: categories of test_unseen / test_unseen_cross (None: all unseen categories).
         views_per_shape: synthetic views per shape instance.
         unseen_view_set: view set of synthetic test_unseen ("same" or "cross").
         val_fraction: recgan: share of train shape ids held out as val.

@@ -121,9 +121,9 @@ def test_convert_release_sizes_and_pairing(tmp_path, monkeypatch, old_layout):
     assert sizes["train"] == 4 * 4 and sizes["val"] == 4 * 2
     assert sizes["test_same"] == 4 * 2
     assert sizes.get("test_cross", 0) == (0 if old_layout else 4 * 2)
-    assert sizes["test_unseen"] == (2 if old_layout else 4)
+    assert sizes["test_unseen"] == 2 and sizes.get("test_unseen_cross", 0) == (0 if old_layout else 2)
     assert set(info["counts"]["train"]) == {"bench", "chair", "couch", "table"}
-    assert info["counts"]["test_unseen"] == {"car": sizes["test_unseen"]}
+    assert info["counts"]["test_unseen"] == {"car": 2}
     folder_views = {}
     for it in dm.manifest["items"]:
         inp, tgt = load_pair(dm.data_dir / it["file"])
@@ -140,7 +140,8 @@ def test_convert_release_sizes_and_pairing(tmp_path, monkeypatch, old_layout):
     assert not ids["train"] & ids["val"]
     batch = next(iter(dm.train_dataloader()))
     assert batch["input"].shape == (2, 1, 8, 8, 8) and batch["target"].shape == (2, 1, RAW, RAW, RAW)
-    assert dm.test_split_names == (["test_same", "test_unseen"] if old_layout else ["test_same", "test_cross", "test_unseen"])
+    assert dm.test_split_names == (["test_same", "test_unseen"] if old_layout
+                                   else ["test_same", "test_cross", "test_unseen", "test_unseen_cross"])
 
 
 def test_target_pooled_to_configured_resolution(tmp_path):
@@ -245,3 +246,40 @@ def test_real_sample_converts_with_expected_counts(tmp_path):
     y = F.max_pool3d(batch["target"], 4)
     assert float((x * y).sum() / x.sum()) > 0.9
     assert os.path.getsize(dm.data_dir / "manifest.json") > 0
+
+
+def _pair(category, split_kind, view_set, shape_id, view="0_0_0"):
+    from datamodules.readers.recgan import RecganPair
+
+    folder = f"{split_kind}_{'125' if view_set == 'same' else '216'}"
+    return RecganPair(category, "0", folder, split_kind, view_set, shape_id, view, Path("i"), Path("t"))
+
+
+def test_val_folders_are_read_and_held_out_ids_leave_every_view_set():
+    seen, unseen = ["chair", "table"], ["car"]
+    pairs = [_pair("chair", "train", vs, i, v) for vs in ("same", "cross") for i in "abcdefghij" for v in ("0_0_0", "1_1_1")]
+    pairs += [_pair("table", "train", "same", i) for i in "abc"] + [_pair("table", "val", "same", "z")]
+    pairs += [_pair("car", "test", vs, "u") for vs in ("same", "cross")] + [_pair("car", "train", "same", "w")]
+    out = assign_splits(pairs, seen, unseen, val_fraction=0.2, seed=3)
+    split_of = {(p.category, p.view_set, p.shape_id, p.view): s for s, p in out}
+    # chair (no val folder): whole ids held out, with both their view sets; no id in train and val
+    val_ids = {p.shape_id for s, p in out if s == "val" and p.category == "chair"}
+    train_ids = {p.shape_id for s, p in out if s == "train" and p.category == "chair"}
+    assert len(val_ids) == 2 and not val_ids & train_ids
+    assert {p.view_set for s, p in out if s == "val" and p.category == "chair"} == {"same", "cross"}
+    # table has a val folder: it is the validation set, every train pair stays in train
+    assert [p.shape_id for s, p in out if s == "val" and p.category == "table"] == ["z"]
+    assert sorted(p.shape_id for s, p in out if s == "train" and p.category == "table") == ["a", "b", "c"]
+    # unseen categories: test 125 -> test_unseen, test 216 -> test_unseen_cross; their train folder is unused
+    assert split_of[("car", "same", "u", "0_0_0")] == "test_unseen"
+    assert split_of[("car", "cross", "u", "0_0_0")] == "test_unseen_cross"
+    assert ("car", "same", "w", "0_0_0") not in split_of
+
+
+@pytest.mark.parametrize("folder,category", [("P1_02691156_airplane", "plane"), ("P1_04090263_rifle", "firearm"),
+                                             ("P1_04090263_gun", "firearm"), ("P1_04256520_coach", "couch"),
+                                             ("P1_04256520_sofa", "couch"), ("P1_03001627_chair", "chair")])
+def test_category_folder_aliases(folder, category):
+    from datamodules.readers.recgan import parse_category_folder
+
+    assert parse_category_folder(folder) == (folder.split("_")[1], category)

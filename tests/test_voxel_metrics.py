@@ -77,3 +77,28 @@ def test_metric_per_category_and_best_threshold():
              for tt in thr.tolist()]
     assert best == pytest.approx(max(brute))
     assert t == pytest.approx(thr[int(np.argmax(brute))].item())
+
+
+def test_pooled_iou_is_summed_intersections_over_summed_unions():
+    from lit3d.metrics.voxel import VoxelSweepMetrics
+
+    g = torch.Generator().manual_seed(4)
+    probs = torch.rand(5, 1, 6, 6, 6, generator=g)
+    target = (torch.rand(5, 1, 6, 6, 6, generator=g) > 0.7).float()
+    target[0] = 0.0  # an empty target: counts in the sums, not as a per-sample 1
+    probs[0] = 0.0
+    cats = torch.tensor([0, 0, 1, 1, 1])
+    m = VoxelSweepMetrics(["a", "b"])
+    m.update(probs[:2], target[:2], cats[:2])
+    m.update(probs[2:], target[2:], cats[2:])
+    res = m.compute()
+    for j, t in enumerate(m.thresholds.tolist()):
+        p = probs.numpy() >= t
+        y = target.numpy() > 0.5
+        inter, union = (p & y).reshape(5, -1).sum(1), (p | y).reshape(5, -1).sum(1)
+        assert float(res["iou_pooled"][j]) == pytest.approx(inter.sum() / union.sum())
+        for c in (0, 1):
+            k = cats.numpy() == c
+            assert float(res["iou_pooled_per_category"][c, j]) == pytest.approx(inter[k].sum() / union[k].sum())
+        per_sample = np.where(union == 0, 1.0, inter / np.maximum(union, 1))
+        assert float(res["iou"][j]) == pytest.approx(per_sample.mean())

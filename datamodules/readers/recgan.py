@@ -15,10 +15,15 @@ Preparation of one pair: centre-pad/crop both grids to ``raw_res^3``; the target
 max-pooled to ``target_res`` (no-op at 256); the input is the padded partial grid
 max-pooled to ``target_res / input_factor`` (64^3 at paper scale).
 
-Splits: ``train_125`` -> ``train`` (some shape ids held out as ``val``, chosen by a
-seeded hash of the id; when a category has a single train id, some of its views are
-held out instead), ``test_125`` -> ``test_same``, ``test_216`` -> ``test_cross``;
-categories in ``unseen_categories`` -> ``test_unseen`` (any view set, recorded per item).
+Splits: ``val_125`` / ``val_216`` folders, when a category has them, -> ``val``; otherwise
+whole shape ids of ``train_*`` are held out as ``val`` with every view of them in every
+train view set (about ``val_fraction`` of the ids, chosen by a seeded hash of the id; when a
+category has a single train id, some of its views are held out instead); ``train_*`` ->
+``train``, ``test_125`` -> ``test_same``, ``test_216`` -> ``test_cross``; categories in
+``unseen_categories`` -> ``test_unseen`` (125 views, thesis table 3.6) and
+``test_unseen_cross`` (216 views, table 3.5). Category folder names go through
+:data:`lit3d.utils.shapenet_categories.CATEGORY_ALIASES` (``coach``/``sofa`` -> couch,
+``airplane`` -> plane, ``gun``/``rifle`` -> firearm, ...).
 """
 from __future__ import annotations
 
@@ -38,7 +43,7 @@ from lit3d.utils.shapenet_categories import CATEGORY_ALIASES
 
 log = logging.getLogger("lit3d.data")
 
-DIR_RE = re.compile(r"^(?P<split>train|test)(?:_(?P<views>125|216))?_(?P<kind>25d|3d)_vox(?P<res>\d+)$")
+DIR_RE = re.compile(r"^(?P<split>train|val|test)(?:_(?P<views>125|216))?_(?P<kind>25d|3d)_vox(?P<res>\d+)$")
 FILE_RE = re.compile(r"^(?P<id>.+)_(?P<a>\d+)_(?P<b>\d+)_(?P<c>\d+)\.npz$")
 VIEW_SETS = {"125": "same", "216": "cross"}
 
@@ -50,7 +55,7 @@ class RecganPair:
     category: str
     synset: str
     folder: str        # e.g. "train_125" (older layout: "train")
-    split_kind: str    # "train" | "test"
+    split_kind: str    # "train" | "val" | "test"
     view_set: str      # "same" (125) | "cross" (216)
     shape_id: str
     view: str          # "a_b_c"
@@ -218,10 +223,12 @@ def assign_splits(pairs: list[RecganPair], categories, unseen_categories, val_fr
                   seed: int = 0) -> list[tuple[str, RecganPair]]:
     """(split, pair) for every pair that belongs to a split; other categories are dropped (logged).
 
-    train -> train/val (val = about ``val_fraction`` of each category's train shape ids,
-    chosen by a seeded hash; at least one id stays in train; a category with a single
-    train id holds out views instead), test 125 -> test_same, test 216 -> test_cross,
-    unseen categories -> test_unseen.
+    A category with ``val_*`` folders: those are ``val``, every ``train_*`` pair is ``train``.
+    Otherwise train -> train/val, val = about ``val_fraction`` of the category's train shape
+    ids (seeded hash; at least one id stays in train), every view of a held-out id in every
+    train view set (no id in both); a category with a single train id holds out views
+    instead. test 125 -> test_same, test 216 -> test_cross, unseen categories -> test_unseen
+    (125) / test_unseen_cross (216); unseen pairs in train or val folders are not used.
     """
     categories, unseen = set(categories), set(unseen_categories)
     dropped = sorted({p.category for p in pairs} - categories - unseen)
@@ -229,11 +236,17 @@ def assign_splits(pairs: list[RecganPair], categories, unseen_categories, val_fr
         log.info("3D-RecGAN++ categories not used by this config: %s", dropped)
     out: list[tuple[str, RecganPair]] = []
     train_by_cat: dict[str, list[RecganPair]] = defaultdict(list)
+    has_val = {p.category for p in pairs if p.split_kind == "val"}
     for p in pairs:
         if p.category in unseen:
-            out.append(("test_unseen", p))
+            if p.split_kind == "test":
+                out.append(("test_unseen" if p.view_set == "same" else "test_unseen_cross", p))
         elif p.category in categories:
-            if p.split_kind == "train":
+            if p.split_kind == "val":
+                out.append(("val", p))
+            elif p.split_kind == "train" and p.category in has_val:
+                out.append(("train", p))
+            elif p.split_kind == "train":
                 train_by_cat[p.category].append(p)
             else:
                 out.append(("test_same" if p.view_set == "same" else "test_cross", p))
@@ -244,10 +257,12 @@ def assign_splits(pairs: list[RecganPair], categories, unseen_categories, val_fr
             val_ids = set(ids[:n_val])
             out += [("val" if p.shape_id in val_ids else "train", p) for p in ps]
         else:
-            views = sorted({p.view for p in ps}, key=lambda v: stable_hash([seed, cat, v]))
+            # same-view keys hash as before cross-view train folders were read (splits stay put)
+            views = sorted({(p.view_set, p.view) for p in ps},
+                           key=lambda v: stable_hash([seed, cat, v[1]] if v[0] == "same" else [seed, cat, *v]))
             n_val = min(len(views) - 1, max(1, round(val_fraction * len(views)))) if val_fraction > 0 else 0
             val_views = set(views[:n_val])
-            out += [("val" if p.view in val_views else "train", p) for p in ps]
-    order = {"train": 0, "val": 1, "test_same": 2, "test_cross": 3, "test_unseen": 4}
+            out += [("val" if (p.view_set, p.view) in val_views else "train", p) for p in ps]
+    order = {"train": 0, "val": 1, "test_same": 2, "test_cross": 3, "test_unseen": 4, "test_unseen_cross": 5}
     out.sort(key=lambda sp: (order[sp[0]], sp[1].category, sp[1].folder, sp[1].shape_id, sp[1].view))
     return out

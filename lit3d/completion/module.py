@@ -34,7 +34,7 @@ from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, select_seen_categor
 
 log = logging.getLogger("lit3d.completion")
 
-SPLITS = ("same", "cross", "unseen")
+SPLITS = ("same", "cross", "unseen", "unseen_cross")
 # predictions: the model, the partial input upsampled, the per-voxel training prior
 SOURCES = ("model", "input", "prior")
 
@@ -333,10 +333,12 @@ class CompletionTask(pl.LightningModule):
                 j = self._thr_index(thresholds[src])
                 suffix = "" if src == "model" else f"_{src}"
                 out[f"test/{split}/iou{suffix}"] = float(res["iou"][j])
+                out[f"test/{split}/iou_pooled{suffix}"] = float(res["iou_pooled"][j])
                 out[f"test/{split}/ce{suffix}"] = float(res["ce"])
                 for c, cat in enumerate(self.eval_categories):
                     if res["count_per_category"][c] > 0:
                         out[f"test/{split}/iou{suffix}/{cat}"] = float(res["iou_per_category"][c, j])
+                        out[f"test/{split}/iou_pooled{suffix}/{cat}"] = float(res["iou_pooled_per_category"][c, j])
                         out[f"test/{split}/ce{suffix}/{cat}"] = float(res["ce_per_category"][c])
                 metric.reset()
         self.log_dict(out, sync_dist=False)

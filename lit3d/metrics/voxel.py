@@ -89,13 +89,16 @@ def voxel_cross_entropy(probs: torch.Tensor, target: torch.Tensor) -> torch.Tens
 
 
 class VoxelSweepMetrics(Metric):
-    """Mean per-sample IoU at every threshold and mean CE, per category.
+    """Mean per-sample IoU and pooled IoU at every threshold, and mean CE, per category.
 
     ``update(probs, target, category)`` with probs/target (B, 1, D, H, W) and
     category (B,) int64 indices into ``categories`` (out-of-range -> ignored).
     ``compute()`` returns a dict:
         ``iou`` (T,) mean IoU over all samples at each threshold,
-        ``iou_per_category`` (C, T), ``ce`` scalar, ``ce_per_category`` (C,),
+        ``iou_per_category`` (C, T), ``iou_pooled`` (T,) pooled IoU (sum of the samples'
+        intersections / sum of their unions: big shapes weigh more; the thesis does not say
+        which of the two it reports), ``iou_pooled_per_category`` (C, T),
+        ``ce`` scalar, ``ce_per_category`` (C,),
         ``count_per_category`` (C,).
     Categories with no samples get NaN in the per-category tensors.
     """
@@ -110,6 +113,8 @@ class VoxelSweepMetrics(Metric):
         self.register_buffer("thresholds", thr.float(), persistent=False)
         c, t = len(self.categories), thr.numel()
         self.add_state("iou_sum", torch.zeros(c, t, dtype=torch.float64), dist_reduce_fx="sum")
+        self.add_state("inter_sum", torch.zeros(c, t, dtype=torch.float64), dist_reduce_fx="sum")
+        self.add_state("union_sum", torch.zeros(c, t, dtype=torch.float64), dist_reduce_fx="sum")
         self.add_state("ce_sum", torch.zeros(c, dtype=torch.float64), dist_reduce_fx="sum")
         self.add_state("count", torch.zeros(c, dtype=torch.float64), dist_reduce_fx="sum")
 
@@ -119,9 +124,13 @@ class VoxelSweepMetrics(Metric):
         if not bool(keep.any()):
             return
         probs, target, category = probs[keep], target[keep], category[keep]
-        iou = iou_at_thresholds(probs, target, self.thresholds)
+        predicted, true_pos, positives = confusion_at_thresholds(probs, target, self.thresholds)
+        union = (predicted + positives.unsqueeze(1) - true_pos).double()
+        iou = torch.where(union == 0, torch.ones_like(union), true_pos.double() / union.clamp_min(1))
         ce = voxel_cross_entropy(probs, target)
         self.iou_sum.index_add_(0, category, iou)
+        self.inter_sum.index_add_(0, category, true_pos.double())
+        self.union_sum.index_add_(0, category, union)
         self.ce_sum.index_add_(0, category, ce)
         self.count.index_add_(0, category, torch.ones_like(ce))
 
@@ -132,10 +141,17 @@ class VoxelSweepMetrics(Metric):
         return {
             "iou": self.iou_sum.sum(0) / total,
             "iou_per_category": torch.where(per_count > 0, self.iou_sum / per_count.clamp_min(1), nan),
+            "iou_pooled": _pooled(self.inter_sum.sum(0), self.union_sum.sum(0)),
+            "iou_pooled_per_category": torch.where(per_count > 0, _pooled(self.inter_sum, self.union_sum), nan),
             "ce": self.ce_sum.sum() / total,
             "ce_per_category": torch.where(self.count > 0, self.ce_sum / self.count.clamp_min(1), nan),
             "count_per_category": self.count,
         }
+
+
+def _pooled(inter: torch.Tensor, union: torch.Tensor) -> torch.Tensor:
+    """Pooled IoU = summed intersections / summed unions (1 where both sums are 0)."""
+    return torch.where(union > 0, inter / union.clamp_min(1), torch.ones_like(union))
 
 
 def best_threshold(iou_curve: torch.Tensor, thresholds: torch.Tensor) -> tuple[float, float]:

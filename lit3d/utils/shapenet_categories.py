@@ -3,7 +3,8 @@ defined here once.
 
 Seen categories are those the completion networks train on; the classifier's labels index
 into :data:`SEEN_CATEGORIES`, so its order is part of every trained model. Unseen
-categories appear only in the ``test_unseen`` split (thesis tables 3.5 / 3.6). The same
+categories appear only in the ``test_unseen`` (same view, thesis table 3.6) and ``test_unseen_cross``
+(cross view, table 3.5) splits. The same
 names key the synthetic shape generators, the 3D-RecGAN++ folders and the per-category
 metrics and tables.
 
@@ -24,7 +25,12 @@ from collections.abc import Sequence
 SEEN_CATEGORIES: tuple[str, ...] = ("bench", "chair", "couch", "table")
 UNSEEN_CATEGORIES: tuple[str, ...] = ("car", "faucet", "firearm", "guitar", "monitor", "plane")
 # other spellings of a category in 3D-RecGAN++ / ShapeNet folder names (the older release says "coach")
-CATEGORY_ALIASES: dict[str, str] = {"coach": "couch", "sofa": "couch"}
+CATEGORY_ALIASES: dict[str, str] = {
+    "coach": "couch", "sofa": "couch",
+    "airplane": "plane", "aeroplane": "plane", "airplanes": "plane",
+    "gun": "firearm", "rifle": "firearm", "pistol": "firearm", "handgun": "firearm",
+    "display": "monitor", "tv": "monitor", "car_ex": "car", "tap": "faucet",
+}
 
 
 def _subset(chosen: Sequence[str] | None, known: tuple[str, ...], what: str) -> tuple[str, ...]:
