@@ -39,6 +39,10 @@ def test_fast_dev_run(compose_cfg, data_dir):
     metrics = json.loads((Path(cfg.paths.output_dir) / "metrics.json").read_text())
     assert "test/same/iou" in metrics and "test/unseen/iou_input" in metrics
     assert 0.0 <= metrics["test/same/iou"] <= 1.0
+    # pooled IoU, the extrusion baseline and the paired comparison with intervals, in results.md too
+    assert {"test/same/iou_pooled", "test/same/iou_extrusion", "test/same/paired/margin_input_lo"} <= set(metrics)
+    results = (Path(cfg.paths.output_dir) / "results.md").read_text()
+    assert "Paired comparison, same view" in results and "silhouette extrusion (ours)" in results
 
 
 def test_critic_and_generator_steps_per_batch(compose_cfg, data_dir):

@@ -28,6 +28,7 @@ from lit3d.completion.losses import (critic_loss, generator_adv_loss, gradient_p
                                      weighted_bce_with_logits)
 from lit3d.metrics.voxel import VoxelSweepMetrics, best_threshold, default_thresholds
 from lit3d.completion.nets import build_completion_nets, validate_net_config
+from lit3d.completion.paired import PairedSamples, extrude_silhouette
 from lit3d.completion.prior import mean_training_target
 from lit3d.callbacks.nonfinite import NonFiniteLossError, guard_step, validate_mode  # noqa: F401 (re-exported)
 from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, select_seen_categories, select_unseen_categories
@@ -36,7 +37,7 @@ log = logging.getLogger("lit3d.completion")
 
 SPLITS = ("same", "cross", "unseen", "unseen_cross")
 # predictions: the model, the partial input upsampled, the per-voxel training prior
-SOURCES = ("model", "input", "prior")
+SOURCES = ("model", "input", "prior", "extrusion")
 
 
 def split_key(name: str) -> str:
@@ -104,6 +105,7 @@ class CompletionTask(pl.LightningModule):
         self.test_metrics = torch.nn.ModuleDict(
             {f"{sp}_{s}": VoxelSweepMetrics(self.eval_categories, thresholds) for sp in SPLITS for s in SOURCES}
         )
+        self.test_samples = PairedSamples()
         self.generator_steps = 0
         self.skipped_steps = 0
         self.loss_scale = resolve_loss_scale(loss_scale, res)
@@ -272,6 +274,7 @@ class CompletionTask(pl.LightningModule):
             "model": self(x),
             "input": self.upsample_input(x, size),
             "prior": self.prior.expand(y.shape[0], -1, -1, -1, -1),
+            "extrusion": extrude_silhouette(x, size),
         }
 
     # ------------------------------------------------------------------ validation
@@ -302,6 +305,9 @@ class CompletionTask(pl.LightningModule):
         for m in self.val_metrics.values():
             m.reset()
 
+    def _source_thresholds(self) -> dict[str, float]:  # model and prior: chosen on validation
+        return {"model": float(self.threshold), "prior": float(self.prior_threshold), "input": 0.5, "extrusion": 0.5}
+
     def _thr_index(self, t: float) -> int:
         return int(torch.argmin((self.thresholds - t).abs()))
 
@@ -317,12 +323,16 @@ class CompletionTask(pl.LightningModule):
     def test_step(self, batch: dict, batch_idx: int, dataloader_idx: int = 0) -> None:
         split = self._split_name(dataloader_idx)
         cats = self._categories(batch)
-        for src, p in self._predictions(batch).items():
+        preds = self._predictions(batch)
+        for src, p in preds.items():
             self.test_metrics[f"{split}_{src}"].update(p, batch["target"], cats)
+        self.test_samples.update(SPLITS.index(split), cats, preds, batch["target"], self._source_thresholds())
 
     def on_test_epoch_end(self) -> None:
-        thresholds = {"model": float(self.threshold), "prior": float(self.prior_threshold), "input": 0.5}
+        thresholds = self._source_thresholds()
         out: dict[str, float] = {"test/threshold": float(self.threshold)}
+        out.update(self.test_samples.summary(SPLITS, self.eval_categories))
+        self.test_samples.reset()
         for split in SPLITS:
             for src in SOURCES:
                 metric = self.test_metrics[f"{split}_{src}"]

@@ -33,7 +33,9 @@ THESIS = [
         "3DCascade-GAN, same view (thesis 3.6)": [.559, .541, .430, .455, .569, .395]}),
 ]
 OURS = (("lit3d, multi-category (ours)", ""), ("input as prediction (ours)", "_input"),
-        ("per-voxel prior (ours)", "_prior"))
+        ("silhouette extrusion (ours)", "_extrusion"), ("per-voxel prior (ours)", "_prior"))
+SPLIT_TITLES = {"same": "same view", "cross": "cross view", "unseen": "unseen categories, same view",
+                "unseen_cross": "unseen categories, cross view"}
 
 
 def category_rows(metrics: dict, split: str, categories, kind: str = "iou") -> list[list[str]]:
@@ -74,9 +76,40 @@ def write_results(metrics: dict, out_dir: Path) -> Path:
         if ce:
             parts += ["", f"## Cross-entropy, {split} split (lower is better)", "",
                       markdown_table(["method", *cats, "mean"], ce)]
+    parts += paired_section(metrics)
     path = Path(out_dir) / "results.md"
     atomic_write_text(path, "\n".join(parts) + "\n")
     return path
+
+
+def _ci(metrics: dict, key: str, suffix: str) -> str:
+    lo, hi = metrics.get(f"{key}_lo{suffix}"), metrics.get(f"{key}_hi{suffix}")
+    bounds = f" [{fmt(lo)}, {fmt(hi)}]" if lo is not None and lo == lo else ""
+    return f"{fmt(metrics.get(key + suffix))}{bounds}"
+
+
+def paired_section(metrics: dict) -> list[str]:
+    """Paired per-sample comparison tables (``test/<split>/paired/...`` keys of
+    :meth:`lit3d.completion.paired.PairedSamples.summary`), one per split."""
+    parts = []
+    for split, title in SPLIT_TITLES.items():
+        base = f"test/{split}/paired"
+        if f"{base}/n" not in metrics:
+            continue
+        cats = sorted({k.rsplit("/", 1)[1] for k in metrics if k.startswith(f"{base}/n/")})
+        rows = []
+        for label, suffix in [(c, f"/{c}") for c in cats] + [("all", "")]:
+            rows.append([label, f"{int(metrics[f'{base}/n{suffix}'])}", _ci(metrics, f"{base}/model", suffix),
+                         fmt(metrics.get(f"{base}/input{suffix}")), _ci(metrics, f"{base}/margin_input", suffix),
+                         fmt(metrics.get(f"{base}/extrusion{suffix}")),
+                         _ci(metrics, f"{base}/margin_extrusion", suffix)])
+        parts += ["", f"## Paired comparison, {title}: per-sample IoU, mean [bootstrap 95% interval]", "",
+                  markdown_table(["category", "n", "model", "input as prediction", "model - input",
+                                  "silhouette extrusion", "model - extrusion"], rows)]
+    if parts:
+        parts += ["", "Same samples for every column; intervals resample samples (pairs for the margins), "
+                      "2000 resamples, percentile method; none with fewer than 2 samples."]
+    return parts
 
 
 def write_figures(task, datamodule, out_dir: Path, n: int = 4) -> list[Path]:
