@@ -29,16 +29,34 @@ def nonfinite_terms(losses: Mapping[str, torch.Tensor]) -> list[str]:
     return [k for k, v in losses.items() if not bool(torch.isfinite(v.detach()).all())]
 
 
+def any_rank(flag: bool, device: torch.device | str = "cpu") -> bool:
+    """``flag`` OR-ed over every process of an initialised ``torch.distributed`` group (one
+    ``all_reduce``; the flag itself when not distributed). ``device``: where the collective's
+    tensor lives (CPU for gloo, the GPU for NCCL)."""
+    import torch.distributed as dist
+
+    if not (dist.is_available() and dist.is_initialized()) or dist.get_world_size() < 2:
+        return flag
+    t = torch.tensor([1.0 if flag else 0.0], device=device)
+    dist.all_reduce(t, op=dist.ReduceOp.MAX)
+    return bool(t.item() > 0)
+
+
 def check_losses(losses: Mapping[str, torch.Tensor], where: str, mode: str = "raise") -> bool:
-    """True when every loss is finite; else raise :class:`NonFiniteLossError` (``mode="raise"``)
-    or return False (``mode="skip"``: the caller skips the step and counts it)."""
+    """True when every loss is finite on every process; else raise :class:`NonFiniteLossError`
+    (``mode="raise"``) or return False (``mode="skip"``: the caller skips the step and counts it).
+
+    Under DDP the decision is taken jointly (:func:`any_rank`): a NaN on one rank makes every
+    rank skip (or raise) the same step, so no rank waits in a gradient all-reduce that the
+    others never reach."""
     validate_mode(mode)
     bad = nonfinite_terms(losses)
-    if not bad:
+    device = next(iter(losses.values())).device if losses else "cpu"
+    if not any_rank(bool(bad), device):
         return True
     if mode == "skip":
         return False
-    raise NonFiniteLossError(f"non-finite loss at {where}: {', '.join(bad)} "
+    raise NonFiniteLossError(f"non-finite loss at {where}: {', '.join(bad) or 'on another process'} "
                              "(set task.on_nonfinite=skip to skip such steps)")
 
 
@@ -48,6 +66,6 @@ def guard_step(module, losses: Mapping[str, torch.Tensor], where: str, mode: str
     if check_losses(losses, where, mode):
         return True
     module.skipped_steps += 1
-    module.print(f"warning: non-finite loss at {where}: {', '.join(nonfinite_terms(losses))}; "
+    module.print(f"warning: non-finite loss at {where}: {', '.join(nonfinite_terms(losses)) or 'on another process'}; "
                  f"step skipped ({module.skipped_steps} so far)")
     return False
