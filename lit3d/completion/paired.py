@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 
@@ -55,6 +56,11 @@ class PairedSamples(torch.nn.Module):
         out: dict[str, float] = {}
         if not got:
             return out
+        # one canonical order (by value), so the bootstrap draws do not depend on how the samples
+        # were spread over processes
+        keys = [got[k].double().numpy() for k in ("extrusion", "input", "model", "category", "split")]
+        order = torch.from_numpy(np.lexsort(keys))
+        got = {k: v[order] for k, v in got.items()}
         for s, split in enumerate(splits):
             rows = got["split"] == s
             if not bool(rows.any()):
