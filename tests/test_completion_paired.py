@@ -9,9 +9,10 @@ from lit3d.completion.paired import PairedSamples, extrude_silhouette
 from lit3d.metrics.bootstrap import mean_ci, paired_difference_ci
 
 
-def test_extrusion_fills_everything_behind_the_first_visible_voxel():
+def test_extrusion_fills_behind_the_first_visible_voxel_down_to_the_deepest_one():
     g = torch.Generator().manual_seed(0)
     partial = (torch.rand(2, 1, 5, 5, 5, generator=g) > 0.8).float()
+    partial[0, ..., 3:] = 0  # sample 0 is shallow: its extrusion stops at k = 2
     got = extrude_silhouette(partial, 10)
     ref = np.zeros((2, 1, 5, 5, 5), np.float32)
     p = partial.numpy()
@@ -19,10 +20,11 @@ def test_extrusion_fills_everything_behind_the_first_visible_voxel():
         for i in range(5):
             for j in range(5):
                 ks = np.nonzero(p[b, 0, i, j])[0]
+                deepest = max(np.nonzero(p[b, 0])[2], default=-1)
                 if len(ks):
-                    ref[b, 0, i, j, ks[0]:] = 1
+                    ref[b, 0, i, j, ks[0]:deepest + 1] = 1
     ref = ref.repeat(2, 2).repeat(2, 3).repeat(2, 4)  # nearest x2
-    assert got.shape == (2, 1, 10, 10, 10)
+    assert got.shape == (2, 1, 10, 10, 10) and got[0, ..., 6:].sum() == 0 and got[1, ..., 8:].sum() > 0
     np.testing.assert_array_equal(got.numpy(), ref)
 
 

@@ -2,8 +2,7 @@
 input-as-prediction and silhouette-extrusion baselines on the same samples, with bootstrap
 95% intervals (:mod:`lit3d.metrics.bootstrap`), per split and category.
 
-Also the silhouette-extrusion baseline itself: every voxel behind a visible input voxel along
-the depth camera's axis is filled (the one-view visual hull of the partial grid).
+Also the silhouette-extrusion baseline itself (:func:`extrude_silhouette`).
 """
 from __future__ import annotations
 
@@ -20,16 +19,22 @@ from lit3d.metrics.voxel import iou_at_thresholds
 BASELINES = ("input", "extrusion")
 
 
-def extrude_silhouette(partial: torch.Tensor, size: int, axis: int = -1) -> torch.Tensor:
-    """The one-view visual hull ``(B, 1, size, size, size) float32`` of a partial grid.
+def extrude_silhouette(partial: torch.Tensor, size: int) -> torch.Tensor:
+    """Silhouette extrusion ``(B, 1, size, size, size) float32``: the partial grid extruded away
+    from the camera, behind each visible voxel of a column, down to the deepest visible voxel of
+    the sample (not to the grid's far side, which would fill empty space behind every shape).
 
     Args:
-        partial: ``(B, 1, r, r, r)`` {0, 1}; along ``axis`` index 0 is nearest the depth camera
-            (:mod:`datamodules.synth.depth_voxels`; the 3D-RecGAN++ grids share the convention).
+        partial: ``(B, 1, r, r, r)`` {0, 1}; along the last axis index 0 is nearest the depth
+            camera (:mod:`datamodules.synth.depth_voxels`).
         size: output side (nearest upsampling, as the input-as-prediction baseline).
     """
-    filled = (partial > 0.5).cummax(dim=axis).values.float()
-    return F.interpolate(filled, size=(size,) * 3, mode="nearest")
+    occ = partial > 0.5
+    behind = occ.cummax(dim=-1).values  # at or behind the first visible voxel of the column
+    k = torch.arange(occ.shape[-1], device=occ.device)
+    deepest = torch.where(occ, k, torch.full_like(k, -1)).flatten(1).amax(1)  # (B,) -1: empty
+    filled = behind & (k <= deepest.view(-1, 1, 1, 1, 1))
+    return F.interpolate(filled.float(), size=(size,) * 3, mode="nearest")
 
 
 class PairedSamples(torch.nn.Module):
