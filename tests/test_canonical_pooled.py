@@ -10,6 +10,7 @@ from lightning.fabric.utilities.data import AttributeDict
 
 from datamodules.canonical import CanonicalDataModule
 from lit3d.canonical import evaluator, heldout, pooled
+from lit3d.utils.evaluation import Evaluation
 
 RETRIEVAL = {"level": 0, "view_size": 32, "vocab": 16, "dense_step": 6}
 
@@ -90,12 +91,13 @@ def test_folds_write_heldout_and_the_pooled_evaluator_scores_every_row(tmp_path)
     runs = []
     for f in range(3):
         dm = _dm(tmp_path, f)
-        evaluator.save_heldout_items(SimpleNamespace(hparams=hp, _trainer=None), _fold_outputs(dm), dm)
+        held = evaluator.heldout_items(SimpleNamespace(hparams=hp, _trainer=None), _fold_outputs(dm), dm)
         run = tmp_path / f"run{f}"
+        assert evaluator.write_artefacts(Evaluation({}, {"heldout": held}), run) == [run / heldout.HELDOUT_FILE]
         evaluator.write_results({"test/depth_mse": 0.1}, run)
         assert (run / heldout.HELDOUT_FILE).is_file() and (run / "results.md").is_file()
         runs.append(run)
-    assert not evaluator._PENDING_HELDOUT  # written once
+    assert evaluator.write_artefacts(Evaluation(), tmp_path / "none") == []  # nothing held out: no file
     with pytest.raises(ValueError, match="never held out"):
         pooled.run(runs[:2], [0], tmp_path / "partial")
     path = pooled.run(runs, [0, 1], tmp_path / "pooled")

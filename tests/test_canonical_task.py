@@ -42,7 +42,7 @@ def _train(tmp_path, net, epochs, retrieval=None, size=48, n=9, mesh_resolution=
                     check_val_every_n_epoch=epochs, deterministic=True)
     tr.fit(task, dm)
     res = tr.test(task, dm, verbose=False)[0]
-    res.update(evaluator.protocol(task, dm))
+    res.update(evaluator.protocol(task, dm).metrics)
     return task, dm, res
 
 

@@ -76,7 +76,8 @@ def test_task_trains_checkpoints_and_predicts(tmp_path):
     m = {k: float(v) for k, v in trainer.callback_metrics.items()}
     from lit3d.quality import evaluator
 
-    m.update(evaluator.protocol(task, dm))  # baselines + leave-one-shape-out (as run_evaluation does)
+    evaluation = evaluator.protocol(task, dm)  # baselines + leave-one-shape-out (as run_evaluation does)
+    m.update(evaluation.metrics)
     for key in ("test/ours/pearson", "test/ours/spearman/rock", "test/chamfer/pearson", "test/single_best/spearman",
                 "test/cv/ours_sfs/pearson/blob", "test/cv/chamfer/spearman"):
         assert key in m and math.isfinite(m[key]), key
@@ -98,7 +99,7 @@ def test_task_trains_checkpoints_and_predicts(tmp_path):
     # report + scatter plots
     md = evaluator.write_results(m, tmp_path).read_text()
     assert "Leave-one-shape-out" in md and "ordinal severity" in md and "| rock |" in md
-    figures = evaluator.write_figures(task, dm, tmp_path)
+    figures = evaluator.write_figures(task, dm, tmp_path, evaluation=evaluation)
     assert len(figures) == 2 and all(p.stat().st_size > 0 for p in figures)
 
 

@@ -12,8 +12,9 @@ test (``task.test_outputs``, DDP-correct) and returns ``test/retrieval/<source>/
 - each of ``mesh_baselines`` (cmds, smacof, nmds, gps, posed): the non-learned canonical forms of
   the full test meshes, one per unique (subject, pose), from ``datamodule.normalized_mesh``.
 
-``write_results`` also saves the fold's held-out items to ``<run dir>/heldout.npz`` (:mod:`lit3d.canonical.heldout`)
-for the pooled cross-validated protocol (:mod:`lit3d.canonical.pooled`).
+:func:`write_artefacts` saves the fold's held-out items (the ``heldout`` artefact of
+:func:`protocol`) to ``<run dir>/heldout.npz`` (:mod:`lit3d.canonical.heldout`) for the pooled
+cross-validated protocol (:mod:`lit3d.canonical.pooled`).
 
 Settings come from the task config (``retrieval``: descriptor config or null = off,
 ``retrieval_min_subjects``, ``chance_trials``, ``mask_threshold``, ``mesh_baselines``,
@@ -28,9 +29,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lit3d.canonical.report import write_figures  # noqa: F401
-from lit3d.canonical.report import write_results as report_write_results
+from lit3d.canonical.report import write_figures, write_results  # noqa: F401
 from lit3d.metrics.depth import composite_depth
+from lit3d.utils.evaluation import Evaluation
 
 log = logging.getLogger("lit3d")
 
@@ -39,54 +40,50 @@ LOGGED_SCORES = ("nn", "ft", "st", "e", "dcg", "seconds")
 PREDICTION_SOURCE = {"canonical": "model", "unet": "unet"}
 
 
-def protocol(task, datamodule) -> dict[str, float]:
-    """``{"test/retrieval/<source>/<score>": value}`` from the task's gathered test outputs; ``{}``
-    when retrieval is off (``task.retrieval=null``), nothing was tested, or fewer than
-    ``retrieval_min_subjects`` test subjects have 2+ items. Call on every process (the gathered
-    outputs are synchronised across DDP ranks)."""
+def protocol(task, datamodule) -> Evaluation:
+    """Metrics ``{"test/retrieval/<source>/<score>": value}`` from the task's gathered test outputs
+    (none when retrieval is off (``task.retrieval=null``), nothing was tested, or fewer than
+    ``retrieval_min_subjects`` test subjects have 2+ items) and, on rank 0, the ``heldout``
+    artefact (:func:`heldout_items`). Call on every process (the gathered outputs are
+    synchronised across DDP ranks)."""
     outputs = task.test_outputs.compute()
     if task.hparams.retrieval is None or not outputs:
-        return {}
+        return Evaluation()
     order = torch.argsort(outputs["index"].cpu())  # dataset order: ranks hand in interleaved shares
     outputs = {k: v.cpu()[order] for k, v in outputs.items()}
-    save_heldout_items(task, outputs, datamodule)
+    held = heldout_items(task, outputs, datamodule)
     results = retrieval_results(task.hparams, outputs, datamodule)
-    return {f"test/retrieval/{source}/{k}": float(scores[k])
-            for source, scores in results.items() for k in LOGGED_SCORES if k in scores}
+    metrics = {f"test/retrieval/{source}/{k}": float(scores[k])
+               for source, scores in results.items() for k in LOGGED_SCORES if k in scores}
+    return Evaluation(metrics, {"heldout": held} if held else {})
 
 
-# this process's last held-out items (rank 0), written by write_results into the run dir
-_PENDING_HELDOUT: dict = {}
-
-
-def save_heldout_items(task, outputs: dict[str, torch.Tensor], datamodule) -> None:
-    """Keep this fold's held-out items (:mod:`lit3d.canonical.heldout`) for :func:`write_results`,
-    which writes them to ``<out_dir>/heldout.npz`` for the pooled protocol
-    (:mod:`lit3d.canonical.pooled`); nothing off rank 0 or for a datamodule that does not list its
-    held-out items."""
+def heldout_items(task, outputs: dict[str, torch.Tensor], datamodule) -> dict | None:
+    """This fold's held-out items (:func:`lit3d.canonical.heldout.heldout_arrays`) for the pooled
+    protocol (:mod:`lit3d.canonical.pooled`); None off rank 0 or for a datamodule that does not
+    list its held-out items."""
     from lit3d.canonical.heldout import heldout_arrays
     from lit3d.canonical.pooled import settings_of
 
     trainer = getattr(task, "_trainer", None)
-    _PENDING_HELDOUT.clear()
     if (trainer is not None and not trainer.is_global_zero) or not hasattr(datamodule, "held_out_ids"):
-        return
+        return None
     hp = datamodule.hparams
-    _PENDING_HELDOUT.update(heldout_arrays(
+    return heldout_arrays(
         outputs, {i: s for s, i in datamodule.subject_index.items()}, datamodule.held_out_ids(),
-        PREDICTION_SOURCE.get(task.hparams.arch, "model"), dict(hp), hp.fold, hp.n_folds, settings_of(dict(task.hparams))))
+        PREDICTION_SOURCE.get(task.hparams.arch, "model"), dict(hp), hp.fold, hp.n_folds, settings_of(dict(task.hparams)))
 
 
-def write_results(metrics: dict, out_dir: Path, dataset: str | None = None) -> Path:
-    """results.md (:func:`lit3d.canonical.report.write_results`) and, after a test with retrieval on,
-    ``heldout.npz`` with the test items of :func:`protocol` (once; :mod:`lit3d.canonical.heldout`)."""
+def write_artefacts(evaluation: Evaluation, out_dir: Path) -> list[Path]:
+    """``<out_dir>/heldout.npz`` from the ``heldout`` artefact, when :func:`protocol` made one."""
     from lit3d.canonical.heldout import HELDOUT_FILE, save_heldout
 
-    if _PENDING_HELDOUT:
-        path = save_heldout(Path(out_dir) / HELDOUT_FILE, dict(_PENDING_HELDOUT))
-        _PENDING_HELDOUT.clear()
-        log.info("held-out items: %s", path)
-    return report_write_results(metrics, out_dir, dataset)
+    held = evaluation.artefacts.get("heldout")
+    if not held:
+        return []
+    path = save_heldout(Path(out_dir) / HELDOUT_FILE, dict(held))
+    log.info("held-out items: %s", path)
+    return [path]
 
 
 def retrieval_results(hp, outputs: dict[str, torch.Tensor], datamodule=None) -> dict[str, dict]:

@@ -164,7 +164,7 @@ def write_pooled_results(result: dict, out_dir: Path) -> Path:
     return path
 
 
-def write_figures(task, datamodule, out_dir: Path, n: int = 4) -> list[Path]:
+def write_figures(task, datamodule, out_dir: Path, n: int = 4, evaluation=None) -> list[Path]:
     """One contact sheet per test subject ``canonical_<subject>.png`` (:mod:`lit3d.canonical.figures`:
     posed input | predicted canonical (depth, shaded surface) | true canonical (depth, shaded
     surface) | |error|, one row per test pose/view). Also rewrites ``results.md`` for the

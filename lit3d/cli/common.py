@@ -304,7 +304,8 @@ def run_evaluation(trainer, task, datamodule, task_name: str, out_dir: Path, *, 
         metrics.update({k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("val/")})
     trainer.test(task, datamodule=datamodule, ckpt_path=ckpt_path, weights_only=True)
     metrics.update({k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("test/")})
-    protocol_metrics = evaluator.protocol(task, datamodule)  # on every rank: it may synchronise states
+    evaluation = evaluator.protocol(task, datamodule)  # on every rank: it may synchronise states
+    protocol_metrics = evaluation.metrics
     metrics.update(protocol_metrics)
     if trainer.is_global_zero:
         for logger in trainer.loggers:  # the module logged its own metrics; these come after the test
@@ -312,7 +313,9 @@ def run_evaluation(trainer, task, datamodule, task_name: str, out_dir: Path, *, 
                 logger.log_metrics(protocol_metrics, step=trainer.global_step)
         out_dir.mkdir(parents=True, exist_ok=True)
         write_json(out_dir / "metrics.json", {**(extra or {}), **metrics})
+        evaluator.write_artefacts(evaluation, out_dir)
         evaluator.write_results(metrics, out_dir)
-        figures = evaluator.write_figures(task, datamodule, out_dir, n=n_figures) if n_figures > 0 else []
+        figures = (evaluator.write_figures(task, datamodule, out_dir, n=n_figures, evaluation=evaluation)
+                   if n_figures > 0 else [])
         log.info("wrote %s, results.md and %d figures", out_dir / "metrics.json", len(figures))
     return metrics

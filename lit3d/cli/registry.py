@@ -3,10 +3,12 @@ config's ``_target_``.
 
 An evaluator module (``lit3d/<task>/evaluator.py``) provides:
 
-- ``protocol(task, datamodule) -> dict[str, float]``: metrics computed after ``trainer.test`` from
-  what the module's test metrics gathered (retrieval, baselines, cross-validation); ``{}`` if none;
+- ``protocol(task, datamodule) -> Evaluation`` (:class:`lit3d.utils.evaluation.Evaluation`): metrics
+  computed after ``trainer.test`` from what the module's test metrics gathered (retrieval,
+  baselines, cross-validation), on every rank, plus in-memory artefacts for the writers below;
+- ``write_artefacts(evaluation, out_dir) -> list[Path]``: files beyond the tables (rank 0);
 - ``write_results(metrics, out_dir) -> Path``: results.md in the thesis's table layout;
-- ``write_figures(task, datamodule, out_dir, n) -> list[Path]``: labelled PNGs.
+- ``write_figures(task, datamodule, out_dir, n, evaluation) -> list[Path]``: labelled PNGs.
 
 ``lit3d-eval`` and ``lit3d-train`` (after testing) both run it through
 :func:`lit3d.cli.common.run_evaluation`.

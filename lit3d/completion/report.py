@@ -112,7 +112,7 @@ def paired_section(metrics: dict) -> list[str]:
     return parts
 
 
-def write_figures(task, datamodule, out_dir: Path, n: int = 4) -> list[Path]:
+def write_figures(task, datamodule, out_dir: Path, n: int = 4, evaluation=None) -> list[Path]:
     """``completion_<split>.png`` per test split (:mod:`lit3d.completion.figures`: labelled shaded
     renders, input | stages | prediction | target, front and back views), ``max(1, n // 4)``
     samples per category; logged as ``eval/<split>`` images to a W&B logger when the task has one.

@@ -12,12 +12,11 @@ after ``trainer.test``, results.md and scatter plots.
 
 Learned methods are the task's own settings through :mod:`lit3d.quality.task_methods` and are
 trained by the one trainer (:mod:`lit3d.quality.trainer`). What the figures need beyond the
-metrics (the leave-one-shape-out predictions) is kept here per task object (weakly) between
-:func:`protocol` and :func:`write_figures`; the module carries no results.
+metrics (the leave-one-shape-out predictions) travels in the returned
+:class:`~lit3d.utils.evaluation.Evaluation`'s artefacts; the module carries no results.
 """
 from __future__ import annotations
 
-import weakref
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -29,30 +28,34 @@ from lit3d.quality.correlation import shape_corr_metrics
 from lit3d.quality.protocol import EvalResult, baseline_methods, cross_dataset, leave_one_shape_out, results_to_metrics
 from lit3d.quality.report import write_results, write_scatter_figures
 from lit3d.quality.task_methods import cv_methods, task_baselines
+from lit3d.utils.evaluation import Evaluation
 
-__all__ = ["protocol", "write_figures", "write_results"]
-
-# task -> leave-one-shape-out results of its last protocol() run (for write_figures)
-_CV_RESULTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+__all__ = ["protocol", "write_artefacts", "write_figures", "write_results"]
 
 
-def protocol(task, datamodule) -> dict[str, float]:
+def protocol(task, datamodule) -> Evaluation:
     """Baselines on the held-out split, and (per the task's settings) leave-one-shape-out and
     cross-dataset metrics; see the module docstring for the keys."""
     hp = task.hparams
     baselines = task_baselines(hp)
     train, test = datamodule.split("train"), datamodule.split("test")
     out: dict[str, float] = {}
+    artefacts = {}
     for name, method in baseline_methods(test.names, baselines).items():
         pred = method.fit(train).predict(test)
         out.update(shape_corr_metrics(f"test/{name}", pred, test.target, test.shapes))
     if hp.cv:
         results = run_cv(task, datamodule.matrix)
-        _CV_RESULTS[task] = results
+        artefacts["cv"] = results
         out.update(results_to_metrics(results, "test/cv"))
     if hp.cross_data:
         out.update(run_cross(task, datamodule.matrix, hp.cross_data))
-    return out
+    return Evaluation(out, artefacts)
+
+
+def write_artefacts(evaluation: Evaluation, out_dir: Path) -> list[Path]:
+    """No files beyond results.md and the figures."""
+    return []
 
 
 def run_cv(task, fm: FeatureMatrix) -> dict[str, EvalResult]:
@@ -99,8 +102,9 @@ def checkpoint_predictions(task, test: FeatureMatrix) -> Mapping[str, np.ndarray
     return {"pred": pred, "target": test.target, "shapes": test.shapes}
 
 
-def write_figures(task, datamodule, out_dir: Path, n: int = 4) -> list[Path]:
+def write_figures(task, datamodule, out_dir: Path, n: int = 4, evaluation: Evaluation | None = None) -> list[Path]:
     """Scatter plots of predicted vs target per test shape: the checkpoint, and each learned
-    leave-one-shape-out method of the last :func:`protocol` run on ``task``."""
+    leave-one-shape-out method of ``evaluation`` (:func:`protocol`'s result) when it ran one."""
     ours = checkpoint_predictions(task, datamodule.split("test")) if task.net is not None else None
-    return write_scatter_figures(ours, _CV_RESULTS.get(task), out_dir)
+    cv = evaluation.artefacts.get("cv") if evaluation is not None else None
+    return write_scatter_figures(ours, cv, out_dir)
