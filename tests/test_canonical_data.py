@@ -173,3 +173,17 @@ def test_subject_balanced_sampler_draws_subjects_equally():
     share = Counter(draws)["wolf"] / len(draws)
     assert abs(share - 0.5) < 0.03, share
     assert list(subject_balanced_sampler(records, 3)) == list(subject_balanced_sampler(records, 3))
+
+
+def test_pose_split_tests_every_pose_exactly_once_even_with_fewer_poses_than_folds():
+    from datamodules.canonical.splits import split_pose
+
+    subject_poses = {"wolf": [1, 2], "cat": [1, 2, 3, 4, 5], "horse": [1, 2, 3], "gorilla": [7]}
+    n_folds = 3
+    tested = [sp for f in range(n_folds) for sp in split_pose(subject_poses, n_folds, f, seed=0)["test"]]
+    expected = [(s, p) for s, ps in subject_poses.items() if len(ps) >= 2 for p in ps]
+    assert sorted(tested) == sorted(expected)  # each once: no pose of wolf held out by two folds
+    for f in range(n_folds):
+        sp = split_pose(subject_poses, n_folds, f, seed=0)
+        test = set(sp["test"])
+        assert not test & set(sp["train"]) and not test & set(sp["val"])

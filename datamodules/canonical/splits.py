@@ -46,14 +46,17 @@ def split_subject_pose(subjects, poses, n_folds: int, fold: int, seed: int) -> d
 
 def split_pose(subject_poses: dict[str, list], n_folds: int, fold: int, seed: int,
                val_per_subject: int = 1) -> dict[str, list[tuple]]:
-    """Per subject: poses dealt into folds; fold f -> test, ``val_per_subject`` others -> val."""
+    """Per subject: poses dealt into folds; fold f -> test, ``val_per_subject`` others -> val.
+    Every pose is tested by exactly one of the ``n_folds`` folds."""
     out = {k: [] for k in SPLITS}
     for i, (s, poses) in enumerate(sorted(subject_poses.items())):
         if len(poses) < 2:
             out["train"] += [(s, p) for p in poses]
             continue
         groups = deal(poses, min(n_folds, len(poses)), seed + i)
-        test = groups[fold % len(groups)]
+        # fewer poses than folds: the later folds test none of this subject's poses (each pose is
+        # held out by exactly one fold, so the pooled protocol sees it once)
+        test = groups[fold % n_folds] if fold % n_folds < len(groups) else []
         rest = [p for p in poses if p not in test]
         val = rest[:val_per_subject] if len(rest) > val_per_subject else []
         out["test"] += [(s, p) for p in test]
