@@ -86,15 +86,21 @@ def synth_items(sizes: dict, categories: Sequence[str], unseen_categories: Seque
     return items
 
 
-def synth_pair(item: dict, seed: int, target_res: int, input_factor: int, render_factor: int = 2):
-    """Generate one planned synthetic item -> (input, target) bool grids."""
+def synth_pair(item: dict, seed: int, target_res: int, input_factor: int, render_factor: int = 2,
+               sensor: str | dict | None = None):
+    """Generate one planned synthetic item -> (input, target) bool grids.
+
+    ``sensor``: :mod:`datamodules.synth.sensor` (name or fields; None = orthographic, noise-free);
+    its noise is drawn from a generator seeded by ``seed`` and the item's name.
+    """
     from datamodules.synth.depth_voxels import make_sample  # noqa: PLC0415
     from datamodules.synth.furniture import make_shape  # noqa: PLC0415
 
     rng = np.random.default_rng(stable_seed(seed, "shape", item["shape_group"], item["category"], item["shape_index"]))
     shape = make_shape(item["category"], rng)
+    noise = np.random.default_rng(stable_seed(seed, "sensor", item["split"], item["name"]))
     out = make_sample(shape, tuple(item["view"]), target_res=target_res, input_factor=input_factor,
-                      render_factor=render_factor)
+                      render_factor=render_factor, sensor=sensor, rng=noise)
     return out["input"], out["target"]
 
 
@@ -120,6 +126,9 @@ class CompletionDataModule(pl.LightningDataModule):
         skip_bad: recgan: skip bad files with a warning (count in describe()) instead of raising.
         compress: zlib-compress the packed bits (smaller; measured about as fast to load).
         render_factor: synth depth image size = render_factor * target_res.
+        sensor: synth: camera, handedness and noise of the 2.5D input (:mod:`datamodules.synth.sensor`):
+            "ortho" (orthographic, noise-free), "recgan" (3D-RecGAN++'s perspective camera and
+            handedness, noise calibrated on its released sample), or a dict of Sensor fields.
         progress: tqdm progress bar during preparation.
     """
 
@@ -131,7 +140,7 @@ class CompletionDataModule(pl.LightningDataModule):
                  batch_size: int = 4, num_workers: int = 0, seed: int = 0, skip_bad: bool = False,
                  pin_memory: bool = False, views_per_shape: int = 4, unseen_view_set: str = "same",
                  val_fraction: float = 0.1, raw_res: int = 256, compress: bool = True, render_factor: int = 2,
-                 progress: bool = True):
+                 progress: bool = True, sensor: str | dict = "ortho"):
         super().__init__()
         if source not in ("synth", "recgan"):
             raise DataConfigError(f"data.source={source!r}: expected 'synth' or 'recgan'")
@@ -154,6 +163,12 @@ class CompletionDataModule(pl.LightningDataModule):
         self.compress, self.render_factor, self.progress = bool(compress), int(render_factor), bool(progress)
         if source == "recgan" and self.raw_res % self.target_res:
             raise DataConfigError(f"data.target_res={target_res} must divide data.raw_res={raw_res}")
+        from datamodules.synth.sensor import make_sensor  # noqa: PLC0415
+
+        try:
+            self.sensor = make_sensor(dict(sensor) if hasattr(sensor, "keys") else sensor)
+        except (TypeError, ValueError) as exc:
+            raise DataConfigError(f"data.sensor: {exc}") from None
         self.manifest: dict | None = None
         self.datasets: dict[str, VoxelPairDataset] = {}
         self.test_split_names = []
@@ -165,8 +180,12 @@ class CompletionDataModule(pl.LightningDataModule):
                "categories": list(self.categories), "unseen_categories": list(self.unseen_categories),
                "seed": self.seed, "compress": self.compress}
         if self.source == "synth":
+            from datamodules.synth.sensor import make_sensor  # noqa: PLC0415
+
             cfg.update(sizes={k: int(v) for k, v in sorted(self.sizes.items())}, views_per_shape=self.views_per_shape,
                        unseen_view_set=self.unseen_view_set, render_factor=self.render_factor)
+            if self.sensor != make_sensor("ortho"):  # the original data keeps its hash
+                cfg.update(sensor=self.sensor.as_dict())
         else:
             cfg.update(root=str(self.root.resolve()) if self.root else None, raw_res=self.raw_res,
                        val_fraction=self.val_fraction, skip_bad=self.skip_bad)
@@ -205,7 +224,7 @@ class CompletionDataModule(pl.LightningDataModule):
         if len(todo) < len(items):
             log.info("%s: %d of %d items already prepared", self.data_dir, len(items) - len(todo), len(items))
         for it in self._progress(todo, len(todo), "completion synth"):
-            inp, tgt = synth_pair(it, self.seed, self.target_res, self.input_factor, self.render_factor)
+            inp, tgt = synth_pair(it, self.seed, self.target_res, self.input_factor, self.render_factor, self.sensor)
             save_pair(builder.path(it["file"]), inp, tgt, compress=self.compress)
         return items, {"skipped": []}
 

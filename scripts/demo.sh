@@ -4,9 +4,10 @@
 set -euo pipefail
 BIN=${VENV:-.venv}/bin
 OUT=${DEMO_DIR:-logs/demo}
+EXP=${EXPERIMENT:-completion_demo}  # e.g. EXPERIMENT=completion_cpu DEMO_DIR=logs/completion_cpu
 rm -rf "$OUT/train" "$OUT/eval" "$OUT/eval_recgan"
-"$BIN/lit3d-data" experiment=completion_demo hydra.run.dir="$OUT/data" --show 8
-"$BIN/lit3d-train" experiment=completion_demo hydra.run.dir="$OUT/train" "$@"
+"$BIN/lit3d-data" experiment="$EXP" hydra.run.dir="$OUT/data" --show 8
+"$BIN/lit3d-train" experiment="$EXP" hydra.run.dir="$OUT/train" "$@"
 CKPT=$(ls "$OUT"/train/checkpoints/best-*.ckpt | head -n 1)
 "$BIN/lit3d-eval" task=completion ckpt_path="$CKPT" hydra.run.dir="$OUT/eval"
 SAMPLE=../shared/data/recgan_sample

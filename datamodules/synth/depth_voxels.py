@@ -12,10 +12,13 @@ Steps for one sample:
 2. normalisation from the mesh vertices in the camera frame;
 3. target: union of the primitives' analytic inside tests at voxel centres, each
    primitive grown by half a voxel (a conservative, binvox-like filled solid);
-4. orthographic depth image (pyrender, EGL) at ``render_factor * res`` pixels a side;
-5. back-projection: each foreground pixel's surface point, pushed a quarter voxel
-   along the ray into the object, marks its voxel -> partial surface grid at ``res``
-   (with the conservative target of step 3, >95% of these voxels are target voxels);
+4. depth image (pyrender, EGL) through the sensor's camera (:mod:`datamodules.synth.sensor`:
+   orthographic at ``render_factor * res`` pixels a side, or 3D-RecGAN++'s pinhole camera);
+5. back-projection: each foreground pixel's surface point (with the sensor's range noise and
+   holes), pushed a quarter voxel along its ray into the object, marks its voxel -> partial
+   surface grid at ``res`` (noise-free, >95% of these voxels are target voxels with the
+   conservative target of step 3); the sensor may misregister the points by a sub-voxel
+   shift and mirror ``i`` (3D-RecGAN++'s handedness);
 6. the network input is that grid max-pooled by ``input_factor``.
 """
 from __future__ import annotations
@@ -26,6 +29,7 @@ import numpy as np
 
 from datamodules.synth.furniture import Shape, shape_mesh
 from datamodules.voxel_cache import max_pool_bool
+from datamodules.synth.sensor import Sensor, bin_points, make_sensor, render_perspective, sensed_points
 from lit3d.render.camera import OrthoCamera, look_at, render_ortho_depth
 
 # Analogues of the 3D-RecGAN++ view sets: same-view 5x5x5 (125 views), cross-view
@@ -131,44 +135,41 @@ def render_depth(shape: Shape, geom: ViewGeometry, pixels: int) -> np.ndarray:
     return depth
 
 
-def backproject(depth: np.ndarray, res: int, push: float = 0.25) -> np.ndarray:
-    """Depth image (from :func:`render_depth`) -> (res, res, res) bool surface voxels.
-
-    Each foreground pixel's surface point is moved ``push`` voxels further along its
-    ray (into the object) before it is binned, so it is not binned into the empty
-    voxel in front of a surface that lies on a voxel boundary.
-    """
-    px = depth.shape[0]
-    rows, cols = np.nonzero(depth > 0)
-    f = px / res
-    x = (cols + 0.5) / f  # index units, 0..res
-    y = res - (rows + 0.5) / f
-    # eye depth d -> GL z = res - d -> k = res/2 - z = d - res/2
-    k = depth[rows, cols] - res / 2 + push
-    idx = np.stack([x, y, k], axis=1).astype(np.int64)
-    keep = np.all((idx >= 0) & (idx < res), axis=1)
-    idx = idx[keep]
-    grid = np.zeros((res, res, res), dtype=bool)
-    grid[idx[:, 0], idx[:, 1], idx[:, 2]] = True
-    return grid
-
-
 def max_pool(grid: np.ndarray, factor: int) -> np.ndarray:
     """(R, R, R) bool -> (R/f, R/f, R/f) bool, a voxel is set when any of its f^3 children is."""
     return max_pool_bool(grid, factor)
 
 
 def make_sample(shape: Shape, view: tuple[float, float, float], target_res: int = 64, input_factor: int = 4,
-                render_factor: int = 2, margin: float = 1.0, pad: float = 0.5,
-                push: float = 0.25) -> dict[str, np.ndarray]:
+                render_factor: int = 2, margin: float = 1.0, pad: float = 0.5, push: float = 0.25,
+                sensor: Sensor | str | dict | None = None, rng: np.random.Generator | None = None) -> dict[str, np.ndarray]:
     """One view of ``shape`` -> dict(input=(r,r,r) bool, target=(R,R,R) bool, surface=(R,R,R) bool).
 
     ``R = target_res``, ``r = R / input_factor``; ``surface`` is the partial grid before pooling.
+    ``sensor`` (:mod:`datamodules.synth.sensor`: a name, a dict or a Sensor; default the
+    orthographic, noise-free one) decides the camera, handedness and noise; ``rng`` draws the
+    noise (required when the sensor is noisy).
     """
     if target_res % input_factor:
         raise ValueError(f"target_res={target_res} is not divisible by input_factor={input_factor}")
+    sensor = make_sensor(sensor)
+    if sensor.raw_res and sensor.raw_res != target_res:
+        if sensor.raw_res % target_res:
+            raise ValueError(f"sensor raw_res={sensor.raw_res} is not a multiple of target_res={target_res}")
+        f = sensor.raw_res // target_res
+        raw = make_sample(shape, view, sensor.raw_res, input_factor * f, max(1, render_factor // f), margin, pad,
+                          push, sensor, rng)
+        surface, target = max_pool(raw["surface"], f), max_pool(raw["target"], f)
+        return {"input": max_pool(surface, input_factor), "target": target, "surface": surface}
     geom = ViewGeometry(shape, camera_rotation(*view), target_res, margin)
     target = solid_occupancy(shape, geom, pad)
-    depth = render_depth(shape, geom, render_factor * target_res)
-    surface = backproject(depth, target_res, push)
+    if sensor.camera == "perspective":
+        mesh = shape_mesh(shape)
+        depth = render_perspective(geom.to_voxel(np.asarray(mesh.vertices)), np.asarray(mesh.faces), sensor,
+                                   target_res, render_factor)
+    else:
+        depth = render_depth(shape, geom, render_factor * target_res)
+    surface = bin_points(sensed_points(depth, sensor, target_res, render_factor, push, rng), target_res)
+    if sensor.mirror_x:  # 3D-RecGAN++'s x axis points to the image's left
+        surface, target = surface[::-1].copy(), target[::-1].copy()
     return {"input": max_pool(surface, input_factor), "target": target, "surface": surface}

@@ -2,8 +2,8 @@
 
 The mesh is posed in the camera frame of :mod:`lit3d.reconstruct.backproject` (metres, ``y``
 down, ``z`` forward) and rendered with the project's EGL pyrender path
-(:func:`lit3d.render.egl.offscreen_renderer`) through a ``pyrender.IntrinsicsCamera``, whose
-depth buffer pyrender linearises to z-depth (exact for perspective cameras).
+(:func:`lit3d.render.camera.render_pinhole_depth`), whose depth buffer pyrender linearises to
+z-depth (exact for perspective cameras).
 """
 from __future__ import annotations
 
@@ -30,21 +30,13 @@ def pose_in_front(mesh, distance: float = 1.5, size: float = 0.6, azimuth: float
 
 def render_depth_pinhole(mesh, intr: Intrinsics, width: int, height: int) -> np.ndarray:
     """``(H, W) float32`` z-depth in metres (0 = background) of a camera-frame mesh."""
-    import trimesh
+    from lit3d.render.camera import render_pinhole_depth
 
-    from lit3d.render.egl import import_pyrender, offscreen_renderer
-
-    pyrender = import_pyrender()
     verts = np.asarray(mesh.vertices, dtype=np.float64) * np.array([1.0, -1.0, -1.0])  # camera -> GL
-    scene = pyrender.Scene()
-    scene.add(pyrender.Mesh.from_trimesh(trimesh.Trimesh(verts, np.asarray(mesh.faces), process=False),
-                                         smooth=False))
-    # pyrender's cx/cy address the pixel corner; ours the pixel centre (see backproject's doc)
-    cam = pyrender.IntrinsicsCamera(intr.fx, intr.fy, intr.cx + 0.5, intr.cy + 0.5, znear=0.05, zfar=100.0)
-    scene.add(cam, pose=np.eye(4))
-    renderer = offscreen_renderer(width, height)
-    depth = renderer.render(scene, flags=pyrender.RenderFlags.DEPTH_ONLY | pyrender.RenderFlags.SKIP_CULL_FACES)
-    return np.asarray(depth, dtype=np.float32)
+    # our cx/cy address the pixel centre (see backproject's doc); the renderer's the pixel corner
+    depth = render_pinhole_depth(verts, np.asarray(mesh.faces), np.eye(4), width, height, intr.fx, intr.fy,
+                                 intr.cx + 0.5, intr.cy + 0.5, znear=0.05, zfar=100.0)
+    return depth.astype(np.float32)
 
 
 def main(argv: list[str] | None = None) -> None:

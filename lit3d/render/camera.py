@@ -148,3 +148,40 @@ def render_ortho_depth(verts: np.ndarray, faces: np.ndarray, poses: np.ndarray, 
     dist = np.stack([d for _, d, _ in views])
     mask = np.stack([m for _, _, m in views])
     return (dist[0], mask[0]) if single else (dist, mask)
+
+
+def render_pinhole_depth(verts: np.ndarray, faces: np.ndarray, pose: np.ndarray, width: int, height: int,
+                         fx: float, fy: float, cx: float, cy: float, znear: float, zfar: float,
+                         cull_faces: bool = False) -> np.ndarray:
+    """Depth-only pass of a triangle mesh through a pinhole (perspective) camera.
+
+    Pixel ``(u, v)`` (column, row from the top) has its centre at image coordinates
+    ``(u + 0.5, v + 0.5)``; a point at eye depth ``d`` (along the view axis) and camera-frame
+    ``(x, y)`` (``x`` right, ``y`` up, OpenGL) lands at ``(fx x / d + cx, cy - fy y / d)``.
+
+    Args:
+        verts: ``(N, 3)`` vertex positions in world units.
+        faces: ``(F, 3)`` int triangle indices.
+        pose: ``(4, 4)`` camera-to-world pose (see :func:`look_at`).
+        width, height: image size in pixels.
+        fx, fy, cx, cy: intrinsics in pixels (principal point from the image's top-left corner).
+        znear, zfar: clipping distances.
+        cull_faces: False draws back faces too (open meshes stay closed to the camera).
+
+    Returns:
+        ``(H, W) float64`` eye depth along the view axis (z-depth; 0 = background). pyrender's
+        perspective linearisation is exact for this camera.
+    """
+    import trimesh
+
+    from lit3d.render.egl import import_pyrender, offscreen_renderer
+
+    pyrender = import_pyrender()
+    scene = pyrender.Scene()
+    scene.add(pyrender.Mesh.from_trimesh(trimesh.Trimesh(verts, faces, process=False), smooth=False))
+    scene.add(pyrender.IntrinsicsCamera(fx, fy, cx, cy, znear=znear, zfar=zfar), pose=np.asarray(pose, dtype=np.float64))
+    flags = pyrender.RenderFlags.DEPTH_ONLY
+    if not cull_faces:
+        flags |= pyrender.RenderFlags.SKIP_CULL_FACES
+    depth = offscreen_renderer(width, height).render(scene, flags=flags)
+    return np.asarray(depth, dtype=np.float64)
