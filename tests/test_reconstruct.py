@@ -63,6 +63,22 @@ def test_placement_round_trip_and_synth_geometry():
     assert outside == 0 and grid.any()
     older = GridGeometry.from_checkpoint(None, {"in_res": 16, "out_res": 64})
     assert older.source == "synth" and "no data config" in older.note
+    assert not geom.mirror_x and geom.to_network(grid) is grid
+
+
+def test_mirrored_training_grids_are_flipped_at_the_network_only():
+    """3D-RecGAN++'s grids (and synthetic data made with its sensor, at 256^3 then pooled) are
+    mirror images along i: the network sees the flipped grid, the caller gets its own frame back."""
+    nets = {"in_res": 16, "out_res": 64}
+    sensed = GridGeometry.from_checkpoint({"source": "synth", "target_res": 64, "input_factor": 4,
+                                           "sensor": "recgan"}, nets)
+    real = GridGeometry.from_checkpoint({"source": "recgan", "target_res": 64, "input_factor": 4}, nets)
+    assert sensed.mirror_x and real.mirror_x
+    assert (sensed.margin, sensed.push) == (0.25, 0.0625)  # 1 and 0.25 voxels of the 256 grid
+    g = np.zeros((4, 4, 4), bool)
+    g[0, 1, 2] = True
+    assert sensed.to_network(g)[3, 1, 2] and not sensed.to_network(g)[0, 1, 2]
+    np.testing.assert_array_equal(sensed.to_network(sensed.to_network(g)), g)
 
 
 def test_sixteen_bit_png_in_millimetres(tmp_path):

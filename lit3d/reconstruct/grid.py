@@ -17,7 +17,10 @@ with decides ``c`` and ``s`` (:class:`GridGeometry`, read from ``checkpoint["lit
   side ``raw_res - 1`` steps of a ``raw_res`` grid, centred, then max-pooled to ``R``.
 
 Each point moves ``push`` voxels further along its ray before binning (as in training), and
-the network input is the ``R`` grid max-pooled by ``input_factor``.
+the network input is the ``R`` grid max-pooled by ``input_factor``. When the training grids
+were mirror images (``mirror_x``: the 3D-RecGAN++ release, whose ``x`` axis points to the
+image's left, and synthetic data made with its sensor), the network sees the grid flipped
+along ``i`` and its prediction is flipped back (:meth:`GridGeometry.to_network`).
 """
 from __future__ import annotations
 
@@ -46,6 +49,7 @@ class GridGeometry:
         margin: free voxels on each side of the longest extent.
         push: voxels each point moves along its ray before binning.
         note: how the geometry was found (e.g. a default for an older checkpoint), or "".
+        mirror_x: the training grids' ``i`` axis points to the image's left.
     """
 
     source: str
@@ -54,6 +58,11 @@ class GridGeometry:
     margin: float
     push: float
     note: str = ""
+    mirror_x: bool = False
+
+    def to_network(self, grid: np.ndarray) -> np.ndarray:
+        """A grid in this module's frame <-> the network's frame (its own inverse)."""
+        return np.ascontiguousarray(grid[::-1]) if self.mirror_x else grid
 
     @property
     def input_res(self) -> int:
@@ -79,8 +88,12 @@ class GridGeometry:
         if source == "recgan":
             raw = int(data_cfg.get("raw_res", 256))
             # voxel step = extent / (raw - 1) in a raw^3 grid, pooled to R: margin of half a raw voxel
-            return cls("recgan", out_res, factor, 0.5 * out_res / raw, 0.0, note)
-        return cls("synth", out_res, factor, d["margin"], d["push"], note)
+            return cls("recgan", out_res, factor, 0.5 * out_res / raw, 0.0, note, mirror_x=True)
+        from datamodules.synth.sensor import make_sensor
+
+        sensor = make_sensor(data_cfg.get("sensor"))
+        shrink = out_res / sensor.raw_res if sensor.raw_res else 1.0  # made finer, then pooled
+        return cls("synth", out_res, factor, d["margin"] * shrink, d["push"] * shrink, note, mirror_x=sensor.mirror_x)
 
     def as_dict(self) -> dict:
         return {**asdict(self), "input_res": self.input_res}

@@ -170,7 +170,7 @@ def reconstruct(depth: np.ndarray, intr: Intrinsics, completer: Completer, opts:
     t["grid"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    probs = completer.probabilities(partial)
+    probs = geom.to_network(completer.probabilities(geom.to_network(partial)))
     t["network"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
