@@ -77,8 +77,40 @@ def collect(sweep_dir: str | Path, metrics: Sequence[str] | None = None,
         extra = [fmt(thesis.get(label)) if isinstance(thesis.get(label), (int, float)) else str(thesis.get(label, "–"))] if thesis else []
         rows.append([job.name, label, *cells, *extra])
     text = f"# {title}\n\nSweep dir: `{sweep_dir}`\n\n" + markdown_table(header, rows) + "\n"
+    by_setting = over_seeds({job_label(j): r for j, r in results.items()}, metrics)
+    if by_setting:
+        head = ["setting", "seeds", *metrics] + (["thesis"] if thesis else [])
+        srows = [[label, str(n), *cells] + ([fmt(thesis.get(label)) if isinstance(thesis.get(label), (int, float))
+                                            else str(thesis.get(label, "–"))] if thesis else [])
+                 for label, (n, cells) in by_setting.items()]
+        text += ("\n## Mean ± sd over seeds (sd of the jobs' values, ddof 1)\n\n"
+                 + markdown_table(head, srows) + "\n")
     atomic_write_text(sweep_dir / "sweep_results.md", text)
     return text
+
+
+def over_seeds(results: dict[str, dict | None], metrics: Sequence[str]) -> dict[str, tuple[int, list[str]]]:
+    """Jobs whose labels differ only in ``seed=...`` -> ``{setting: (seeds, ["mean ± sd", ...])}``.
+
+    Empty unless some setting ran with more than one seed; jobs without metrics are left out.
+    """
+    import numpy as np
+
+    groups: dict[str, list[dict]] = {}
+    for label, res in results.items():
+        parts = [p for p in label.split(", ") if not p.startswith("seed=")]
+        if res is not None:
+            groups.setdefault(", ".join(parts) or "(defaults)", []).append(res)
+    if not any(len(v) > 1 for v in groups.values()):
+        return {}
+    out = {}
+    for setting, rows in groups.items():
+        cells = []
+        for m in metrics:
+            v = np.array([r[m] for r in rows if isinstance(r.get(m), (int, float))], dtype=np.float64)
+            cells.append("–" if not len(v) else f"{v.mean():.3f} ± {v.std(ddof=1):.3f}" if len(v) > 1 else f"{v[0]:.3f}")
+        out[setting] = (len(rows), cells)
+    return out
 
 
 class CollectResults(Callback):
