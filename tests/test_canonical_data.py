@@ -187,3 +187,34 @@ def test_pose_split_tests_every_pose_exactly_once_even_with_fewer_poses_than_fol
         sp = split_pose(subject_poses, n_folds, f, seed=0)
         test = set(sp["test"])
         assert not test & set(sp["train"]) and not test & set(sp["val"])
+
+
+@pytest.mark.parametrize("view_mode", ["fixed", "broadside"])
+def test_flip_lr_mirrors_the_target_only_when_input_and_target_share_the_camera(tmp_path, view_mode):
+    """broadside: the target's view is the canonical shape's own (the same image for every item of a
+    subject, as the evaluation expects), so a mirrored input keeps the unmirrored target; mirroring
+    it too (the old behaviour) trained half the targets on a view the evaluation never asks for.
+    fixed: one camera for both, so input and target are mirrored together."""
+    import torch
+
+    dm = CanonicalDataModule(str(tmp_path / "data"), image_size=32, n_subjects=3, n_poses=3, mesh_resolution=16,
+                             n_folds=3, batch_size=4, kinds=["quadruped"], seed=1, split="pose",
+                             view_mode=view_mode, flip_lr=True)
+    dm.prepare_data()
+    dm.setup()
+    ds = dm.datasets["train"]
+    torch.manual_seed(0)
+    flipped = kept = 0
+    for _ in range(4):
+        for i, r in enumerate(ds.records):
+            it, c = ds[i], dm.cache[r["subject"]]
+            posed, canon = c["depth"][f"{r['pose']}_{r['view']}"], c["depth"][f"canonical_{r['view']}"]
+            assert not np.array_equal(canon, canon[:, ::-1])  # a mirror would be visible
+            mirrored = np.array_equal(it["depth"][0].numpy(), posed[:, ::-1])
+            assert mirrored or np.array_equal(it["depth"][0].numpy(), posed)
+            target = canon[:, ::-1] if (mirrored and view_mode == "fixed") else canon
+            assert np.array_equal(it["canon_depth"][0].numpy(), target)
+            assert np.array_equal(it["canon_mask"][0].numpy() > 0.5, (target > 0))
+            flipped, kept = flipped + mirrored, kept + (not mirrored)
+    assert flipped and kept  # both cases were drawn
+    assert not dm.datasets["test"].flip_lr

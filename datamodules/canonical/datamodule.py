@@ -10,7 +10,10 @@ Every shape is centred on its bounding-box centre and scaled so that its longest
 normalised to [0, 1]: 0 = background, foreground in [0.1, 1], nearer = larger.
 ``view_mode`` (:mod:`lit3d.geometry.views`): ``fixed`` = the azimuths as given; ``broadside`` = each
 shape (posed and canonical alike) first turned so that its broad side faces the camera, then
-by each azimuth. ``flip_lr``: training pairs mirrored left-right together with probability 1/2.
+by each azimuth. ``flip_lr``: training inputs mirrored left-right with probability 1/2; the target
+is mirrored with its input under ``fixed`` (one camera for both) and kept under ``broadside``
+(the target's view is the canonical shape's own, the same for every item of a subject:
+:class:`~datamodules.canonical.dataset.PairDataset`).
 
 Batches (``B`` samples, ``S = image_size``):
     depth, mask              (B, 1, S, S) float32   posed input; mask in {0, 1}
@@ -290,7 +293,7 @@ class CanonicalDataModule(pl.LightningDataModule):
                 raise DataError(f"split '{k}' is empty (subjects {len(subject_poses)}, folds {hp.n_folds}): "
                                 "use more subjects/poses or fewer folds")
             self.datasets[k] = PairDataset(self.splits[k], self.cache, self.subject_index,
-                                           flip_lr=hp.flip_lr and k == "train")
+                                           flip_lr=hp.flip_lr and k == "train", flip_target=hp.view_mode == "fixed")
         tr = {(r["subject"], r["pose"]) for r in self.splits["train"]}
         te = self.splits["test"]
         if hp.split == "subject_pose":

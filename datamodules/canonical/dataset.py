@@ -3,7 +3,9 @@ subject-balanced training sampler.
 
 Items (``S = image_size``): ``depth``, ``mask``, ``canon_depth``, ``canon_mask`` ``(1, S, S)``
 float32; ``subject`` str, ``subject_idx``, ``pose``, ``view`` int. With ``flip_lr`` (training
-only) all four images of an item are mirrored left-right together with probability 1/2.
+only) the posed images of an item are mirrored left-right with probability 1/2, and the canonical
+images with them only when ``flip_target`` (the camera convention decides, see
+:class:`PairDataset`).
 """
 from __future__ import annotations
 
@@ -15,12 +17,25 @@ from torch.utils.data import Dataset, WeightedRandomSampler
 
 
 class PairDataset(Dataset):
-    """Indexable pairs from the in-memory cache (see module docstring for the item dict)."""
+    """Indexable pairs from the in-memory cache (see module docstring for the item dict).
+
+    ``flip_lr``: mirror the posed input left-right with probability 1/2. ``flip_target``: mirror
+    the canonical target with it. That is right when input and target share one camera
+    (``view_mode=fixed``: the mirrored subject's canonical form, seen by the same camera, is the
+    mirrored target). It is wrong with ``view_mode=broadside``, where the target's view is set by
+    the canonical shape alone (its own broadside rule), so every item of a subject has the same
+    target whatever the input looks like, and the evaluation expects exactly that image: a mirrored
+    input still shows the same (bilaterally symmetric) subject, whose target is the unmirrored
+    canonical image. A mirrored target there is a view the rule never gives (a quadruped facing the
+    other way) and, since the posed broadside orientation agrees with the canonical one for only
+    about half the TOSCA poses, the net cannot tell from the input which of the two to draw.
+    """
 
     def __init__(self, records: list[dict], cache: dict[str, dict], subject_index: dict[str, int],
-                 flip_lr: bool = False):
+                 flip_lr: bool = False, flip_target: bool = True):
         self.records, self.cache, self.subject_index = records, cache, subject_index
-        self.flip_lr = flip_lr  # mirror input and target left-right together with probability 1/2
+        self.flip_lr = flip_lr  # mirror the input left-right with probability 1/2
+        self.flip_target = flip_target  # ... and the canonical target with it (same camera only)
 
     def __len__(self):
         return len(self.records)
@@ -30,10 +45,14 @@ class PairDataset(Dataset):
         c = self.cache[r["subject"]]
         pk, ck = f"{r['pose']}_{r['view']}", f"canonical_{r['view']}"
         flip = self.flip_lr and bool(torch.rand(()) < 0.5)
-        t = lambda a: torch.from_numpy(np.ascontiguousarray(a[:, ::-1] if flip else a, dtype=np.float32))[None]  # noqa: E731
+        flip_canon = flip and self.flip_target
+
+        def t(a, mirror):
+            return torch.from_numpy(np.ascontiguousarray(a[:, ::-1] if mirror else a, dtype=np.float32))[None]
+
         return {
-            "depth": t(c["depth"][pk]), "mask": t(c["mask"][pk]),
-            "canon_depth": t(c["depth"][ck]), "canon_mask": t(c["mask"][ck]),
+            "depth": t(c["depth"][pk], flip), "mask": t(c["mask"][pk], flip),
+            "canon_depth": t(c["depth"][ck], flip_canon), "canon_mask": t(c["mask"][ck], flip_canon),
             "subject": r["subject"], "subject_idx": self.subject_index[r["subject"]],
             "pose": int(r["pose"]), "view": int(r["view"]), "index": i,
         }
