@@ -313,42 +313,39 @@ class CompletionDataModule(pl.LightningDataModule):
             "test_split_names": list(self.test_split_names),
         }
 
-    def show(self, n: int, path: str | Path) -> Path:
-        """PNG of ``n`` samples spread over the splits: rows of input | target, two view axes each.
+    def show(self, n: int, path: str | Path, cell: int = 256) -> Path:
+        """PNG of ``n`` samples spread over the splits: per sample the input (nearest-upsampled to
+        the target's grid) and the target as shaded marching-cubes renders
+        (:func:`lit3d.utils.voxel_images.render_voxels`), seen from the depth camera's side and
+        from behind, ``cell`` px each, labelled with split, name and the input's fill."""
+        import torch  # noqa: PLC0415
 
-        Tiles are depth-shaded projections (near = bright) at the target resolution.
-        """
-        from PIL import Image, ImageDraw  # noqa: PLC0415
-
-        from lit3d.utils.voxel_images import panel  # noqa: PLC0415
+        from lit3d.utils.figures import labelled_grid  # noqa: PLC0415
+        from lit3d.utils.voxel_images import BACK_VIEW, FRONT_VIEW, render_voxels, to_resolution  # noqa: PLC0415
 
         if not self.datasets:
             self.setup()
-        import torch  # noqa: PLC0415
-
         splits = [s for s in SPLITS if len(self.datasets[s])]
         picks = []
         for idx in range(max((len(self.datasets[s]) for s in splits), default=0)):
             picks += [(s, idx) for s in splits if idx < len(self.datasets[s])]
             if len(picks) >= n:
                 break
-        picks = picks[:n]
         rows = []
-        for s, idx in picks:
+        for s, idx in picks[:n]:
             it = self.datasets[s].items[idx]
-            inp, tgt = (torch.from_numpy(a) for a in load_pair(self.data_dir / it["file"]))
-            # depth axis (k) first: what the camera sees, then a side view along x
-            vols = [inp.permute(2, 1, 0).flip(1), tgt.permute(2, 1, 0).flip(1)]
-            side = [inp.flip(1), tgt.flip(1)]  # along x: rows y (up at top), columns depth
-            size = self.target_res
-            row = np.concatenate([panel(vols, size=size), np.full((size, 6), 40, np.uint8), panel(side, size=size)], 1)
-            label = np.zeros((12, row.shape[1]), np.uint8)
-            img = Image.fromarray(label)
-            ImageDraw.Draw(img).text((2, 0), f"{s}: {it['name']}"[: row.shape[1] // 6], fill=255)
-            rows += [np.asarray(img), row, np.full((4, row.shape[1]), 40, np.uint8)]
+            inp, tgt = (torch.from_numpy(a).float() for a in load_pair(self.data_dir / it["file"]))
+            views = [render_voxels(v, 0.5, cell, (FRONT_VIEW, BACK_VIEW), style) for v, style in
+                     ((to_resolution(inp, self.target_res), "matt_blue"), (tgt, "clay_brown"))]
+            label = f"{s}\n{it['name']}\ninput {int(inp.sum())} of {inp.numel()} voxels\ntarget fill {float(tgt.mean()):.3f}"
+            rows.append({"label": label, "cells": [views[0][0], views[1][0], views[0][1], views[1][1]]})
         if not rows:
             raise DataError(f"{self.data_dir}: no samples to show")
+        sensor = "3D-RecGAN++ files" if self.source == "recgan" else self.sensor.camera + (", mirrored x" if self.sensor.mirror_x else "") + (", noisy" if self.sensor.noisy else "")
+        title = f"Completion data ({self.source}, {sensor}): input {self.input_res}^3, target {self.target_res}^3"
+        img = labelled_grid(rows, ["input, camera side", "target, camera side", "input, behind", "target, behind"],
+                            title, cell, left=330)
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        Image.fromarray(np.concatenate(rows[:-1], 0)).save(path)
+        img.save(path)
         return path
