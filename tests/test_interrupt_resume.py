@@ -59,7 +59,7 @@ def _phases_override(phases: list[dict]) -> str:
 # so every batch makes 2 optimizer steps (critic + generator)
 COMPLETION = [
     "experiment=completion_demo", "data.sizes={train:16,val:4,test_same:0,test_cross:0,test_unseen:0}",
-    "data.batch_size=4", "data.progress=false", "task.adversarial_start_epoch=0", "test_after_fit=false",
+    "data.batch_size=4", "data.progress=false", "task.adversarial_start_epoch=0", "task.adversarial=true", "test_after_fit=false",
     "callbacks.progress_bar=null", "+trainer.limit_val_batches=0",
 ]
 COMPLETION_BATCHES_PER_EPOCH = 4
