@@ -210,7 +210,7 @@ def test_killed_data_generation_keeps_finished_items_and_resumes_identically(tmp
     overrides = ["experiment=completion_demo", "data.progress=false",
                  "data.sizes={train:120,val:0,test_same:0,test_cross:0,test_unseen:0}"]
     data_dir = tmp_path / "data"
-    items_dir = data_dir / "completion_synth" / "items"
+    items_dir = data_dir / "completion_demo" / "items"  # the demo's data_dir
     proc = _start(["lit3d-data", *overrides, f"paths.data_dir={data_dir}", f"hydra.run.dir={tmp_path}/run"],
                   tmp_path / "data_cli")
     t0 = time.monotonic()
@@ -220,7 +220,7 @@ def test_killed_data_generation_keeps_finished_items_and_resumes_identically(tmp
         time.sleep(0.05)
     proc.send_signal(signal.SIGKILL)
     assert proc.wait(timeout=60) == -signal.SIGKILL
-    assert not (data_dir / "completion_synth" / "manifest.json").exists(), "killed before the manifest"
+    assert not (data_dir / "completion_demo" / "manifest.json").exists(), "killed before the manifest"
     done = sorted(items_dir.rglob("*.npz"))
     assert 5 <= len(done) < 120
     for p in done:  # every item on disk is complete (temp file + rename); a cut write leaves only a .tmp
@@ -242,7 +242,7 @@ def test_killed_data_generation_keeps_finished_items_and_resumes_identically(tmp
     monkeypatch.setattr(completion_mod, "synth_pair", real)
     fresh = build_datamodule(compose_cfg(overrides, data_dir=tmp_path / "fresh").data)
     fresh.prepare_data()
-    fresh_manifest = json.loads((tmp_path / "fresh" / "completion_synth" / "manifest.json").read_text())
+    fresh_manifest = json.loads((tmp_path / "fresh" / "completion_demo" / "manifest.json").read_text())
     assert resumed["manifest_hash"] == fresh_manifest["manifest_hash"]  # killed + resumed == uninterrupted
 
 
