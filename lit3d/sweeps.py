@@ -28,11 +28,21 @@ def _normalise_override(override: str) -> str:
     return f"{key}{sep}{value.lower()}" if value in ("True", "False") else override
 
 
+def _swept_on_command_line(multirun_yaml: Path) -> set[str]:
+    """Keys given several values on the multirun's command line (e.g. ``seed=42,0,1``)."""
+    if not multirun_yaml.is_file():
+        return set()
+    cfg = (yaml.safe_load(multirun_yaml.read_text()) or {}).get("hydra", {})
+    task = ((cfg.get("overrides") or {}).get("task")) or []
+    return {_override_key(str(o)) for o in task if "," in str(o).partition("=")[2] and "{" not in str(o)}
+
+
 def job_label(job_dir: Path, ignore: Sequence[str] = ("hydra.", "+sweep", "experiment")) -> str:
     """The job's swept settings, e.g. ``task.nets.k=50, task.nets.attention=none``.
 
     Read from ``.hydra/overrides.yaml``; only the keys of the sweep's
-    ``hydra.sweeper.params`` (from ``.hydra/hydra.yaml``) are kept, so the fixed
+    ``hydra.sweeper.params`` (from ``.hydra/hydra.yaml``) and of the command line's swept keys
+    (several values, from the sweep dir's ``multirun.yaml``) are kept, so the fixed
     command-line overrides shared by every job do not clutter the row. Without a
     sweeper record, every override but ``ignore`` is kept.
     """
@@ -45,6 +55,7 @@ def job_label(job_dir: Path, ignore: Sequence[str] = ("hydra.", "+sweep", "exper
     if hydra_path.is_file():
         hydra_cfg = (yaml.safe_load(hydra_path.read_text()) or {}).get("hydra", {})
         swept = {k.lstrip("+~") for k in ((hydra_cfg.get("sweeper") or {}).get("params") or {})}
+        swept |= _swept_on_command_line(job_dir.parent / "multirun.yaml")
     if swept:
         kept = [o for o in overrides if _override_key(o) in swept]
     else:

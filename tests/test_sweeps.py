@@ -35,3 +35,18 @@ def test_collect_groups_seeds_into_mean_and_sd(tmp_path):
 
 def test_no_seed_table_without_repeated_settings():
     assert over_seeds({"task.nets.k=50": {"m": 1.0}, "task.nets.k=100": {"m": 2.0}}, ["m"]) == {}
+
+
+def test_seeds_given_on_the_command_line_are_grouped_too(tmp_path):
+    """``-m ... +sweep=X seed=42,0,1``: seed is not a sweeper param of the sweep file but is swept."""
+    (tmp_path / "multirun.yaml").write_text(yaml.safe_dump(
+        {"hydra": {"overrides": {"task": ["experiment=completion_demo", "seed=42,0,1", "data.sizes={a: 1, b: 2}"]}}}))
+    for n, (k, seed, v) in enumerate([(50, 42, 0.4), (50, 0, 0.5), (100, 42, 0.6), (100, 0, 0.8)]):
+        d = tmp_path / str(n)
+        (d / ".hydra").mkdir(parents=True)
+        (d / ".hydra" / "overrides.yaml").write_text(yaml.safe_dump([f"task.nets.k={k}", f"seed={seed}"]))
+        (d / ".hydra" / "hydra.yaml").write_text(yaml.safe_dump({"hydra": {"sweeper": {"params": {"task.nets.k": "50,100"}}}}))
+        (d / "metrics.json").write_text(json.dumps({"m": v}))
+    text = collect(tmp_path, ["m"])
+    assert "| 0 | task.nets.k=50, seed=42 | 0.400 |" in text
+    assert f"| task.nets.k=100 | 2 | 0.700 ± {np.std([0.6, 0.8], ddof=1):.3f} |" in text
