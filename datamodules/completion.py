@@ -27,6 +27,7 @@ from torch.utils.data import DataLoader
 
 from datamodules.cache import CacheBuilder, DataError, bytes_on_disk, stable_seed
 from datamodules.loaders import evaluation_loader
+from datamodules.synth.sensor import SENSORS, make_sensor
 from datamodules.voxel_cache import VoxelPairDataset, load_pair, save_pair
 from lit3d.utils.shapenet_categories import (
     SEEN_CATEGORIES,
@@ -163,8 +164,6 @@ class CompletionDataModule(pl.LightningDataModule):
         self.compress, self.render_factor, self.progress = bool(compress), int(render_factor), bool(progress)
         if source == "recgan" and self.raw_res % self.target_res:
             raise DataConfigError(f"data.target_res={target_res} must divide data.raw_res={raw_res}")
-        from datamodules.synth.sensor import make_sensor  # noqa: PLC0415
-
         try:
             self.sensor = make_sensor(dict(sensor) if hasattr(sensor, "keys") else sensor)
         except (TypeError, ValueError) as exc:
@@ -180,11 +179,9 @@ class CompletionDataModule(pl.LightningDataModule):
                "categories": list(self.categories), "unseen_categories": list(self.unseen_categories),
                "seed": self.seed, "compress": self.compress}
         if self.source == "synth":
-            from datamodules.synth.sensor import make_sensor  # noqa: PLC0415
-
             cfg.update(sizes={k: int(v) for k, v in sorted(self.sizes.items())}, views_per_shape=self.views_per_shape,
                        unseen_view_set=self.unseen_view_set, render_factor=self.render_factor)
-            if self.sensor != make_sensor("ortho"):  # the original data keeps its hash
+            if self.sensor != SENSORS["ortho"]:  # the original data keeps its hash
                 cfg.update(sensor=self.sensor.as_dict())
         else:
             cfg.update(root=str(self.root.resolve()) if self.root else None, raw_res=self.raw_res,

@@ -28,8 +28,8 @@ import itertools
 import numpy as np
 
 from datamodules.synth.furniture import Shape, shape_mesh
-from datamodules.voxel_cache import max_pool_bool
 from datamodules.synth.sensor import Sensor, bin_points, make_sensor, render_perspective, sensed_points
+from datamodules.voxel_cache import max_pool_bool
 from lit3d.render.camera import OrthoCamera, look_at, render_ortho_depth
 
 # Analogues of the 3D-RecGAN++ view sets: same-view 5x5x5 (125 views), cross-view

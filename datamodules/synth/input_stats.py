@@ -97,12 +97,12 @@ def summary(rows: Iterable[dict]) -> dict[str, tuple[float, float, float, float]
 
 def markdown_table(columns: dict[str, dict]) -> str:
     """A markdown table, one column per named summary, ``mean ± sd [min, max]`` per statistic."""
+    from lit3d.utils.tables import markdown_table as table
+
     names = list(columns)
-    lines = ["| statistic | " + " | ".join(names) + " |", "|---" * (len(names) + 1) + "|"]
-    for k in STATS:
-        cells = [f"{m:.3f} ± {s:.3f} [{lo:.3f}, {hi:.3f}]" for m, s, lo, hi in (columns[n][k] for n in names)]
-        lines.append(f"| {k} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+    rows = [[k, *(f"{m:.3f} ± {s:.3f} [{lo:.3f}, {hi:.3f}]" for m, s, lo, hi in (columns[n][k] for n in names))]
+            for k in STATS]
+    return table(["statistic", *names], rows)
 
 
 def write_fixture(path: str, root: str, res: int, input_factor: int = 4) -> None:
