@@ -218,3 +218,38 @@ def test_flip_lr_mirrors_the_target_only_when_input_and_target_share_the_camera(
             flipped, kept = flipped + mirrored, kept + (not mirrored)
     assert flipped and kept  # both cases were drawn
     assert not dm.datasets["test"].flip_lr
+
+
+def test_eval_views_train_on_every_azimuth_and_evaluate_the_chosen_ones(tmp_path):
+    """Extra azimuths are training augmentation: train sees every view, val/test and the pooled held-out
+    set only ``eval_views``; a mirrored broadside input of a turned view gets the canonical image of the
+    opposite turn."""
+    import torch
+
+    from datamodules.canonical.datamodule import mirror_views
+
+    assert mirror_views([0.0, -25.0, 25.0]) == {0: 0, 1: 2, 2: 1}
+    assert mirror_views([0.0, 30.0]) == {0: 0, 1: 1}  # no opposite turn: the same view
+    dm = CanonicalDataModule(str(tmp_path / "data"), image_size=32, n_subjects=3, n_poses=3, mesh_resolution=16,
+                             n_folds=3, batch_size=4, kinds=["quadruped"], seed=1, split="pose",
+                             view_mode="broadside", azimuths=[0.0, -25.0, 25.0], eval_views=[0], flip_lr=True)
+    dm.prepare_data()
+    dm.setup()
+    assert {r["view"] for r in dm.splits["train"]} == {0, 1, 2}
+    assert {r["view"] for r in dm.splits["test"]} == {0} and {r["view"] for r in dm.splits["val"]} == {0}
+    assert {r["view"] for r in dm.held_out_records()} == {0}
+    assert len(dm.splits["train"]) == 3 * len({(r["subject"], r["pose"]) for r in dm.splits["train"]})
+    ds = dm.datasets["train"]
+    torch.manual_seed(0)
+    seen = set()
+    for _ in range(6):
+        for i, r in enumerate(ds.records):
+            it, c = ds[i], dm.cache[r["subject"]]
+            posed = c["depth"][f"{r['pose']}_{r['view']}"]
+            mirrored = np.array_equal(it["depth"][0].numpy(), posed[:, ::-1])
+            want = {0: 0, 1: 2, 2: 1}[r["view"]] if mirrored else r["view"]
+            assert np.array_equal(it["canon_depth"][0].numpy(), c["depth"][f"canonical_{want}"])
+            seen.add((r["view"], mirrored))
+    assert (1, True) in seen and (1, False) in seen
+    with pytest.raises(DataError, match="eval_views"):
+        CanonicalDataModule(str(tmp_path / "x"), azimuths=[0.0, 30.0], eval_views=[2])

@@ -13,7 +13,9 @@ shape (posed and canonical alike) first turned so that its broad side faces the 
 by each azimuth. ``flip_lr``: training inputs mirrored left-right with probability 1/2; the target
 is mirrored with its input under ``fixed`` (one camera for both) and kept under ``broadside``
 (the target's view is the canonical shape's own, the same for every item of a subject:
-:class:`~datamodules.canonical.dataset.PairDataset`).
+:class:`~datamodules.canonical.dataset.PairDataset`). ``eval_views``: indices into ``azimuths`` that
+val, test and the pooled held-out set use (null: all); training always sees every view, so extra
+azimuths are training augmentation while evaluation keeps one view per pose.
 
 Batches (``B`` samples, ``S = image_size``):
     depth, mask              (B, 1, S, S) float32   posed input; mask in {0, 1}
@@ -76,6 +78,12 @@ __all__ = ["SPLITS", "CanonicalDataModule", "DataError", "PairDataset", "Shrec14
            "subject_balanced_sampler", "unpack_mask"]
 
 
+def mirror_views(azimuths: Sequence[float]) -> dict[int, int]:
+    """View index -> index of the view at the negated azimuth offset (itself when there is none)."""
+    az = [float(a) for a in azimuths]
+    return {i: next((j for j, b in enumerate(az) if abs(b + a) < 1e-6), i) for i, a in enumerate(az)}
+
+
 class CanonicalDataModule(pl.LightningDataModule):
     """Posed/canonical depth pairs (synthetic figures, TOSCA or SHREC'14); see module docstring."""
 
@@ -114,6 +122,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         skip_bad: bool = False,
         balance_subjects: bool = False,
         flip_lr: bool = False,
+        eval_views: Sequence[int] | None = None,
     ):
         super().__init__()
         self.save_hyperparameters()
@@ -125,6 +134,9 @@ class CanonicalDataModule(pl.LightningDataModule):
             raise DataError(f"scale_mode must be 'shape' or 'subject', got '{scale_mode}'")
         if view_mode not in VIEW_MODES:
             raise DataError(f"view_mode must be one of {', '.join(VIEW_MODES)}, got '{view_mode}'")
+        n_views = len(azimuths)
+        if eval_views is not None and (not eval_views or any(not 0 <= int(v) < n_views for v in eval_views)):
+            raise DataError(f"eval_views must be indices into azimuths (0..{n_views - 1}), got {list(eval_views)}")
         if split not in ("subject_pose", "pose"):
             raise DataError(f"split must be 'subject_pose' or 'pose', got '{split}'")
         self.data_dir = Path(data_dir)
@@ -285,15 +297,15 @@ class CanonicalDataModule(pl.LightningDataModule):
         if hp.max_val_items and len(pairs["val"]) > hp.max_val_items:
             idx = np.random.default_rng(hp.seed).choice(len(pairs["val"]), hp.max_val_items, replace=False)
             pairs["val"] = [pairs["val"][i] for i in sorted(idx)]
-        views = range(len(hp.azimuths))
-        self.splits = {k: [{"subject": s, "pose": p, "view": v} for s, p in v_ for v in views]
+        self.splits = {k: [{"subject": s, "pose": p, "view": v} for s, p in v_ for v in self.views(k)]
                        for k, v_ in pairs.items()}
         for k in SPLITS:
             if not self.splits[k]:
                 raise DataError(f"split '{k}' is empty (subjects {len(subject_poses)}, folds {hp.n_folds}): "
                                 "use more subjects/poses or fewer folds")
             self.datasets[k] = PairDataset(self.splits[k], self.cache, self.subject_index,
-                                           flip_lr=hp.flip_lr and k == "train", flip_target=hp.view_mode == "fixed")
+                                           flip_lr=hp.flip_lr and k == "train", flip_target=hp.view_mode == "fixed",
+                                           mirror_view=mirror_views(hp.azimuths))
         tr = {(r["subject"], r["pose"]) for r in self.splits["train"]}
         te = self.splits["test"]
         if hp.split == "subject_pose":
@@ -318,7 +330,15 @@ class CanonicalDataModule(pl.LightningDataModule):
         if not self.cache:
             self.setup()
         pairs = sorted({sp for f in range(self.hparams.n_folds) for sp in self._pairs(f)["test"]}, key=str)
-        return [{"subject": s, "pose": p, "view": v} for s, p in pairs for v in range(len(self.hparams.azimuths))]
+        return [{"subject": s, "pose": p, "view": v} for s, p in pairs for v in self.views("test")]
+
+    def views(self, split: str) -> list[int]:
+        """Indices into ``azimuths`` that ``split`` uses: training every view, val/test (and the pooled
+        held-out set) ``eval_views`` when set (more training views than evaluation asks for)."""
+        every = list(range(len(self.hparams.azimuths)))
+        if split == "train" or self.hparams.eval_views is None:
+            return every
+        return [int(v) for v in self.hparams.eval_views]
 
     def held_out_ids(self) -> list[str]:
         """``"subject/pose/view"`` of :meth:`held_out_records`."""

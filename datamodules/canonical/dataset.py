@@ -29,13 +29,17 @@ class PairDataset(Dataset):
     canonical image. A mirrored target there is a view the rule never gives (a quadruped facing the
     other way) and, since the posed broadside orientation agrees with the canonical one for only
     about half the TOSCA poses, the net cannot tell from the input which of the two to draw.
+    ``mirror_view`` (broadside with several azimuths): view index -> the index of the view at the
+    negated azimuth offset; a mirrored input of view ``v`` then gets the canonical image of
+    ``mirror_view[v]`` (a mirrored turn to the left is a turn to the right). Missing: the same view.
     """
 
     def __init__(self, records: list[dict], cache: dict[str, dict], subject_index: dict[str, int],
-                 flip_lr: bool = False, flip_target: bool = True):
+                 flip_lr: bool = False, flip_target: bool = True, mirror_view: dict[int, int] | None = None):
         self.records, self.cache, self.subject_index = records, cache, subject_index
         self.flip_lr = flip_lr  # mirror the input left-right with probability 1/2
         self.flip_target = flip_target  # ... and the canonical target with it (same camera only)
+        self.mirror_view = dict(mirror_view or {})
 
     def __len__(self):
         return len(self.records)
@@ -43,9 +47,10 @@ class PairDataset(Dataset):
     def __getitem__(self, i):
         r = self.records[i]
         c = self.cache[r["subject"]]
-        pk, ck = f"{r['pose']}_{r['view']}", f"canonical_{r['view']}"
         flip = self.flip_lr and bool(torch.rand(()) < 0.5)
         flip_canon = flip and self.flip_target
+        target_view = self.mirror_view.get(r["view"], r["view"]) if flip and not self.flip_target else r["view"]
+        pk, ck = f"{r['pose']}_{r['view']}", f"canonical_{target_view}"
 
         def t(a, mirror):
             return torch.from_numpy(np.ascontiguousarray(a[:, ::-1] if mirror else a, dtype=np.float32))[None]

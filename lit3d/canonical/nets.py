@@ -22,6 +22,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import math
+
 import torch
 import torch.nn as nn
 import torch.nn.functional as F
@@ -246,19 +248,56 @@ class UNet(nn.Module):
         return CanonicalOutput(out.depth[..., :H, :W], out.mask[..., :H, :W], out.mask_logits[..., :H, :W])
 
 
+INITS = ("he", "torch")
+LEAKY_SLOPE = 0.2
+
+
+def he_init_(net: nn.Module) -> nn.Module:
+    """He (fan-in) initialisation for LeakyReLU(0.2) of every conv, transposed conv and linear layer,
+    biases zero; in place, returns ``net``.
+
+    A transposed convolution of stride ``s`` feeds each output pixel from ``cin * k^2 / s^2`` inputs
+    (not ``cin * k^2``), so its fan-in is counted that way. Why not PyTorch's default: measured on
+    TOSCA (README "Real TOSCA"), the default's per-layer gain of about 1/sqrt(3) shrinks the MSFE's
+    12 layers so far that its output is the same image for every input at initialisation (spread
+    over a batch 4e-8, its biases alone), the global path learns slowly and after 750 steps the net
+    still did not fit its own training masks (IoU .5); with this init the spread is 6e-2 and the
+    training masks reach IoU .98 in 600 steps.
+    """
+    gain = nn.init.calculate_gain("leaky_relu", LEAKY_SLOPE)
+    for m in net.modules():
+        if isinstance(m, (nn.Conv2d, nn.Linear)):
+            nn.init.kaiming_normal_(m.weight, a=LEAKY_SLOPE, nonlinearity="leaky_relu")
+        elif isinstance(m, nn.ConvTranspose2d):
+            cin, k = m.weight.shape[0], m.weight.shape[2] * m.weight.shape[3]
+            fan_in = cin * k / (m.stride[0] * m.stride[1])
+            nn.init.normal_(m.weight, 0.0, gain / math.sqrt(fan_in))
+        else:
+            continue
+        if m.bias is not None:
+            nn.init.zeros_(m.bias)
+    return net
+
+
 def build_canonical_net(net: dict) -> nn.Module:
-    """Build from a plain dict: ``{"kind": "canonical"|"unet", **kwargs}``."""
+    """Build from a plain dict: ``{"kind": "canonical"|"unet", "init": "he"|"torch", **kwargs}``
+    (``init``: :func:`he_init_`, or PyTorch's default layer initialisation)."""
     net = dict(net)
     kind = net.pop("kind", "canonical")
+    init = net.pop("init", "torch")
+    if init not in INITS:
+        raise ValueError(f"unknown canonical net init '{init}' ({', '.join(INITS)})")
     if kind == "canonical":
         net.pop("unet_channels", None)
-        return CanonicalNet(**net)
-    if kind == "unet":
+        model = CanonicalNet(**net)
+    elif kind == "unet":
         keep = {k: v for k, v in net.items() if k in ("channels", "image_size")}
         if "unet_channels" in net:
             keep["channels"] = net["unet_channels"]
-        return UNet(**keep)
-    raise ValueError(f"unknown canonical net kind '{kind}' (canonical, unet)")
+        model = UNet(**keep)
+    else:
+        raise ValueError(f"unknown canonical net kind '{kind}' (canonical, unet)")
+    return he_init_(model) if init == "he" else model
 
 
 def summarize(net: nn.Module, image_size: int) -> list[dict]:
