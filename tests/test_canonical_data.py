@@ -253,3 +253,31 @@ def test_eval_views_train_on_every_azimuth_and_evaluate_the_chosen_ones(tmp_path
     assert (1, True) in seen and (1, False) in seen
     with pytest.raises(DataError, match="eval_views"):
         CanonicalDataModule(str(tmp_path / "x"), azimuths=[0.0, 30.0], eval_views=[2])
+
+
+def test_roll_turns_the_input_only_and_keeps_depth_inside_the_mask(tmp_path):
+    """roll: a horizontal bar turned by 90 degrees is the vertical bar through the centre, nothing lost,
+    no depth outside the mask; the datamodule rolls training inputs only, never the target."""
+    import torch
+
+    from datamodules.canonical.dataset import roll
+
+    d = torch.zeros(1, 32, 32)
+    d[0, 14:18, 4:28] = 0.7  # horizontal bar through the centre (rows 14-17)
+    m = (d > 0).float()
+    rd, rm = roll(d, m, 90.0)
+    assert torch.equal(rm[0], m[0].T)  # symmetric about the centre: a quarter turn is the transpose
+    assert (rd[rm == 0] == 0).all() and torch.allclose(rd[rm > 0], torch.tensor(0.7))
+    dm = CanonicalDataModule(str(tmp_path / "data"), image_size=32, n_subjects=3, n_poses=3, mesh_resolution=16,
+                             n_folds=3, batch_size=4, kinds=["quadruped"], seed=1, split="pose",
+                             view_mode="broadside", roll_deg=45.0)
+    dm.prepare_data()
+    dm.setup()
+    torch.manual_seed(0)
+    ds, turned = dm.datasets["train"], 0
+    for i, r in enumerate(ds.records):
+        it, c = ds[i], dm.cache[r["subject"]]
+        turned += not np.array_equal(it["mask"][0].numpy() > 0.5, c["mask"][f"{r['pose']}_{r['view']}"] > 0)
+        assert np.array_equal(it["canon_depth"][0].numpy(), c["depth"][f"canonical_{r['view']}"])
+    assert turned > 0
+    assert dm.datasets["test"].roll_deg == 0 and dm.datasets["val"].roll_deg == 0

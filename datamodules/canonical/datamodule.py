@@ -15,7 +15,8 @@ is mirrored with its input under ``fixed`` (one camera for both) and kept under 
 (the target's view is the canonical shape's own, the same for every item of a subject:
 :class:`~datamodules.canonical.dataset.PairDataset`). ``eval_views``: indices into ``azimuths`` that
 val, test and the pooled held-out set use (null: all); training always sees every view, so extra
-azimuths are training augmentation while evaluation keeps one view per pose.
+azimuths are training augmentation while evaluation keeps one view per pose. ``roll_deg``: training
+inputs turned in the image plane by up to that many degrees (a rolled camera; the target stays).
 
 Batches (``B`` samples, ``S = image_size``):
     depth, mask              (B, 1, S, S) float32   posed input; mask in {0, 1}
@@ -123,6 +124,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         balance_subjects: bool = False,
         flip_lr: bool = False,
         eval_views: Sequence[int] | None = None,
+        roll_deg: float = 0.0,
     ):
         super().__init__()
         self.save_hyperparameters()
@@ -305,7 +307,8 @@ class CanonicalDataModule(pl.LightningDataModule):
                                 "use more subjects/poses or fewer folds")
             self.datasets[k] = PairDataset(self.splits[k], self.cache, self.subject_index,
                                            flip_lr=hp.flip_lr and k == "train", flip_target=hp.view_mode == "fixed",
-                                           mirror_view=mirror_views(hp.azimuths))
+                                           mirror_view=mirror_views(hp.azimuths),
+                                           roll_deg=hp.roll_deg if k == "train" else 0.0)
         tr = {(r["subject"], r["pose"]) for r in self.splits["train"]}
         te = self.splits["test"]
         if hp.split == "subject_pose":

@@ -32,14 +32,19 @@ class PairDataset(Dataset):
     ``mirror_view`` (broadside with several azimuths): view index -> the index of the view at the
     negated azimuth offset; a mirrored input of view ``v`` then gets the canonical image of
     ``mirror_view[v]`` (a mirrored turn to the left is a turn to the right). Missing: the same view.
+    ``roll_deg``: the posed input (depth and mask together, nearest neighbour) turned in the image
+    plane by an angle drawn uniformly from [-roll_deg, roll_deg] about the image centre (a rolled
+    camera); the target stays.
     """
 
     def __init__(self, records: list[dict], cache: dict[str, dict], subject_index: dict[str, int],
-                 flip_lr: bool = False, flip_target: bool = True, mirror_view: dict[int, int] | None = None):
+                 flip_lr: bool = False, flip_target: bool = True, mirror_view: dict[int, int] | None = None,
+                 roll_deg: float = 0.0):
         self.records, self.cache, self.subject_index = records, cache, subject_index
         self.flip_lr = flip_lr  # mirror the input left-right with probability 1/2
         self.flip_target = flip_target  # ... and the canonical target with it (same camera only)
         self.mirror_view = dict(mirror_view or {})
+        self.roll_deg = float(roll_deg)
 
     def __len__(self):
         return len(self.records)
@@ -55,12 +60,27 @@ class PairDataset(Dataset):
         def t(a, mirror):
             return torch.from_numpy(np.ascontiguousarray(a[:, ::-1] if mirror else a, dtype=np.float32))[None]
 
+        depth, mask = t(c["depth"][pk], flip), t(c["mask"][pk], flip)
+        if self.roll_deg:
+            depth, mask = roll(depth, mask, float((torch.rand(()) * 2 - 1) * self.roll_deg))
         return {
-            "depth": t(c["depth"][pk], flip), "mask": t(c["mask"][pk], flip),
+            "depth": depth, "mask": mask,
             "canon_depth": t(c["depth"][ck], flip_canon), "canon_mask": t(c["mask"][ck], flip_canon),
             "subject": r["subject"], "subject_idx": self.subject_index[r["subject"]],
             "pose": int(r["pose"]), "view": int(r["view"]), "index": i,
         }
+
+
+def roll(depth: torch.Tensor, mask: torch.Tensor, degrees: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(1, S, S)`` depth and mask turned by ``degrees`` (counter-clockwise) about the image centre,
+    nearest neighbour (no depth is mixed with the background), zeros where the turn uncovers; the
+    depth is kept only inside the turned mask."""
+    from kornia.geometry.transform import rotate
+
+    x = torch.cat([depth, mask], 0)[None]
+    out = rotate(x, torch.tensor([float(degrees)]), mode="nearest", padding_mode="zeros", align_corners=True)[0]
+    m = (out[1:2] > 0.5).float()
+    return out[0:1] * m, m
 
 
 def subject_balanced_sampler(records: Sequence[dict], seed: int) -> WeightedRandomSampler:
