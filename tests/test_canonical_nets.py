@@ -94,3 +94,35 @@ def test_he_init_keeps_the_global_path_alive(compose_cfg, size):
     assert spread["torch"] < 1e-4, spread  # measured 4e-8
     with pytest.raises(ValueError, match="init"):
         build_canonical_net({**net_cfg, "init": "xavier"})
+
+
+def test_he_init_fits_training_pairs_that_the_default_init_does_not(compose_cfg, tmp_path):
+    """The training claim behind the init: on 6 rendered pairs (64^2, the demo net, full batch, Adam 1e-3,
+    150 steps) the He-initialised net fits the canonical masks (measured IoU .94); PyTorch's default
+    init, whose global path starts dead, is still at .83."""
+    from datamodules.canonical import CanonicalDataModule
+    from lit3d.canonical.losses import canonical_loss
+
+    net_cfg = OmegaConf.to_container(compose_cfg(["task=canonical", "task.net.image_size=64"]).task.net, resolve=True)
+    dm = CanonicalDataModule(str(tmp_path / "data"), image_size=64, n_subjects=6, n_poses=4, mesh_resolution=24,
+                             n_folds=2, kinds=["humanoid", "quadruped"], seed=1, split="pose", view_mode="broadside")
+    dm.prepare_data()
+    dm.setup()
+    ds = dm.datasets["train"]
+    batch = {k: torch.stack([ds[i][k] for i in range(len(ds))]) for k in ("depth", "mask", "canon_depth", "canon_mask")}
+    iou = {}
+    for init in ("he", "torch"):
+        torch.manual_seed(0)
+        net = build_canonical_net({**net_cfg, "init": init})
+        opt = torch.optim.Adam(net.parameters(), 1e-3)
+        for _ in range(150):
+            out = net(batch["depth"], batch["mask"])
+            loss = canonical_loss(out.depth, out.mask, batch["canon_depth"], batch["canon_mask"], 1000.0, 1000.0,
+                                  "bce", out.mask_logits)["loss"]
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+        pm, tm = out.mask.detach() > 0.5, batch["canon_mask"] > 0.5
+        iou[init] = ((pm & tm).sum((1, 2, 3)) / (pm | tm).sum((1, 2, 3)).clamp_min(1)).mean().item()
+    assert iou["he"] > 0.9, iou
+    assert iou["he"] - iou["torch"] > 0.05, iou
