@@ -52,7 +52,7 @@ import numpy as np
 from torch.utils.data import DataLoader
 
 from datamodules.cache import CacheBuilder, DataError, atomic_save_npz, read_manifest
-from datamodules.canonical.dataset import PairDataset, subject_balanced_sampler
+from datamodules.canonical.dataset import PairDataset, mirror_views, subject_balanced_sampler
 from datamodules.canonical.images import depth_image_problem, read_subject, unpack_mask
 from datamodules.canonical.sources import (
     SOURCES,
@@ -77,12 +77,6 @@ SUBJECTS_DIR = "subjects"  # the cache's item folder
 __all__ = ["SPLITS", "CanonicalDataModule", "DataError", "PairDataset", "Shrec14Source", "SynthSource",
            "ToscaSource", "deal", "depth_image_problem", "read_subject", "split_pose", "split_subject_pose",
            "subject_balanced_sampler", "unpack_mask"]
-
-
-def mirror_views(azimuths: Sequence[float]) -> dict[int, int]:
-    """View index -> index of the view at the negated azimuth offset (itself when there is none)."""
-    az = [float(a) for a in azimuths]
-    return {i: next((j for j, b in enumerate(az) if abs(b + a) < 1e-6), i) for i, a in enumerate(az)}
 
 
 class CanonicalDataModule(pl.LightningDataModule):

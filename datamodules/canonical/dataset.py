@@ -71,6 +71,12 @@ class PairDataset(Dataset):
         }
 
 
+def mirror_views(azimuths: Sequence[float]) -> dict[int, int]:
+    """View index -> index of the view at the negated azimuth offset (itself when there is none)."""
+    az = [float(a) for a in azimuths]
+    return {i: next((j for j, b in enumerate(az) if abs(b + a) < 1e-6), i) for i, a in enumerate(az)}
+
+
 def roll(depth: torch.Tensor, mask: torch.Tensor, degrees: float) -> tuple[torch.Tensor, torch.Tensor]:
     """``(1, S, S)`` depth and mask turned by ``degrees`` (counter-clockwise) about the image centre,
     nearest neighbour (no depth is mixed with the background), zeros where the turn uncovers; the

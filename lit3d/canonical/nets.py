@@ -19,10 +19,9 @@ transposed convolutions with kernels 3, 3, 6, 2, 2, 2, 3 (stride 2) and resized 
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-
-import math
 
 import torch
 import torch.nn as nn
