@@ -11,12 +11,12 @@ normalised to [0, 1]: 0 = background, foreground in [0.1, 1], nearer = larger.
 ``view_mode`` (:mod:`lit3d.geometry.views`): ``fixed`` = the azimuths as given; ``broadside`` = each
 shape (posed and canonical alike) first turned so that its broad side faces the camera, then
 by each azimuth. ``flip_lr``: training inputs mirrored left-right with probability 1/2; the target
-is mirrored with its input under ``fixed`` (one camera for both) and kept under ``broadside``
-(the target's view is the canonical shape's own, the same for every item of a subject:
-:class:`~datamodules.canonical.dataset.PairDataset`). ``eval_views``: indices into ``azimuths`` that
+with them under ``fixed`` only (:class:`~datamodules.canonical.dataset.PairDataset` says why). ``eval_views``: indices into ``azimuths`` that
 val, test and the pooled held-out set use (null: all); training always sees every view, so extra
 azimuths are training augmentation while evaluation keeps one view per pose. ``roll_deg``: training
 inputs turned in the image plane by up to that many degrees (a rolled camera; the target stays).
+``blend_poses``: that many extra training poses per subject, each a vertex blend of two of the fold's
+training poses (:mod:`datamodules.canonical.blends`; one connectivity per subject, as TOSCA).
 
 Batches (``B`` samples, ``S = image_size``):
     depth, mask              (B, 1, S, S) float32   posed input; mask in {0, 1}
@@ -41,7 +41,6 @@ Splits (``split``: ``subject_pose`` or ``pose``): :mod:`datamodules.canonical.sp
 """
 from __future__ import annotations
 
-import io
 import logging
 from collections import Counter
 from collections.abc import Sequence
@@ -52,8 +51,9 @@ import numpy as np
 from torch.utils.data import DataLoader
 
 from datamodules.cache import CacheBuilder, DataError, atomic_save_npz, read_manifest
+from datamodules.canonical.blends import add_blends
 from datamodules.canonical.dataset import PairDataset, mirror_views, subject_balanced_sampler
-from datamodules.canonical.images import depth_image_problem, read_subject, unpack_mask
+from datamodules.canonical.images import depth_image_problem, pairs_png, read_subject, unpack_mask
 from datamodules.canonical.sources import (
     SOURCES,
     Shrec14Source,
@@ -66,7 +66,6 @@ from datamodules.loaders import evaluation_loader
 from lit3d.geometry.normalise import normalise_vertices
 from lit3d.geometry.views import VIEW_MODES, base_azimuth
 from lit3d.render.depth import render_depth
-from lit3d.utils.io import atomic_write_bytes
 
 log = logging.getLogger("lit3d")
 
@@ -119,6 +118,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         flip_lr: bool = False,
         eval_views: Sequence[int] | None = None,
         roll_deg: float = 0.0,
+        blend_poses: int = 0,
     ):
         super().__init__()
         self.save_hyperparameters()
@@ -179,27 +179,37 @@ class CanonicalDataModule(pl.LightningDataModule):
     # ------------------------------------------------------------------ generation
     def normalized_mesh(self, subject: str, pose) -> tuple[np.ndarray, np.ndarray]:
         """The mesh of (subject, pose) centred and scaled as it is rendered (``pose="canonical"`` ok)."""
+        v, f = self._raw_mesh(subject, pose)
+        return self._normalise(subject, v), f
+
+    def _raw_mesh(self, subject: str, pose) -> tuple[np.ndarray, np.ndarray]:
         src = self.source
-        key = src.canonical_pose(subject) if pose == "canonical" else pose
-        v, f = src.mesh(subject, key)
+        return src.mesh(subject, src.canonical_pose(subject) if pose == "canonical" else pose)
+
+    def _normalise(self, subject: str, v: np.ndarray) -> np.ndarray:
+        """Raw ``(V, 3)`` vertices of ``subject`` centred and scaled by ``scale_mode``."""
         scale = None
         if self.hparams.scale_mode == "subject":
-            cv, _ = src.mesh(subject, src.canonical_pose(subject))
-            _, scale = normalise_vertices(cv)
-        v, _ = normalise_vertices(v, scale)
-        return v, f
+            _, scale = normalise_vertices(self._raw_mesh(subject, "canonical")[0])
+        return normalise_vertices(v, scale)[0]
 
-    def _render_pose(self, subject: str, pose) -> dict[str, np.ndarray]:
-        """Depth (float16) and packed mask of every view of one pose; DataError for a bad image."""
+    def _render_views(self, subject: str, v: np.ndarray, f: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(depth, mask) ``(S, S)`` of every azimuth of raw mesh ``v, f``; DataError for a bad image."""
         hp = self.hparams
-        v, f = self.normalized_mesh(subject, pose)
-        base = base_azimuth(v, f, hp.view_mode)
-        out = {}
+        v = self._normalise(subject, v)
+        base, out = base_azimuth(v, f, hp.view_mode), []
         for vi, az in enumerate(hp.azimuths):
             d, m = render_depth(v, f, hp.image_size, base + az)
             problem = depth_image_problem(d, m, hp.image_size)
             if problem:
                 raise DataError(f"view {vi}: rendered {problem} (mesh outside the view?)")
+            out.append((d, m))
+        return out
+
+    def _render_pose(self, subject: str, pose) -> dict[str, np.ndarray]:
+        """Depth (float16) and packed mask of every view of one pose; DataError for a bad image."""
+        out = {}
+        for vi, (d, m) in enumerate(self._render_views(subject, *self._raw_mesh(subject, pose))):
             out[f"depth_{pose}_{vi}"] = d.astype(np.float16)
             out[f"mask_{pose}_{vi}"] = np.packbits(m)
         return out
@@ -295,6 +305,10 @@ class CanonicalDataModule(pl.LightningDataModule):
             pairs["val"] = [pairs["val"][i] for i in sorted(idx)]
         self.splits = {k: [{"subject": s, "pose": p, "view": v} for s, p in v_ for v in self.views(k)]
                        for k, v_ in pairs.items()}
+        if hp.blend_poses:  # rendered now: they depend on the fold's training poses
+            added = add_blends(self.cache, pairs["train"], hp.blend_poses, hp.seed, hp.fold, self._raw_mesh,
+                               self._render_views)
+            self.splits["train"] += [{"subject": s, "pose": p, "view": v} for s, p in added for v in self.views("train")]
         for k in SPLITS:
             if not self.splits[k]:
                 raise DataError(f"split '{k}' is empty (subjects {len(subject_poses)}, folds {hp.n_folds}): "
@@ -381,19 +395,6 @@ class CanonicalDataModule(pl.LightningDataModule):
 
     def show(self, n: int, path: str | Path, split: str = "test") -> Path:
         """PNG with one row per sample: posed depth | posed mask | canonical depth | canonical mask."""
-        from PIL import Image
-
         if not self.datasets:
             self.setup()
-        ds = self.datasets[split]
-        rows = []
-        for i in np.linspace(0, len(ds) - 1, min(n, len(ds))).astype(int):
-            b = ds[int(i)]
-            rows.append(np.concatenate([b[k][0].numpy() for k in ("depth", "mask", "canon_depth", "canon_mask")], 1))
-        img = (np.concatenate(rows, 0) * 255).clip(0, 255).astype(np.uint8)
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        buf = io.BytesIO()
-        Image.fromarray(img).save(buf, format="PNG")
-        atomic_write_bytes(path, buf.getvalue())
-        return path
+        return pairs_png(self.datasets[split], n, path)

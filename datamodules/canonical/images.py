@@ -71,3 +71,26 @@ def read_subject(path: Path, size: int, n_views: int) -> tuple[dict | None, list
     if "canonical" not in complete:
         return None, problems
     return {"depth": depth, "mask": mask, "poses": [int(p) for p in complete[1:]]}, problems
+
+
+def pairs_png(dataset, n: int, path: str | Path) -> Path:
+    """PNG (written atomically) of ``n`` items spread over ``dataset`` (a
+    :class:`~datamodules.canonical.dataset.PairDataset`), one row each: posed depth | posed mask |
+    canonical depth | canonical mask, ``S`` px a tile."""
+    import io
+
+    from PIL import Image
+
+    from lit3d.utils.io import atomic_write_bytes
+
+    rows = []
+    for i in np.linspace(0, len(dataset) - 1, min(n, len(dataset))).astype(int):
+        b = dataset[int(i)]
+        rows.append(np.concatenate([b[k][0].numpy() for k in ("depth", "mask", "canon_depth", "canon_mask")], 1))
+    img = (np.concatenate(rows, 0) * 255).clip(0, 255).astype(np.uint8)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    buf = io.BytesIO()
+    Image.fromarray(img).save(buf, format="PNG")
+    atomic_write_bytes(path, buf.getvalue())
+    return path
