@@ -88,3 +88,17 @@ def subject_sheets(task, dataset, n: int = 4, size: int = CELL) -> dict[str, Ima
             out = task(batch["depth"], batch["mask"])
         sheets[subject] = contact_sheet(subject, sheet_rows(batch, out, task.hparams.mask_threshold, size), size)
     return sheets
+
+
+def validation_panel(batch: dict, out, n: int, threshold: float) -> np.ndarray:
+    """uint8 image ``(n * (S + 2), 4 * (S + 2))`` of the first ``n`` samples of a batch, one row each:
+    input | predicted | target depth | |error| (each tile padded by 1 px); ``out`` the net's
+    :class:`~lit3d.canonical.nets.CanonicalOutput`, its mask binarised at ``threshold``."""
+    n = min(n, batch["depth"].shape[0])
+    rows = []
+    for i in range(n):
+        pred = composite_depth(out.depth[i, 0], out.mask[i, 0], threshold).detach().float().cpu()
+        tgt = batch["canon_depth"][i, 0].cpu()
+        tiles = [batch["depth"][i, 0].cpu(), pred, tgt, (pred - tgt).abs()]
+        rows.append(torch.cat([torch.nn.functional.pad(t, (1, 1, 1, 1), value=0.3) for t in tiles], 1))
+    return (torch.cat(rows, 0).clamp(0, 1).numpy() * 255).astype(np.uint8)

@@ -12,7 +12,11 @@ version does not).
 A NaN/Inf loss term stops training with the step and the term named
 (``on_nonfinite="raise"``) or skips that step (``"skip"``, counted in ``skipped_steps``).
 
-Logged: ``train/loss|depth_loss|mask_loss|alpha|beta``; ``val/`` and ``test/`` ``depth_mse``
+``identity_weight > 0`` adds a subject classifier (one linear layer, ``identity_classes`` outputs)
+on the MSFE's fused latent and its cross-entropy, times that weight, to the loss: the targets
+already name the subject (one canonical image each); this asks the latent to say it too.
+
+Logged: ``train/loss|depth_loss|mask_loss|alpha|beta`` (``identity_loss`` with the classifier); ``val/`` and ``test/`` ``depth_mse``
 (masked depth error, :class:`lit3d.metrics.depth.MaskedDepthMSE`), ``iou`` (mask IoU,
 :class:`lit3d.metrics.depth.MaskIoU`), and the same with suffix ``_input`` for the posed-input
 baseline (the input taken as its own canonical form).
@@ -29,14 +33,14 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import lightning.pytorch as pl
-import numpy as np
 import torch
 
 from lit3d.callbacks.nonfinite import guard_step, validate_mode
+from lit3d.canonical.figures import validation_panel
 from lit3d.canonical.loss_phases import THESIS_FRACTIONS, LossPhases
 from lit3d.canonical.losses import canonical_loss
 from lit3d.canonical.nets import build_canonical_net, summarize
-from lit3d.metrics.depth import MaskedDepthMSE, MaskIoU, composite_depth
+from lit3d.metrics.depth import MaskedDepthMSE, MaskIoU
 from lit3d.metrics.gathered import GatheredTensors
 
 METRICS = ("depth_mse", "iou", "depth_mse_input", "iou_input")
@@ -75,6 +79,8 @@ class CanonicalTask(pl.LightningModule):
         baseline_smacof_eps: float = 1e-4,
         baseline_landmarks: int | None = 300,
         on_nonfinite: str = "raise",
+        identity_weight: float = 0.0,
+        identity_classes: int = 0,
         unet_baseline: bool = False,
     ):
         super().__init__()
@@ -89,6 +95,13 @@ class CanonicalTask(pl.LightningModule):
         if arch == "canonical":
             cfg.update(use_lfe=use_lfe, use_msfe=use_msfe)
         self.net = build_canonical_net(cfg)
+        self.identity_head = None  # subject classifier on the MSFE latent (identity_weight > 0)
+        if identity_weight > 0:
+            if arch != "canonical" or not use_msfe or identity_classes < 2:
+                raise ValueError("identity_weight > 0 needs arch=canonical with the MSFE and identity_classes >= 2 "
+                                 f"(the number of training subjects); got arch={arch}, use_msfe={use_msfe}, "
+                                 f"identity_classes={identity_classes}")
+            self.identity_head = torch.nn.Linear(int(cfg.get("fuser_out", 500)), int(identity_classes))
         # set by LossPhases each epoch; constant weights when phases are off
         self.loss_alpha, self.loss_beta = float(alpha), float(beta)
         self.val_metrics = self._image_metrics(mask_threshold)
@@ -122,16 +135,31 @@ class CanonicalTask(pl.LightningModule):
                                 self.loss_alpha, self.loss_beta, self.hparams.mask_loss, out.mask_logits)
         # the weighted total too: finite terms times a huge alpha/beta can still overflow to Inf
         terms = {"depth": losses["depth"], "mask": losses["mask"], "loss": losses["loss"]}
+        if self.identity_head is not None:
+            terms["identity"] = self._identity_loss(out.latent, batch["subject_idx"])
+            terms["loss"] = terms["loss"] + self.hparams.identity_weight * terms["identity"]
         where = f"step {self.global_step} (epoch {self.current_epoch}, batch {batch_idx})"
         if not guard_step(self, terms, where, self.hparams.on_nonfinite):
             return None  # no backward, no optimizer step
         bs = batch["depth"].shape[0]
-        self.log_dict({"train/loss": losses["loss"], "train/depth_loss": losses["depth"],
+        self.log_dict({"train/loss": terms["loss"], "train/depth_loss": losses["depth"],
                        "train/mask_loss": losses["mask"]}, on_step=True, on_epoch=True, batch_size=bs)
+        if "identity" in terms:
+            self.log("train/identity_loss", terms["identity"], on_step=False, on_epoch=True, batch_size=bs)
         if not self.hparams.use_phases:
             self.log_dict({"train/alpha": self.loss_alpha, "train/beta": self.loss_beta},
                           on_step=False, on_epoch=True, batch_size=bs)
-        return losses["loss"]
+        return terms["loss"]
+
+    def _identity_loss(self, latent: torch.Tensor, subject_idx) -> torch.Tensor:
+        """Cross-entropy of the subject classifier on the MSFE latent ``(B, fuser_out)``; ``subject_idx``
+        ``(B,)`` (the DataModule's subject index). ValueError when an index is outside the classifier."""
+        target = torch.as_tensor(subject_idx, device=latent.device).long()
+        n = self.identity_head.out_features
+        if target.min() < 0 or target.max() >= n:
+            raise ValueError(f"subject index {int(target.max())} outside identity_classes={n}: set "
+                             "task.identity_classes to the number of subjects of the data")
+        return torch.nn.functional.cross_entropy(self.identity_head(latent.float()), target)
 
     # ------------------------------------------------------------------ evaluation
     @staticmethod
@@ -177,25 +205,11 @@ class CanonicalTask(pl.LightningModule):
             m.reset()
 
     # ------------------------------------------------------------------ images
-    def panel(self, batch: dict, out, n: int | None = None) -> np.ndarray:
-        """uint8 image ``(n * (S + 2), 4 * (S + 2))``: rows of input | predicted | target depth |
-        |error|, one row per sample (each tile padded by 1 px)."""
-        n = min(n or self.hparams.n_panel, batch["depth"].shape[0])
-        thr = self.hparams.mask_threshold
-        rows = []
-        for i in range(n):
-            pred = composite_depth(out.depth[i, 0], out.mask[i, 0], thr).detach().float().cpu()
-            tgt = batch["canon_depth"][i, 0].cpu()
-            err = (pred - tgt).abs()
-            tiles = [batch["depth"][i, 0].cpu(), pred, tgt, err]
-            rows.append(torch.cat([torch.nn.functional.pad(t, (1, 1, 1, 1), value=0.3) for t in tiles], 1))
-        return (torch.cat(rows, 0).clamp(0, 1).numpy() * 255).astype(np.uint8)
-
     def _log_panels(self, batch: dict, out) -> None:
         loggers = [lg for lg in self.loggers if type(lg).__name__ == "WandbLogger"]
         if not loggers or self.trainer.sanity_checking:
             return
-        image = self.panel(batch, out)
+        image = validation_panel(batch, out, self.hparams.n_panel, self.hparams.mask_threshold)
         for lg in loggers:
             lg.log_image(key="val/panels", images=[image], caption=["input | predicted | true canonical | error"],
                          step=self.global_step)

@@ -142,19 +142,27 @@ class MSFE(nn.Module):
             prev = ch
         self.decoder = nn.Sequential(*dec)
 
+    def encode(self, x: torch.Tensor) -> torch.Tensor:
+        """``(B, cin, H, W)`` -> fused latent ``(B, fuser_out)``."""
+        return self.fuser(torch.cat([e(x) for e in self.encoders], dim=1))
+
+    def decode(self, f: torch.Tensor, size: Sequence[int]) -> torch.Tensor:
+        """Fused latent ``(B, fuser_out)`` -> ``(B, out, *size)``."""
+        return resize_to(self.decoder(f[:, :, None, None]), size)
+
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        z = torch.cat([e(x) for e in self.encoders], dim=1)
-        f = self.fuser(z)[:, :, None, None]
-        return resize_to(self.decoder(f), x.shape[-2:])
+        return self.decode(self.encode(x), x.shape[-2:])
 
 
 @dataclass
 class CanonicalOutput:
-    """Predicted canonical depth ``(B,1,H,W)`` in [0,1], mask probability and mask logits ``(B,1,H,W)``."""
+    """Predicted canonical depth ``(B,1,H,W)`` in [0,1], mask probability and mask logits ``(B,1,H,W)``;
+    ``latent``: the MSFE's fused latent ``(B, fuser_out)`` (None without an MSFE, and for the U-Net)."""
 
     depth: torch.Tensor
     mask: torch.Tensor
     mask_logits: torch.Tensor
+    latent: torch.Tensor | None = None
 
 
 class _Head(nn.Module):
@@ -195,13 +203,16 @@ class CanonicalNet(nn.Module):
 
     def forward(self, depth: torch.Tensor, mask: torch.Tensor) -> CanonicalOutput:
         x = torch.cat([depth, mask], dim=1)
-        feats = [x]
+        feats, latent = [x], None
         if self.lfe is not None:
             feats.append(self.lfe(x))
         if self.msfe is not None:
-            feats.append(self.msfe(torch.cat(feats, dim=1)))
+            latent = self.msfe.encode(torch.cat(feats, dim=1))
+            feats.append(self.msfe.decode(latent, x.shape[-2:]))
         h = self.reconstruction(torch.cat(feats, dim=1))
-        return self.head(torch.cat([h, x], dim=1))
+        out = self.head(torch.cat([h, x], dim=1))
+        out.latent = latent
+        return out
 
 
 class UNet(nn.Module):
