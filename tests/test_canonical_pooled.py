@@ -111,3 +111,25 @@ def test_folds_write_heldout_and_the_pooled_evaluator_scores_every_row(tmp_path)
     assert res["per_seed"]["model"] == res["per_seed"]["input"]
     assert res["summary"]["shapedna"]["nn"][1] == 0  # no codebook: no spread over seeds
     assert "table 5.1" in text and "±" in text and "ShapeDNA of the posed full mesh" in text
+
+
+def test_mask_match_against_sklearn_jaccard():
+    """Prediction = the truth: IoU 1 and every item nearest its own subject; prediction = the next
+    subject's canonical mask: nearest 0; the posed-input IoU equals sklearn's Jaccard per item."""
+    from sklearn.metrics import jaccard_score
+
+    from lit3d.canonical.pooled import mask_match
+
+    rng = np.random.default_rng(0)
+    canon = rng.random((3, 1, 16, 16)) > 0.5
+    subject = np.array(["a", "a", "b", "c", "c", "b"])
+    idx = np.array([0, 0, 1, 2, 2, 1])
+    truth = canon[idx].astype(np.float32)
+    posed = (rng.random((6, 1, 16, 16)) > 0.4).astype(np.float32)
+    items = {"subject": subject, "canon_mask": truth, "mask": posed, "pred_mask": truth.copy(), "source": "model"}
+    out = mask_match(items, 0.5)
+    assert out["model"] == {"iou": 1.0, "nearest_subject": 1.0}
+    ref = np.mean([jaccard_score(truth[i].ravel() > 0.5, posed[i].ravel() > 0.5) for i in range(6)])
+    assert out["input"]["iou"] == pytest.approx(ref, abs=1e-6)
+    items["pred_mask"] = canon[(idx + 1) % 3].astype(np.float32)
+    assert mask_match(items, 0.5)["model"]["nearest_subject"] == 0.0

@@ -56,6 +56,36 @@ def depth_meshes_of(pooled: dict, cfg, mask_threshold: float) -> dict[str, list]
     return out
 
 
+def mask_match(items: dict, mask_threshold: float) -> dict[str, dict[str, float]]:
+    """Descriptor-free checks of the pooled items: per depth row (the prediction and the posed
+    input), the mean mask IoU with the item's true canonical mask (``iou``) and the share of items
+    whose nearest true canonical mask (highest IoU among the subjects' canonical masks) is their
+    own subject's (``nearest_subject``; chance = 1 / subjects). Masks ``(N, 1, S, S)`` or ``(N, S, S)``."""
+    def flat(m):
+        return np.asarray(m).reshape(len(m), *np.shape(m)[-2:])
+
+    subjects = np.asarray(items["subject"]).astype(str)
+    names = sorted(set(subjects.tolist()))
+    truth = flat(items["canon_mask"]) > 0.5
+    canon = np.stack([truth[np.flatnonzero(subjects == s)[0]] for s in names])  # (C, S, S)
+
+    def iou(a, b):  # (N, S, S) x (M, S, S) -> (N, M)
+        inter = np.einsum("nij,mij->nm", a.astype(np.float32), b.astype(np.float32))
+        union = a.sum((1, 2))[:, None] + b.sum((1, 2))[None] - inter
+        return inter / np.maximum(union, 1)
+
+    rows = {"input": flat(items["mask"]) > 0.5}
+    if "pred_mask" in items:
+        rows = {str(items.get("source", "model")): flat(items["pred_mask"]) >= mask_threshold, **rows}
+    out = {}
+    for row, m in rows.items():
+        to_canon = iou(m, canon)
+        own = np.array([names.index(s) for s in subjects])
+        out[row] = {"iou": float(np.mean([iou(m[i:i + 1], truth[i:i + 1])[0, 0] for i in range(len(m))])),
+                    "nearest_subject": float((to_canon.argmax(1) == own).mean())}
+    return out
+
+
 def score_rows(features: dict[str, list], labels: np.ndarray, cfg, seeds, extra_dists: dict | None = None,
                chance_trials: int = 100) -> dict[str, dict[str, list[float]]]:
     """``{row: {score: [value per seed]}}``: each row's descriptor features
@@ -116,6 +146,7 @@ def study(items: dict, datamodule, settings: dict, seeds, rows=None) -> dict:
     per_seed = score_rows(features, labels, cfg, seeds, dists, int(settings.get("chance_trials", 100)))
     return {"per_seed": per_seed, "summary": summarise(per_seed), "seeds": [int(s) for s in seeds],
             "n_items": int(len(labels)), "n_subjects": int(len(set(labels.tolist()))),
+            "mask_match": mask_match(items, settings.get("mask_threshold", 0.5)),
             "seconds": {**seconds, "codebooks_and_scores": time.perf_counter() - t0},
             "descriptor": cfg.__dict__}
 

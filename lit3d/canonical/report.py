@@ -158,10 +158,20 @@ def write_pooled_results(result: dict, out_dir: Path) -> Path:
              f"(settings {({k: v for k, v in (result.get('settings') or {}).items() if k.startswith('baseline')})}); "
              "ShapeDNA: first 30 cotangent-Laplacian eigenvalues x surface area, Euclidean distance after dividing "
              "each by 4 pi i (no codebook: sd 0). Chance: 100 random distance matrices per seed.", "",
+             *_mask_match_lines(result.get("mask_match")),
              f"Time: {secs}; wall {result.get('wall_seconds', 0):.0f}s."]
     path = Path(out_dir) / "pooled_results.md"
     atomic_write_text(path, "\n".join(parts) + "\n")
     return path
+
+
+def _mask_match_lines(match: dict | None) -> list[str]:
+    """The descriptor-free mask checks of :func:`lit3d.canonical.pooled.mask_match`, one sentence."""
+    if not match:
+        return []
+    parts = [f"{row} {v['iou']:.2f} IoU, nearest canonical mask of its own subject {v['nearest_subject']:.0%}"
+             for row, v in match.items()]
+    return ["Masks, against the true canonical mask (no descriptor, no seed): " + "; ".join(parts) + ".", ""]
 
 
 def write_figures(task, datamodule, out_dir: Path, n: int = 4, evaluation=None) -> list[Path]:
