@@ -114,11 +114,14 @@ def test_folds_write_heldout_and_the_pooled_evaluator_scores_every_row(tmp_path)
 
 
 def test_mask_match_against_sklearn_jaccard():
-    """Prediction = the truth: IoU 1 and every item nearest its own subject; prediction = the next
-    subject's canonical mask: nearest 0; the posed-input IoU equals sklearn's Jaccard per item."""
+    """Prediction = the truth: IoU 1, every item nearest its own subject and retrieved perfectly by
+    mask IoU; prediction = the next subject's canonical mask: nearest 0; the posed-input IoU equals
+    sklearn's Jaccard per item, its retrieval by mask IoU that of SciPy's Jaccard distances."""
+    from scipy.spatial.distance import cdist
     from sklearn.metrics import jaccard_score
 
     from lit3d.canonical.pooled import mask_match
+    from lit3d.metrics.retrieval import retrieval_scores
 
     rng = np.random.default_rng(0)
     canon = rng.random((3, 1, 16, 16)) > 0.5
@@ -128,7 +131,12 @@ def test_mask_match_against_sklearn_jaccard():
     posed = (rng.random((6, 1, 16, 16)) > 0.4).astype(np.float32)
     items = {"subject": subject, "canon_mask": truth, "mask": posed, "pred_mask": truth.copy(), "source": "model"}
     out = mask_match(items, 0.5)
-    assert out["model"] == {"iou": 1.0, "nearest_subject": 1.0}
+    assert out["model"] == {"iou": 1.0, "nearest_subject": 1.0, "nn_by_mask": 1.0, "ft_by_mask": 1.0}
+    flat = posed.reshape(6, -1) > 0.5
+    ref_dist = cdist(flat, flat, metric="jaccard")  # scipy's 1 - IoU
+    ref_scores = retrieval_scores(ref_dist, subject)
+    assert out["input"]["nn_by_mask"] == pytest.approx(ref_scores["nn"])
+    assert out["input"]["ft_by_mask"] == pytest.approx(ref_scores["ft"])
     ref = np.mean([jaccard_score(truth[i].ravel() > 0.5, posed[i].ravel() > 0.5) for i in range(6)])
     assert out["input"]["iou"] == pytest.approx(ref, abs=1e-6)
     items["pred_mask"] = canon[(idx + 1) % 3].astype(np.float32)

@@ -60,7 +60,11 @@ def mask_match(items: dict, mask_threshold: float) -> dict[str, dict[str, float]
     """Descriptor-free checks of the pooled items: per depth row (the prediction and the posed
     input), the mean mask IoU with the item's true canonical mask (``iou``) and the share of items
     whose nearest true canonical mask (highest IoU among the subjects' canonical masks) is their
-    own subject's (``nearest_subject``; chance = 1 / subjects). Masks ``(N, 1, S, S)`` or ``(N, S, S)``."""
+    own subject's (``nearest_subject``; chance = 1 / subjects), and retrieval among the row's own
+    masks with distance 1 - IoU (``nn_by_mask``, ``ft_by_mask``: no codebook, so no seed).
+    Masks ``(N, 1, S, S)`` or ``(N, S, S)``."""
+    from lit3d.metrics.retrieval import retrieval_scores
+
     def flat(m):
         return np.asarray(m).reshape(len(m), *np.shape(m)[-2:])
 
@@ -83,6 +87,8 @@ def mask_match(items: dict, mask_threshold: float) -> dict[str, dict[str, float]
         own = np.array([names.index(s) for s in subjects])
         out[row] = {"iou": float(np.mean([iou(m[i:i + 1], truth[i:i + 1])[0, 0] for i in range(len(m))])),
                     "nearest_subject": float((to_canon.argmax(1) == own).mean())}
+        by_mask = retrieval_scores(1.0 - iou(m, m), subjects)
+        out[row].update(nn_by_mask=float(by_mask["nn"]), ft_by_mask=float(by_mask["ft"]))
     return out
 
 

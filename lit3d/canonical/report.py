@@ -170,6 +170,8 @@ def _mask_match_lines(match: dict | None) -> list[str]:
     if not match:
         return []
     parts = [f"{row} {v['iou']:.2f} IoU, nearest canonical mask of its own subject {v['nearest_subject']:.0%}"
+             + (f", retrieval by mask IoU NN {v['nn_by_mask']:.2f} / FT {v['ft_by_mask']:.2f}"
+                if "nn_by_mask" in v else "")
              for row, v in match.items()]
     return ["Masks, against the true canonical mask (no descriptor, no seed): " + "; ".join(parts) + ".", ""]
 
