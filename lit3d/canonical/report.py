@@ -169,9 +169,8 @@ def _mask_match_lines(match: dict | None) -> list[str]:
     """The descriptor-free mask checks of :func:`lit3d.canonical.pooled.mask_match`, one sentence."""
     if not match:
         return []
-    parts = [f"{row} {v['iou']:.2f} IoU, nearest canonical mask of its own subject {v['nearest_subject']:.0%}"
-             + (f", retrieval by mask IoU NN {v['nn_by_mask']:.2f} / FT {v['ft_by_mask']:.2f}"
-                if "nn_by_mask" in v else "")
+    parts = [f"{row} {v['iou']:.2f} IoU, nearest canonical mask of its own subject {v['nearest_subject']:.0%}, "
+             f"retrieval by mask IoU NN {v['nn_by_mask']:.2f} / FT {v['ft_by_mask']:.2f}"
              for row, v in match.items()]
     return ["Masks, against the true canonical mask (no descriptor, no seed): " + "; ".join(parts) + ".", ""]
 
