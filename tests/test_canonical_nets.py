@@ -13,6 +13,7 @@ def _net_sizes(compose_cfg, *overrides: str) -> dict:
     """CanonicalNet kwargs of a composed task config (``unet_channels`` dropped)."""
     net = OmegaConf.to_container(compose_cfg(["task=canonical", *overrides]).task.net, resolve=True)
     net.pop("unet_channels", None)
+    net.pop("recall_channels", None)
     net.pop("init", None)
     return net
 

@@ -70,6 +70,18 @@ class PairDataset(Dataset):
             "pose": int(r["pose"]), "view": int(r["view"]), "index": i,
         }
 
+    def canonical_templates(self, view: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
+        """Every subject's canonical depth and mask seen from view ``view``, ``(K, 1, S, S)`` float32 each,
+        row k = the subject with index k (the closed-set recall net's templates)."""
+        by_index = sorted(self.subject_index.items(), key=lambda kv: kv[1])
+        if [i for _, i in by_index] != list(range(len(by_index))):
+            raise ValueError(f"subject indices are not 0..K-1: {dict(by_index)}")
+        key = f"canonical_{int(view)}"
+        depth = [self.cache[s]["depth"][key] for s, _ in by_index]
+        mask = [self.cache[s]["mask"][key] for s, _ in by_index]
+        return (torch.from_numpy(np.stack(depth).astype(np.float32))[:, None],
+                torch.from_numpy(np.stack(mask).astype(np.float32))[:, None])
+
 
 def mirror_views(azimuths: Sequence[float]) -> dict[int, int]:
     """View index -> index of the view at the negated azimuth offset (itself when there is none)."""

@@ -16,6 +16,11 @@ A NaN/Inf loss term stops training with the step and the term named
 on the MSFE's fused latent and its cross-entropy, times that weight, to the loss: the targets
 already name the subject (one canonical image each); this asks the latent to say it too.
 
+``arch="recall"`` is the closed-set recall row (:mod:`lit3d.canonical.recall`): a subject classifier
+(``identity_classes`` subjects) whose output is the recalled training canonical image; its templates
+are filled from the training data at fit start and saved in the checkpoint; its cross-entropy x
+``identity_weight`` joins the image loss.
+
 Logged: ``train/loss|depth_loss|mask_loss|alpha|beta`` (``identity_loss`` with the classifier); ``val/`` and ``test/`` ``depth_mse``
 (masked depth error, :class:`lit3d.metrics.depth.MaskedDepthMSE`), ``iou`` (mask IoU,
 :class:`lit3d.metrics.depth.MaskIoU`), and the same with suffix ``_input`` for the posed-input
@@ -52,7 +57,8 @@ TEST_OUTPUTS = ("pred_depth", "pred_mask", "depth", "mask", "canon_depth", "cano
 
 
 class CanonicalTask(pl.LightningModule):
-    """Posed depth+mask -> canonical depth+mask (CanonicalNet, or a plain U-Net with ``arch="unet"``)."""
+    """Posed depth+mask -> canonical depth+mask (CanonicalNet; a plain U-Net with ``arch="unet"``; the
+    closed-set recall net with ``arch="recall"``)."""
 
     def __init__(
         self,
@@ -94,9 +100,11 @@ class CanonicalTask(pl.LightningModule):
         cfg["kind"] = arch
         if arch == "canonical":
             cfg.update(use_lfe=use_lfe, use_msfe=use_msfe)
+        if arch == "recall":  # closed-set recall row: the net is the subject classifier (lit3d.canonical.recall)
+            cfg["n_subjects"] = identity_classes
         self.net = build_canonical_net(cfg)
         self.identity_head = None  # subject classifier on the MSFE latent (identity_weight > 0)
-        if identity_weight > 0:
+        if identity_weight > 0 and arch != "recall":
             if arch != "canonical" or not use_msfe or identity_classes < 2:
                 raise ValueError("identity_weight > 0 needs arch=canonical with the MSFE and identity_classes >= 2 "
                                  f"(the number of training subjects); got arch={arch}, use_msfe={use_msfe}, "
@@ -120,6 +128,17 @@ class CanonicalTask(pl.LightningModule):
         """``(B,1,S,S)`` depth, mask -> CanonicalOutput (depth, mask probabilities, mask logits)."""
         return self.net(depth, mask)
 
+    def on_fit_start(self) -> None:
+        """``arch=recall``: the templates are the training data's canonical images, seen from the first
+        evaluation view (the view every test target is drawn in)."""
+        if self.hparams.arch != "recall":
+            return
+        dm = getattr(self.trainer, "datamodule", None)
+        if dm is None or not hasattr(dm, "views"):
+            raise ValueError("arch=recall fills its templates from a canonical DataModule; fit with datamodule=...")
+        depth, mask = dm.datasets["train"].canonical_templates(dm.views("test")[0])
+        self.net.set_templates(depth.to(self.device), mask.to(self.device))
+
     def configure_callbacks(self):
         if not self.hparams.use_phases:
             return []
@@ -135,7 +154,7 @@ class CanonicalTask(pl.LightningModule):
                                 self.loss_alpha, self.loss_beta, self.hparams.mask_loss, out.mask_logits)
         # the weighted total too: finite terms times a huge alpha/beta can still overflow to Inf
         terms = {"depth": losses["depth"], "mask": losses["mask"], "loss": losses["loss"]}
-        if self.identity_head is not None:
+        if self.identity_head is not None or (self.hparams.arch == "recall" and self.hparams.identity_weight > 0):
             terms["identity"] = self._identity_loss(out.latent, batch["subject_idx"])
             terms["loss"] = terms["loss"] + self.hparams.identity_weight * terms["identity"]
         where = f"step {self.global_step} (epoch {self.current_epoch}, batch {batch_idx})"
@@ -152,14 +171,16 @@ class CanonicalTask(pl.LightningModule):
         return terms["loss"]
 
     def _identity_loss(self, latent: torch.Tensor, subject_idx) -> torch.Tensor:
-        """Cross-entropy of the subject classifier on the MSFE latent ``(B, fuser_out)``; ``subject_idx``
-        ``(B,)`` (the DataModule's subject index). ValueError when an index is outside the classifier."""
+        """Cross-entropy of the subject classifier on the MSFE latent ``(B, fuser_out)`` (``arch=recall``: of
+        the recall net's logits ``(B, K)``); ``subject_idx`` ``(B,)`` (the DataModule's subject index).
+        ValueError when an index is outside the classifier."""
         target = torch.as_tensor(subject_idx, device=latent.device).long()
-        n = self.identity_head.out_features
+        n = self.net.n_subjects if self.identity_head is None else self.identity_head.out_features
         if target.min() < 0 or target.max() >= n:
             raise ValueError(f"subject index {int(target.max())} outside identity_classes={n}: set "
                              "task.identity_classes to the number of subjects of the data")
-        return torch.nn.functional.cross_entropy(self.identity_head(latent.float()), target)
+        logits = latent.float() if self.identity_head is None else self.identity_head(latent.float())
+        return torch.nn.functional.cross_entropy(logits, target)
 
     # ------------------------------------------------------------------ evaluation
     @staticmethod

@@ -290,8 +290,9 @@ def he_init_(net: nn.Module) -> nn.Module:
 
 
 def build_canonical_net(net: dict) -> nn.Module:
-    """Build from a plain dict: ``{"kind": "canonical"|"unet", "init": "he"|"torch", **kwargs}``
-    (``init``: :func:`he_init_`, or PyTorch's default layer initialisation)."""
+    """Build from a plain dict: ``{"kind": "canonical"|"unet"|"recall", "init": "he"|"torch", **kwargs}``
+    (``init``: :func:`he_init_`, or PyTorch's default layer initialisation; ``recall``:
+    :class:`lit3d.canonical.recall.SubjectRecallNet`, sized by ``recall_channels`` and ``n_subjects``)."""
     net = dict(net)
     kind = net.pop("kind", "canonical")
     init = net.pop("init", "torch")
@@ -299,14 +300,20 @@ def build_canonical_net(net: dict) -> nn.Module:
         raise ValueError(f"unknown canonical net init '{init}' ({', '.join(INITS)})")
     if kind == "canonical":
         net.pop("unet_channels", None)
+        net.pop("recall_channels", None)
         model = CanonicalNet(**net)
     elif kind == "unet":
         keep = {k: v for k, v in net.items() if k in ("channels", "image_size")}
         if "unet_channels" in net:
             keep["channels"] = net["unet_channels"]
         model = UNet(**keep)
+    elif kind == "recall":
+        from lit3d.canonical.recall import SubjectRecallNet  # imports this module
+
+        model = SubjectRecallNet(int(net.get("n_subjects", 0)), int(net.get("image_size", 128)),
+                                 net.get("recall_channels", (16, 32, 64, 128)))
     else:
-        raise ValueError(f"unknown canonical net kind '{kind}' (canonical, unet)")
+        raise ValueError(f"unknown canonical net kind '{kind}' (canonical, unet, recall)")
     return he_init_(model) if init == "he" else model
 
 
