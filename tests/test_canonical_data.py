@@ -281,3 +281,35 @@ def test_roll_turns_the_input_only_and_keeps_depth_inside_the_mask(tmp_path):
         assert np.array_equal(it["canon_depth"][0].numpy(), c["depth"][f"canonical_{r['view']}"])
     assert turned > 0
     assert dm.datasets["test"].roll_deg == 0 and dm.datasets["val"].roll_deg == 0
+
+
+def test_train_pose_fraction_thins_training_poses_per_subject_and_keeps_the_test(tmp_path):
+    """The learning-curve knob: that share of each subject's training poses (at least one, seeded),
+    validation and test unchanged; a fraction outside (0, 1] is a named error."""
+    from datamodules.canonical.splits import thin_training
+
+    train = [(s, p) for s in ("a", "b") for p in range(8)] + [("c", 1)]
+    half = thin_training(train, 0.5, seed=3)
+    assert set(half) < set(train) and half == thin_training(train, 0.5, seed=3)
+    assert [sum(s == k for s, _ in half) for k in "abc"] == [4, 4, 1]  # c keeps its only pose
+    assert thin_training(train, 1.0, seed=3) == train
+    assert set(thin_training(train, 0.5, seed=4)) != set(half)  # the seed draws the poses
+    for bad in (0.0, 1.5):
+        with pytest.raises(DataError, match="train_pose_fraction must be in"):
+            thin_training(train, bad, seed=0)
+
+    def dm(fraction):
+        d = CanonicalDataModule(str(tmp_path / "data"), image_size=32, n_subjects=2, n_poses=8, mesh_resolution=16,
+                                n_folds=2, batch_size=4, kinds=["humanoid"], seed=1, split="pose",
+                                train_pose_fraction=fraction)
+        d.prepare_data()
+        d.setup()
+        return d
+
+    full, thin = dm(1.0), dm(0.5)
+    assert thin.splits["test"] == full.splits["test"] and thin.splits["val"] == full.splits["val"]
+    poses = {k: {(r["subject"], r["pose"]) for r in d.splits["train"]} for k, d in (("full", full), ("thin", thin))}
+    assert poses["thin"] < poses["full"]
+    for subject in full.cache:
+        n = sum(s == subject for s, _ in poses["full"])
+        assert sum(s == subject for s, _ in poses["thin"]) == max(1, round(0.5 * n))

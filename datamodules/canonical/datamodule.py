@@ -17,6 +17,7 @@ azimuths are training augmentation while evaluation keeps one view per pose. ``r
 inputs turned in the image plane by up to that many degrees (a rolled camera; the target stays).
 ``blend_poses``: that many extra training poses per subject, each a vertex blend of two of the fold's
 training poses (:mod:`datamodules.canonical.blends`; one connectivity per subject, as TOSCA).
+``train_pose_fraction``: train on that share of each subject's training poses (a learning curve).
 
 Batches (``B`` samples, ``S = image_size``):
     depth, mask              (B, 1, S, S) float32   posed input; mask in {0, 1}
@@ -54,14 +55,8 @@ from datamodules.cache import CacheBuilder, DataError, atomic_save_npz, read_man
 from datamodules.canonical.blends import add_blends
 from datamodules.canonical.dataset import PairDataset, mirror_views, subject_balanced_sampler
 from datamodules.canonical.images import depth_image_problem, pairs_png, read_subject, unpack_mask
-from datamodules.canonical.sources import (
-    SOURCES,
-    Shrec14Source,
-    SynthSource,
-    ToscaSource,
-    make_source,
-)
-from datamodules.canonical.splits import SPLITS, deal, split_pose, split_subject_pose
+from datamodules.canonical.sources import SOURCES, Shrec14Source, SynthSource, ToscaSource, make_source
+from datamodules.canonical.splits import SPLITS, deal, split_pose, split_subject_pose, thin_training
 from datamodules.loaders import evaluation_loader
 from lit3d.geometry.normalise import normalise_vertices
 from lit3d.geometry.views import VIEW_MODES, base_azimuth
@@ -119,6 +114,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         eval_views: Sequence[int] | None = None,
         roll_deg: float = 0.0,
         blend_poses: int = 0,
+        train_pose_fraction: float = 1.0,
     ):
         super().__init__()
         self.save_hyperparameters()
@@ -300,6 +296,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         hp = self.hparams
         subject_poses = {s: c["poses"] for s, c in self.cache.items()}
         pairs = self._pairs(hp.fold)
+        pairs["train"] = thin_training(pairs["train"], hp.train_pose_fraction, hp.seed + hp.fold)
         if hp.max_val_items and len(pairs["val"]) > hp.max_val_items:
             idx = np.random.default_rng(hp.seed).choice(len(pairs["val"]), hp.max_val_items, replace=False)
             pairs["val"] = [pairs["val"][i] for i in sorted(idx)]

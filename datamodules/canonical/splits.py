@@ -63,3 +63,21 @@ def split_pose(subject_poses: dict[str, list], n_folds: int, fold: int, seed: in
         out["val"] += [(s, p) for p in val]
         out["train"] += [(s, p) for p in rest if p not in val]
     return out
+
+
+def thin_training(train: Sequence[tuple], fraction: float, seed: int) -> list[tuple]:
+    """``fraction`` of each subject's training ``(subject, pose)`` pairs, at least one per subject,
+    drawn with ``seed`` (the learning-curve knob ``train_pose_fraction``; 1 keeps every pair)."""
+    if not 0 < float(fraction) <= 1:
+        raise DataError(f"train_pose_fraction must be in (0, 1], got {fraction}")
+    if float(fraction) == 1:
+        return list(train)
+    by_subject: dict[str, list] = {}
+    for s, p in train:
+        by_subject.setdefault(s, []).append(p)
+    keep = set()
+    for i, (s, poses) in enumerate(sorted(by_subject.items())):
+        order = list(poses)
+        np.random.default_rng(seed + i).shuffle(order)
+        keep |= {(s, p) for p in order[:max(1, round(float(fraction) * len(order)))]}
+    return [sp for sp in train if sp in keep]
