@@ -1,0 +1,89 @@
+"""Mean ± sd over training runs of the pooled canonical results (training noise, not codebook noise).
+
+    python -m lit3d.canonical.over_runs SWEEP_DIR... [--rows model input] [--out FILE.md]
+
+Each ``SWEEP_DIR`` is one whole cross-validation (``+sweep=canonical_cv``) with the ``pooled.json``
+that :mod:`lit3d.canonical.pooled` wrote; the runs differ by training seed (or anything else the
+caller chooses to treat as noise). Per run and row, the score is that run's mean over its codebook
+seeds; the table gives the mean and the sample sd (ddof 1) of those per-run means, with each run's
+value, plus the same for the descriptor-free mask checks (``mask_match``). All runs must score the
+same items (``n_items``) with the same codebook seeds, or the spread would mix protocols.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from lit3d.canonical.pooled import SCORES
+
+MASK_KEYS = ("iou", "nearest_subject", "nn_by_mask", "ft_by_mask")
+
+
+def load(sweep_dirs) -> list[dict]:
+    """The ``pooled.json`` of every sweep dir; ValueError naming the dir when one is missing or the
+    runs differ in items or codebook seeds."""
+    runs = []
+    for d in sweep_dirs:
+        path = Path(d) / "pooled.json"
+        if not path.is_file():
+            raise ValueError(f"{path}: missing (run the sweep with +sweep=canonical_cv, or python -m "
+                             "lit3d.canonical.pooled RUN_DIRS --out DIR)")
+        runs.append(json.loads(path.read_text()))
+    for d, r in zip(sweep_dirs, runs):
+        if (r["n_items"], r["seeds"]) != (runs[0]["n_items"], runs[0]["seeds"]):
+            raise ValueError(f"{d}: {r['n_items']} items, codebook seeds {r['seeds']}; {sweep_dirs[0]} has "
+                             f"{runs[0]['n_items']} items, seeds {runs[0]['seeds']}: not the same protocol")
+    return runs
+
+
+def _stats(values: list[float]) -> dict:
+    v = np.asarray(values, dtype=float)
+    return {"mean": float(v.mean()), "sd": float(v.std(ddof=1)) if len(v) > 1 else 0.0, "runs": v.tolist()}
+
+
+def over_runs(runs: list[dict], rows=("model", "input")) -> dict:
+    """``{"scores": {row: {score: {mean, sd, runs}}}, "masks": {row: {key: {mean, sd, runs}}}}``."""
+    out: dict = {"scores": {}, "masks": {}}
+    for row in rows:
+        if all(row in r["summary"] for r in runs):
+            out["scores"][row] = {s: _stats([r["summary"][row][s][0] for r in runs]) for s in SCORES}
+        if all(row in r.get("mask_match", {}) for r in runs):
+            out["masks"][row] = {k: _stats([r["mask_match"][row][k] for r in runs]) for k in MASK_KEYS}
+    return out
+
+
+def markdown(table: dict, names: list[str]) -> str:
+    """Two tables: retrieval scores, then the mask checks; each cell ``mean ± sd (run values)``."""
+    def cell(st):
+        return f"{st['mean']:.2f} ± {st['sd']:.2f} ({' '.join(f'{x:.2f}' for x in st['runs'])})"
+
+    lines = [f"Mean ± sd over {len(names)} runs ({', '.join(names)}); each run's value is its mean over "
+             "codebook seeds.", "", "| row | " + " | ".join(s.upper() for s in SCORES) + " |",
+             "|---" * (len(SCORES) + 1) + "|"]
+    lines += [f"| {row} | " + " | ".join(cell(v[s]) for s in SCORES) + " |" for row, v in table["scores"].items()]
+    if table["masks"]:
+        lines += ["", "| row | " + " | ".join(MASK_KEYS) + " |", "|---" * (len(MASK_KEYS) + 1) + "|"]
+        lines += [f"| {row} | " + " | ".join(cell(v[k]) for k in MASK_KEYS) + " |" for row, v in table["masks"].items()]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(prog="python -m lit3d.canonical.over_runs", description=__doc__.splitlines()[0])
+    ap.add_argument("sweeps", nargs="+", help="sweep dirs with pooled.json (one per training run)")
+    ap.add_argument("--rows", nargs="+", default=["model", "input"], help="rows of pooled.json")
+    ap.add_argument("--out", help="also write the tables to this .md file")
+    a = ap.parse_args(argv)
+    try:
+        text = markdown(over_runs(load(a.sweeps), a.rows), [Path(d).name for d in a.sweeps])
+    except ValueError as exc:
+        raise SystemExit(f"error: {exc}") from None
+    print(text, end="")
+    if a.out:
+        Path(a.out).write_text(text)
+
+
+if __name__ == "__main__":
+    main()

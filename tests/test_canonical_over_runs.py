@@ -1,0 +1,48 @@
+"""Mean ± sd over training runs of pooled canonical results, against the standard library's statistics."""
+import json
+import statistics
+
+import pytest
+
+from lit3d.canonical.over_runs import load, main, markdown, over_runs
+
+SCORES = ("nn", "ft", "st", "e", "dcg")
+
+
+def _write(d, nn, iou, n_items=68, seeds=(0, 1, 2, 3, 4)):
+    d.mkdir(parents=True)
+    summary = {"model": {s: [nn + i / 100, 0.01] for i, s in enumerate(SCORES)},
+               "input": {s: [0.5, 0.02] for s in SCORES}}
+    masks = {"model": {"iou": iou, "nearest_subject": iou / 2, "nn_by_mask": 0.3, "ft_by_mask": 0.2}}
+    (d / "pooled.json").write_text(json.dumps({"summary": summary, "mask_match": masks, "n_items": n_items,
+                                               "seeds": list(seeds)}))
+    return d
+
+
+def test_mean_and_sd_over_runs_match_statistics(tmp_path, capsys):
+    nns, ious = [0.44, 0.37, 0.31, 0.28], [0.59, 0.63, 0.59, 0.54]
+    dirs = [_write(tmp_path / f"run{i}", nn, iou) for i, (nn, iou) in enumerate(zip(nns, ious))]
+    table = over_runs(load(dirs))
+    nn = table["scores"]["model"]["nn"]
+    assert nn["mean"] == pytest.approx(statistics.mean(nns)) and nn["sd"] == pytest.approx(statistics.stdev(nns))
+    assert nn["runs"] == pytest.approx(nns)
+    ft = table["scores"]["model"]["ft"]
+    assert ft["mean"] == pytest.approx(statistics.mean(nns) + 0.01)
+    assert table["scores"]["input"]["nn"]["sd"] == 0.0
+    iou = table["masks"]["model"]["iou"]
+    assert iou["sd"] == pytest.approx(statistics.stdev(ious))
+    assert "input" not in table["masks"]  # no mask check for that row in these files
+    text = markdown(table, ["a", "b", "c", "d"])
+    assert "| model | 0.35 ± 0.07 (0.44 0.37 0.31 0.28) |" in text
+    out = tmp_path / "over.md"
+    main([str(d) for d in dirs] + ["--out", str(out)])
+    assert out.read_text() == capsys.readouterr().out
+
+
+def test_runs_of_different_protocols_or_missing_files_are_named(tmp_path):
+    a = _write(tmp_path / "a", 0.4, 0.6)
+    b = _write(tmp_path / "b", 0.4, 0.6, n_items=26)
+    with pytest.raises(ValueError, match=r"b: 26 items.*not the same protocol"):
+        load([a, b])
+    with pytest.raises(SystemExit, match=r"missing.*pooled.json|pooled.json: missing"):
+        main([str(a), str(tmp_path / "nowhere")])
