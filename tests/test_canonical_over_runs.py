@@ -46,3 +46,40 @@ def test_runs_of_different_protocols_or_missing_files_are_named(tmp_path):
         load([a, b])
     with pytest.raises(SystemExit, match=r"missing.*pooled.json|pooled.json: missing"):
         main([str(a), str(tmp_path / "nowhere")])
+
+
+def test_confusion_counts_who_is_taken_for_whom(tmp_path):
+    """Two subjects whose canonical masks are the left and right half; a/2's prediction is the right
+    half (taken for b), the others their own: counts [[1, 1], [0, 1]] per run, summed over two runs."""
+    import numpy as np
+
+    from lit3d.canonical import heldout
+    from lit3d.canonical.over_runs import confusion, confusion_markdown
+
+    left, right = np.zeros((4, 4), np.float16), np.zeros((4, 4), np.float16)
+    left[:, :2], right[:, 2:] = 1, 1
+    ids = ["a/1/0", "a/2/0", "b/1/0"]
+    canon = {"a": left, "b": right}
+    pred = {"a/1/0": left, "a/2/0": right, "b/1/0": right}
+
+    def fold(sweep, f, items):
+        arr = {k: np.stack([canon[i[0]] for i in items]) for k in heldout.IMAGES}
+        arr["pred_mask"] = np.stack([pred[i] for i in items])
+        arr.update(subject=np.array([i.split("/")[0] for i in items]), pose=np.array([int(i[2]) for i in items]),
+                   view=np.zeros(len(items), np.int64), item=np.array(items), expected=np.array(ids),
+                   source=np.array("model"), fold=np.array(f), n_folds=np.array(2), data=np.array("{}"),
+                   settings=np.array("{}"))
+        (sweep / str(f)).mkdir(parents=True)
+        heldout.save_heldout(sweep / str(f) / heldout.HELDOUT_FILE, arr)
+
+    sweeps = []
+    for run in ("r1", "r2"):
+        fold(tmp_path / run, 0, ids[:2])
+        fold(tmp_path / run, 1, ids[2:])
+        sweeps.append(tmp_path / run)
+    names, counts = confusion(sweeps)
+    assert names == ["a", "b"] and counts.tolist() == [[2, 2], [0, 2]]
+    text = confusion_markdown(names, counts)
+    assert "| a | 2 | 2 | 0.50 |" in text and "| b | 0 | 2 | 1.00 |" in text and "Overall: 0.67 of 6" in text
+    with pytest.raises(ValueError, match="no row 'unet'"):
+        confusion(sweeps, row="unet")

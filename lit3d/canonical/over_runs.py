@@ -8,6 +8,8 @@ caller chooses to treat as noise). Per run and row, the score is that run's mean
 seeds; the table gives the mean and the sample sd (ddof 1) of those per-run means, with each run's
 value, plus the same for the descriptor-free mask checks (``mask_match``). All runs must score the
 same items (``n_items``) with the same codebook seeds, or the spread would mix protocols.
+``--confusion``: which subject's true canonical mask is nearest (IoU) to each held-out prediction,
+per true subject, summed over the runs (read from every fold's ``heldout.npz``): who is taken for whom.
 """
 from __future__ import annotations
 
@@ -17,7 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lit3d.canonical.pooled import SCORES
+from lit3d.canonical.heldout import pool
+from lit3d.canonical.pooled import SCORES, job_dirs, nearest_canonical, prediction_masks
 
 MASK_KEYS = ("iou", "nearest_subject", "nn_by_mask", "ft_by_mask")
 
@@ -70,14 +73,48 @@ def markdown(table: dict, names: list[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def confusion(sweep_dirs, row: str = "model", mask_threshold: float = 0.5) -> tuple[list[str], np.ndarray]:
+    """``(subject names, (C, C) counts)``: row = true subject, column = the subject whose true canonical
+    mask is nearest to the prediction's mask, summed over the sweeps (each pooled over its folds)."""
+    names, total = None, None
+    for d in sweep_dirs:
+        items = pool(job_dirs(Path(d)))
+        masks = prediction_masks(items, mask_threshold)
+        if row not in masks:
+            raise ValueError(f"{d}: no row '{row}' in its held-out items (rows: {', '.join(masks)})")
+        n, own, nearest = nearest_canonical(items, masks[row])
+        if names is not None and n != names:
+            raise ValueError(f"{d}: subjects {n} differ from {names}")
+        names = n
+        counts = np.zeros((len(n), len(n)), dtype=int)
+        np.add.at(counts, (own, nearest), 1)
+        total = counts if total is None else total + counts
+    return names, total
+
+
+def confusion_markdown(names: list[str], counts: np.ndarray) -> str:
+    """Counts table with each true subject's share recognised (its diagonal over its row)."""
+    lines = ["| true \\ nearest | " + " | ".join(names) + " | own |", "|---" * (len(names) + 2) + "|"]
+    for i, name in enumerate(names):
+        share = counts[i, i] / max(counts[i].sum(), 1)
+        lines.append(f"| {name} | " + " | ".join(str(int(c)) for c in counts[i]) + f" | {share:.2f} |")
+    lines.append(f"\nOverall: {np.trace(counts) / max(counts.sum(), 1):.2f} of {int(counts.sum())} predictions.")
+    return "\n".join(lines) + "\n"
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="python -m lit3d.canonical.over_runs", description=__doc__.splitlines()[0])
     ap.add_argument("sweeps", nargs="+", help="sweep dirs with pooled.json (one per training run)")
     ap.add_argument("--rows", nargs="+", default=["model", "input"], help="rows of pooled.json")
     ap.add_argument("--out", help="also write the tables to this .md file")
+    ap.add_argument("--confusion", metavar="ROW", help="add the nearest-canonical-mask confusion of this row (e.g. model)")
     a = ap.parse_args(argv)
     try:
-        text = markdown(over_runs(load(a.sweeps), a.rows), [Path(d).name for d in a.sweeps])
+        runs = load(a.sweeps)
+        text = markdown(over_runs(runs, a.rows), [Path(d).name for d in a.sweeps])
+        if a.confusion:
+            thr = float(runs[0].get("settings", {}).get("mask_threshold", 0.5))
+            text += "\n" + confusion_markdown(*confusion(a.sweeps, a.confusion, thr))
     except ValueError as exc:
         raise SystemExit(f"error: {exc}") from None
     print(text, end="")

@@ -56,6 +56,37 @@ def depth_meshes_of(pooled: dict, cfg, mask_threshold: float) -> dict[str, list]
     return out
 
 
+def _flat(m) -> np.ndarray:
+    """``(N, 1, S, S)`` or ``(N, S, S)`` -> ``(N, S, S)``."""
+    return np.asarray(m).reshape(len(m), *np.shape(m)[-2:])
+
+
+def _iou(a, b) -> np.ndarray:
+    """Mask IoU of every pair: ``(N, S, S)`` x ``(M, S, S)`` booleans -> ``(N, M)``."""
+    inter = np.einsum("nij,mij->nm", a.astype(np.float32), b.astype(np.float32))
+    union = a.sum((1, 2))[:, None] + b.sum((1, 2))[None] - inter
+    return inter / np.maximum(union, 1)
+
+
+def nearest_canonical(items: dict, masks) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """``(subject names, own (N,), nearest (N,))``: each item's own subject index and the index of
+    the subject whose true canonical mask has the highest IoU with ``masks[i]`` (booleans)."""
+    subjects = np.asarray(items["subject"]).astype(str)
+    names = sorted(set(subjects.tolist()))
+    truth = _flat(items["canon_mask"]) > 0.5
+    canon = np.stack([truth[np.flatnonzero(subjects == s)[0]] for s in names])  # (C, S, S)
+    own = np.array([names.index(s) for s in subjects])
+    return names, own, _iou(_flat(masks), canon).argmax(1)
+
+
+def prediction_masks(items: dict, mask_threshold: float) -> dict[str, np.ndarray]:
+    """``{row: (N, S, S) booleans}``: the prediction (its source's name) thresholded, and the posed input."""
+    rows = {"input": _flat(items["mask"]) > 0.5}
+    if "pred_mask" in items:
+        rows = {str(items.get("source", "model")): _flat(items["pred_mask"]) >= mask_threshold, **rows}
+    return rows
+
+
 def mask_match(items: dict, mask_threshold: float) -> dict[str, dict[str, float]]:
     """Descriptor-free checks of the pooled items: per depth row (the prediction and the posed
     input), the mean mask IoU with the item's true canonical mask (``iou``) and the share of items
@@ -65,29 +96,14 @@ def mask_match(items: dict, mask_threshold: float) -> dict[str, dict[str, float]
     Masks ``(N, 1, S, S)`` or ``(N, S, S)``."""
     from lit3d.metrics.retrieval import retrieval_scores
 
-    def flat(m):
-        return np.asarray(m).reshape(len(m), *np.shape(m)[-2:])
-
     subjects = np.asarray(items["subject"]).astype(str)
-    names = sorted(set(subjects.tolist()))
-    truth = flat(items["canon_mask"]) > 0.5
-    canon = np.stack([truth[np.flatnonzero(subjects == s)[0]] for s in names])  # (C, S, S)
-
-    def iou(a, b):  # (N, S, S) x (M, S, S) -> (N, M)
-        inter = np.einsum("nij,mij->nm", a.astype(np.float32), b.astype(np.float32))
-        union = a.sum((1, 2))[:, None] + b.sum((1, 2))[None] - inter
-        return inter / np.maximum(union, 1)
-
-    rows = {"input": flat(items["mask"]) > 0.5}
-    if "pred_mask" in items:
-        rows = {str(items.get("source", "model")): flat(items["pred_mask"]) >= mask_threshold, **rows}
+    truth = _flat(items["canon_mask"]) > 0.5
     out = {}
-    for row, m in rows.items():
-        to_canon = iou(m, canon)
-        own = np.array([names.index(s) for s in subjects])
-        out[row] = {"iou": float(np.mean([iou(m[i:i + 1], truth[i:i + 1])[0, 0] for i in range(len(m))])),
-                    "nearest_subject": float((to_canon.argmax(1) == own).mean())}
-        by_mask = retrieval_scores(1.0 - iou(m, m), subjects)
+    for row, m in prediction_masks(items, mask_threshold).items():
+        _, own, nearest = nearest_canonical(items, m)
+        out[row] = {"iou": float(np.mean([_iou(m[i:i + 1], truth[i:i + 1])[0, 0] for i in range(len(m))])),
+                    "nearest_subject": float((nearest == own).mean())}
+        by_mask = retrieval_scores(1.0 - _iou(m, m), subjects)
         out[row].update(nn_by_mask=float(by_mask["nn"]), ft_by_mask=float(by_mask["ft"]))
     return out
 
