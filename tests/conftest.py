@@ -94,3 +94,18 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.get_closest_marker("gpu") is not None:
             item.add_marker(skip)
+
+
+def square_subjects(n: int = 8, size: int = 32, classes: int = 4):
+    """A toy subject-recognition batch: ``(depth (n,1,size,size), mask, subject_idx (n,))``, subject k a
+    filled square of side 6 + 3k (depth .5) at a random place (seeded): what tells them apart is the size."""
+    import torch
+
+    g = torch.Generator().manual_seed(0)
+    depth, idx = torch.zeros(n, 1, size, size), torch.arange(n) % classes
+    for i in range(n):
+        s = 6 + 3 * int(idx[i])
+        x, y = torch.randint(0, size - s, (2,), generator=g).tolist()
+        depth[i, 0, y:y + s, x:x + s] = 0.5
+    return depth, (depth > 0).float(), idx
+

@@ -4,6 +4,7 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
+from conftest import square_subjects
 from lit3d.canonical.module import CanonicalTask
 
 
@@ -13,14 +14,8 @@ def _net(compose_cfg, size=32):
 
 
 def _batch(n=8, size=32, classes=4):
-    """Subject k: a filled square of side 6 + 3k at a random place (what to tell apart: the size)."""
-    g = torch.Generator().manual_seed(0)
-    depth, idx = torch.zeros(n, 1, size, size), torch.arange(n) % classes
-    for i in range(n):
-        s = 6 + 3 * int(idx[i])
-        x, y = torch.randint(0, size - s, (2,), generator=g).tolist()
-        depth[i, 0, y:y + s, x:x + s] = 0.5
-    mask = (depth > 0).float()
+    """Subjects told apart by size (:func:`conftest.square_subjects`); the target is the input."""
+    depth, mask, idx = square_subjects(n, size, classes)
     return {"depth": depth, "mask": mask, "canon_depth": depth.clone(), "canon_mask": mask.clone(),
             "subject_idx": idx}
 

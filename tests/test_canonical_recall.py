@@ -5,6 +5,7 @@ import lightning.pytorch as pl
 import pytest
 import torch
 
+from conftest import square_subjects
 from datamodules.canonical import CanonicalDataModule
 from lit3d.canonical.module import CanonicalTask
 from lit3d.canonical.recall import SubjectRecallNet
@@ -13,19 +14,14 @@ SIZE, K = 32, 4
 
 
 def _batch(n=16, classes=K, size=SIZE):
-    """Subject k: a filled square of side 6 + 3k at a random place (what to tell apart: the size);
-    its canonical image: a centred disc of radius 4 + 2k at depth 0.2 + 0.15k."""
-    g = torch.Generator().manual_seed(0)
-    depth, idx = torch.zeros(n, 1, size, size), torch.arange(n) % classes
-    for i in range(n):
-        s = 6 + 3 * int(idx[i])
-        x, y = torch.randint(0, size - s, (2,), generator=g).tolist()
-        depth[i, 0, y:y + s, x:x + s] = 0.5
+    """Subjects told apart by size (:func:`conftest.square_subjects`); subject k's canonical image: a
+    centred disc of radius 4 + 2k at depth 0.2 + 0.15k."""
+    depth, mask, idx = square_subjects(n, size, classes)
     yy, xx = torch.meshgrid(torch.arange(size), torch.arange(size), indexing="ij")
     r = ((yy - size / 2) ** 2 + (xx - size / 2) ** 2).sqrt()
     t_mask = torch.stack([(r < 4 + 2 * k).float() for k in range(classes)])[:, None]
     t_depth = t_mask * (0.2 + 0.15 * torch.arange(classes).float())[:, None, None, None]
-    return {"depth": depth, "mask": (depth > 0).float(), "subject_idx": idx,
+    return {"depth": depth, "mask": mask, "subject_idx": idx,
             "canon_depth": t_depth[idx], "canon_mask": t_mask[idx]}, t_depth, t_mask
 
 
