@@ -108,4 +108,3 @@ def square_subjects(n: int = 8, size: int = 32, classes: int = 4):
         x, y = torch.randint(0, size - s, (2,), generator=g).tolist()
         depth[i, 0, y:y + s, x:x + s] = 0.5
     return depth, (depth > 0).float(), idx
-

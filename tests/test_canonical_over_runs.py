@@ -5,8 +5,7 @@ import statistics
 import pytest
 
 from lit3d.canonical.over_runs import load, main, markdown, over_runs
-
-SCORES = ("nn", "ft", "st", "e", "dcg")
+from lit3d.canonical.pooled import SCORES
 
 
 def _write(d, nn, iou, n_items=68, seeds=(0, 1, 2, 3, 4)):

@@ -154,7 +154,7 @@ class CanonicalTask(pl.LightningModule):
                                 self.loss_alpha, self.loss_beta, self.hparams.mask_loss, out.mask_logits)
         # the weighted total too: finite terms times a huge alpha/beta can still overflow to Inf
         terms = {"depth": losses["depth"], "mask": losses["mask"], "loss": losses["loss"]}
-        if self.identity_head is not None or (self.hparams.arch == "recall" and self.hparams.identity_weight > 0):
+        if self.hparams.identity_weight > 0:  # the MSFE's identity head, or the recall net's own logits
             terms["identity"] = self._identity_loss(out.latent, batch["subject_idx"])
             terms["loss"] = terms["loss"] + self.hparams.identity_weight * terms["identity"]
         where = f"step {self.global_step} (epoch {self.current_epoch}, batch {batch_idx})"

@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from lit3d.canonical.heldout import pool
-from lit3d.canonical.pooled import SCORES, job_dirs, nearest_canonical, prediction_masks
+from lit3d.canonical.pooled import SCORES, canonical_masks, job_dirs, mask_iou, mean_sd, prediction_masks
+from lit3d.utils.tables import markdown_table
 
 MASK_KEYS = ("iou", "nearest_subject", "nn_by_mask", "ft_by_mask")
 
@@ -43,8 +44,8 @@ def load(sweep_dirs) -> list[dict]:
 
 
 def _stats(values: list[float]) -> dict:
-    v = np.asarray(values, dtype=float)
-    return {"mean": float(v.mean()), "sd": float(v.std(ddof=1)) if len(v) > 1 else 0.0, "runs": v.tolist()}
+    mean, sd = mean_sd(values)
+    return {"mean": mean, "sd": sd, "runs": [float(v) for v in values]}
 
 
 def over_runs(runs: list[dict], rows=("model", "input")) -> dict:
@@ -63,14 +64,14 @@ def markdown(table: dict, names: list[str]) -> str:
     def cell(st):
         return f"{st['mean']:.2f} ± {st['sd']:.2f} ({' '.join(f'{x:.2f}' for x in st['runs'])})"
 
-    lines = [f"Mean ± sd over {len(names)} runs ({', '.join(names)}); each run's value is its mean over "
-             "codebook seeds.", "", "| row | " + " | ".join(s.upper() for s in SCORES) + " |",
-             "|---" * (len(SCORES) + 1) + "|"]
-    lines += [f"| {row} | " + " | ".join(cell(v[s]) for s in SCORES) + " |" for row, v in table["scores"].items()]
+    parts = [f"Mean ± sd over {len(names)} runs ({', '.join(names)}); each run's value is its mean over "
+             "codebook seeds.",
+             markdown_table(["row", *(s.upper() for s in SCORES)],
+                            [[row, *(cell(v[s]) for s in SCORES)] for row, v in table["scores"].items()])]
     if table["masks"]:
-        lines += ["", "| row | " + " | ".join(MASK_KEYS) + " |", "|---" * (len(MASK_KEYS) + 1) + "|"]
-        lines += [f"| {row} | " + " | ".join(cell(v[k]) for k in MASK_KEYS) + " |" for row, v in table["masks"].items()]
-    return "\n".join(lines) + "\n"
+        parts.append(markdown_table(["row", *MASK_KEYS],
+                                    [[row, *(cell(v[k]) for k in MASK_KEYS)] for row, v in table["masks"].items()]))
+    return "\n\n".join(parts) + "\n"
 
 
 def confusion(sweep_dirs, row: str = "model", mask_threshold: float = 0.5) -> tuple[list[str], np.ndarray]:
@@ -82,7 +83,8 @@ def confusion(sweep_dirs, row: str = "model", mask_threshold: float = 0.5) -> tu
         masks = prediction_masks(items, mask_threshold)
         if row not in masks:
             raise ValueError(f"{d}: no row '{row}' in its held-out items (rows: {', '.join(masks)})")
-        n, own, nearest = nearest_canonical(items, masks[row])
+        n, own, canon = canonical_masks(items)
+        nearest = mask_iou(masks[row], canon).argmax(1)
         if names is not None and n != names:
             raise ValueError(f"{d}: subjects {n} differ from {names}")
         names = n
@@ -94,12 +96,10 @@ def confusion(sweep_dirs, row: str = "model", mask_threshold: float = 0.5) -> tu
 
 def confusion_markdown(names: list[str], counts: np.ndarray) -> str:
     """Counts table with each true subject's share recognised (its diagonal over its row)."""
-    lines = ["| true \\ nearest | " + " | ".join(names) + " | own |", "|---" * (len(names) + 2) + "|"]
-    for i, name in enumerate(names):
-        share = counts[i, i] / max(counts[i].sum(), 1)
-        lines.append(f"| {name} | " + " | ".join(str(int(c)) for c in counts[i]) + f" | {share:.2f} |")
-    lines.append(f"\nOverall: {np.trace(counts) / max(counts.sum(), 1):.2f} of {int(counts.sum())} predictions.")
-    return "\n".join(lines) + "\n"
+    rows = [[name, *(str(int(c)) for c in counts[i]), f"{counts[i, i] / max(counts[i].sum(), 1):.2f}"]
+            for i, name in enumerate(names)]
+    overall = f"Overall: {np.trace(counts) / max(counts.sum(), 1):.2f} of {int(counts.sum())} predictions."
+    return markdown_table(["true \\ nearest", *names, "own"], rows) + "\n\n" + overall + "\n"
 
 
 def main(argv: list[str] | None = None) -> None:

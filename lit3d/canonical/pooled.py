@@ -61,22 +61,22 @@ def _flat(m) -> np.ndarray:
     return np.asarray(m).reshape(len(m), *np.shape(m)[-2:])
 
 
-def _iou(a, b) -> np.ndarray:
+def mask_iou(a, b) -> np.ndarray:
     """Mask IoU of every pair: ``(N, S, S)`` x ``(M, S, S)`` booleans -> ``(N, M)``."""
     inter = np.einsum("nij,mij->nm", a.astype(np.float32), b.astype(np.float32))
     union = a.sum((1, 2))[:, None] + b.sum((1, 2))[None] - inter
     return inter / np.maximum(union, 1)
 
 
-def nearest_canonical(items: dict, masks) -> tuple[list[str], np.ndarray, np.ndarray]:
-    """``(subject names, own (N,), nearest (N,))``: each item's own subject index and the index of
-    the subject whose true canonical mask has the highest IoU with ``masks[i]`` (booleans)."""
+def canonical_masks(items: dict) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """``(subject names, own (N,), canon (C, S, S))``: the sorted subject names, each item's subject
+    index into them, and each subject's true canonical mask (booleans). The subject whose canonical
+    mask is nearest to masks ``m`` ``(N, S, S)``: ``mask_iou(m, canon).argmax(1)``."""
     subjects = np.asarray(items["subject"]).astype(str)
     names = sorted(set(subjects.tolist()))
     truth = _flat(items["canon_mask"]) > 0.5
-    canon = np.stack([truth[np.flatnonzero(subjects == s)[0]] for s in names])  # (C, S, S)
-    own = np.array([names.index(s) for s in subjects])
-    return names, own, _iou(_flat(masks), canon).argmax(1)
+    canon = np.stack([truth[np.flatnonzero(subjects == s)[0]] for s in names])
+    return names, np.array([names.index(s) for s in subjects]), canon
 
 
 def prediction_masks(items: dict, mask_threshold: float) -> dict[str, np.ndarray]:
@@ -98,12 +98,13 @@ def mask_match(items: dict, mask_threshold: float) -> dict[str, dict[str, float]
 
     subjects = np.asarray(items["subject"]).astype(str)
     truth = _flat(items["canon_mask"]) > 0.5
+    _, own, canon = canonical_masks(items)
     out = {}
     for row, m in prediction_masks(items, mask_threshold).items():
-        _, own, nearest = nearest_canonical(items, m)
-        out[row] = {"iou": float(np.mean([_iou(m[i:i + 1], truth[i:i + 1])[0, 0] for i in range(len(m))])),
+        nearest = mask_iou(m, canon).argmax(1)
+        out[row] = {"iou": float(np.mean([mask_iou(m[i:i + 1], truth[i:i + 1])[0, 0] for i in range(len(m))])),
                     "nearest_subject": float((nearest == own).mean())}
-        by_mask = retrieval_scores(1.0 - _iou(m, m), subjects)
+        by_mask = retrieval_scores(1.0 - mask_iou(m, m), subjects)
         out[row].update(nn_by_mask=float(by_mask["nn"]), ft_by_mask=float(by_mask["ft"]))
     return out
 
@@ -127,10 +128,14 @@ def score_rows(features: dict[str, list], labels: np.ndarray, cfg, seeds, extra_
     return out
 
 
+def mean_sd(values) -> tuple[float, float]:
+    """Mean and sample sd (ddof=1; 0 for a single value)."""
+    return float(np.mean(values)), float(np.std(values, ddof=1)) if len(values) > 1 else 0.0
+
+
 def summarise(per_seed: dict[str, dict[str, list[float]]]) -> dict[str, dict[str, tuple[float, float]]]:
-    """``{row: {score: (mean, sd)}}`` (sd with ddof=1; 0 for one seed)."""
-    return {row: {k: (float(np.mean(v)), float(np.std(v, ddof=1)) if len(v) > 1 else 0.0) for k, v in sc.items()}
-            for row, sc in per_seed.items()}
+    """``{row: {score: (mean, sd)}}`` (:func:`mean_sd` over the seeds)."""
+    return {row: {k: mean_sd(v) for k, v in sc.items()} for row, sc in per_seed.items()}
 
 
 def study(items: dict, datamodule, settings: dict, seeds, rows=None) -> dict:
