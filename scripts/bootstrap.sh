@@ -33,4 +33,9 @@ fi
 echo "bootstrap: installing $TORCH_SPEC and lit3d[dev]"
 "$VENV/bin/pip" install -q "$TORCH_SPEC"
 "$VENV/bin/pip" install -q -e ".[dev]"
+# The Anny body model builds its cache (about 790 MB, about 2.5 min on 2 cores) on its first start:
+# once here, not inside a test or a training run. ANNY_CACHE_DIR moves it (default ~/.cache/anny).
+echo "bootstrap: warming the Anny body-model cache (first time: about 2.5 min)"
+"$VENV/bin/python" -c "import anny; anny.Anny()" >/dev/null 2>&1 \
+  || { echo "bootstrap: the Anny body model failed to start; run: $VENV/bin/python -c 'import anny; anny.Anny()'" >&2; exit 1; }
 touch "$VENV/.installed"

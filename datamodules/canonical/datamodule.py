@@ -55,7 +55,7 @@ from datamodules.cache import CacheBuilder, DataError, atomic_save_npz, read_man
 from datamodules.canonical.blends import add_blends
 from datamodules.canonical.dataset import PairDataset, mirror_views, subject_balanced_sampler
 from datamodules.canonical.images import depth_image_problem, pairs_png, read_subject, unpack_mask
-from datamodules.canonical.sources import SOURCES, Shrec14Source, SynthSource, ToscaSource, make_source
+from datamodules.canonical.sources import ROOTLESS, SOURCES, Shrec14Source, SynthSource, ToscaSource, make_source
 from datamodules.canonical.splits import SPLITS, deal, split_pose, split_subject_pose, thin_training
 from datamodules.loaders import evaluation_loader
 from lit3d.geometry.normalise import normalise_vertices
@@ -67,6 +67,7 @@ log = logging.getLogger("lit3d")
 GENERATOR = "canonical"
 DATA_VERSION = "canonical-data-1"
 SUBJECTS_DIR = "subjects"  # the cache's item folder
+SPLIT_MODES = ("subject_pose", "pose", "all")
 
 __all__ = ["SPLITS", "CanonicalDataModule", "DataError", "PairDataset", "Shrec14Source", "SynthSource",
            "ToscaSource", "deal", "depth_image_problem", "read_subject", "split_pose", "split_subject_pose",
@@ -93,6 +94,8 @@ class CanonicalDataModule(pl.LightningDataModule):
         pose_seed: int = 0,
         yaw_range: float = 15.0,
         pose_strength: float = 1.0,
+        # Anny bodies (source=anny; also n_subjects, n_poses, pose_seed, yaw_range, pose_strength)
+        body_seed: int = 0,
         # real data
         classes: Sequence[str] | None = None,
         canonical_pose: int = 0,
@@ -104,6 +107,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         scale_mode: str = "shape",
         # splits
         split: str = "subject_pose",
+        split_seed: int | None = None,
         n_folds: int = 3,
         fold: int = 0,
         val_per_subject: int = 1,
@@ -120,7 +124,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         self.save_hyperparameters()
         if source not in SOURCES:
             raise DataError(f"unknown canonical data source '{source}' ({', '.join(SOURCES)})")
-        if source != "synth" and not root:
+        if source not in ROOTLESS and not root:
             raise DataError(f"data source '{source}' needs root=<folder with the meshes>")
         if scale_mode not in ("shape", "subject"):
             raise DataError(f"scale_mode must be 'shape' or 'subject', got '{scale_mode}'")
@@ -129,8 +133,8 @@ class CanonicalDataModule(pl.LightningDataModule):
         n_views = len(azimuths)
         if eval_views is not None and (not eval_views or any(not 0 <= int(v) < n_views for v in eval_views)):
             raise DataError(f"eval_views must be indices into azimuths (0..{n_views - 1}), got {list(eval_views)}")
-        if split not in ("subject_pose", "pose"):
-            raise DataError(f"split must be 'subject_pose' or 'pose', got '{split}'")
+        if split not in SPLIT_MODES:
+            raise DataError(f"split must be one of {', '.join(SPLIT_MODES)}, got '{split}'")
         self.data_dir = Path(data_dir)
         self._source = None
         self.manifest: dict = {}
@@ -155,9 +159,15 @@ class CanonicalDataModule(pl.LightningDataModule):
         if hp.source == "synth":
             keys += ["kinds", "n_subjects", "n_poses", "mesh_resolution", "pose_seed", "yaw_range", "pose_strength",
                      "seed"]
+        elif hp.source == "anny":
+            keys += ["n_subjects", "n_poses", "body_seed", "pose_seed", "yaw_range", "pose_strength"]
         else:
             keys += ["root", "classes", "canonical_pose", "up_axis", "cla"]
         cfg = {k: (list(hp[k]) if isinstance(hp[k], (list, tuple)) else hp[k]) for k in keys}
+        if hp.source == "anny":
+            from datamodules.synth.bodies import BODIES_VERSION, anny_version
+
+            cfg["bodies"] = [BODIES_VERSION, anny_version()]
         if hp.skip_bad:  # a cache rendered while skipping may lack poses
             cfg["skip_bad"] = True
         if hp.view_mode != "fixed":  # absent for the old convention: its caches keep their hash
@@ -298,7 +308,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         pairs = self._pairs(hp.fold)
         pairs["train"] = thin_training(pairs["train"], hp.train_pose_fraction, hp.seed + hp.fold)
         if hp.max_val_items and len(pairs["val"]) > hp.max_val_items:
-            idx = np.random.default_rng(hp.seed).choice(len(pairs["val"]), hp.max_val_items, replace=False)
+            idx = np.random.default_rng(self.split_seed).choice(len(pairs["val"]), hp.max_val_items, replace=False)
             pairs["val"] = [pairs["val"][i] for i in sorted(idx)]
         self.splits = {k: [{"subject": s, "pose": p, "view": v} for s, p in v_ for v in self.views(k)]
                        for k, v_ in pairs.items()}
@@ -307,6 +317,8 @@ class CanonicalDataModule(pl.LightningDataModule):
                                self._render_views)
             self.splits["train"] += [{"subject": s, "pose": p, "view": v} for s, p in added for v in self.views("train")]
         for k in SPLITS:
+            if not self.splits[k] and hp.split == "all" and k != "test":
+                continue  # evaluation only: nothing to train or validate on
             if not self.splits[k]:
                 raise DataError(f"split '{k}' is empty (subjects {len(subject_poses)}, folds {hp.n_folds}): "
                                 "use more subjects/poses or fewer folds")
@@ -321,15 +333,23 @@ class CanonicalDataModule(pl.LightningDataModule):
             assert not ({r["pose"] for r in te} & {p for _, p in tr}), "test pose leaked into training"
         assert not ({(r["subject"], r["pose"]) for r in te} & tr), "test item leaked into training"
 
+    @property
+    def split_seed(self) -> int:
+        """The seed that deals subjects and poses into folds (``split_seed``, else ``seed``)."""
+        return int(self.hparams.seed if self.hparams.split_seed is None else self.hparams.split_seed)
+
     def _pairs(self, fold: int) -> dict[str, list[tuple]]:
         """``{split: [(subject, pose), ...]}`` of fold ``fold`` over the loaded cache."""
         hp = self.hparams
         subject_poses = {s: c["poses"] for s, c in self.cache.items()}
+        seed = self.split_seed
+        if hp.split == "all":
+            return {"train": [], "val": [], "test": [(s, p) for s, ps in sorted(subject_poses.items()) for p in ps]}
         if hp.split == "subject_pose":
             all_poses = sorted({p for ps in subject_poses.values() for p in ps})
-            pairs = split_subject_pose(list(subject_poses), all_poses, hp.n_folds, fold, hp.seed)
+            pairs = split_subject_pose(list(subject_poses), all_poses, hp.n_folds, fold, seed)
             return {k: [(s, p) for s, p in v if p in subject_poses[s]] for k, v in pairs.items()}
-        return split_pose(subject_poses, hp.n_folds, fold, hp.seed, hp.val_per_subject)
+        return split_pose(subject_poses, hp.n_folds, fold, seed, hp.val_per_subject)
 
     def held_out_records(self) -> list[dict]:
         """Every item some fold tests (``{"subject", "pose", "view"}``, sorted): the set that the

@@ -6,6 +6,11 @@ poses and loading meshes ``(V, 3) float, (F, 3) int`` unnormalised with y up.
     tosca    TOSCA meshes under ``root`` (.mat/.vert+.tri/.off/.ply); canonical = pose 0 (null pose).
     shrec14  SHREC'14 humans under ``root`` with a PSB ``.cla`` (classes = subjects); canonical =
              the pose at ``canonical_pose`` within each class.
+    anny     people from the Anny body model (:mod:`datamodules.synth.bodies`): ``n_subjects``
+             phenotypes x ``n_poses`` joint-limit poses, both seeded; canonical = the rest pose.
+    faust    FAUST registrations under ``root`` (:mod:`datamodules.readers.posesets`); canonical =
+             pose ``canonical_pose``, which is also an item (FAUST has no separate rest pose).
+    sumner   Sumner & Popovic's animals under ``root``; canonical = each animal's reference pose.
 """
 from __future__ import annotations
 
@@ -15,7 +20,8 @@ import numpy as np
 
 from datamodules.cache import DataError
 
-SOURCES = ("synth", "tosca", "shrec14")
+SOURCES = ("synth", "tosca", "shrec14", "anny", "faust", "sumner")
+ROOTLESS = ("synth", "anny")  # sources that need no root folder
 
 
 class _Source:
@@ -121,6 +127,86 @@ class Shrec14Source(_MeshFileSource):
         self.canon, self.up_axis = canonical_pose, up_axis
 
 
+class AnnySource(_Source):
+    """``n_subjects`` Anny bodies (``anny<i>``, phenotypes drawn with ``seed``) x ``n_poses`` poses
+    (drawn with ``pose_seed``; pose p is the same for every subject). One subject's poses are posed
+    in one batch and kept until another subject is asked for."""
+
+    kind = "anny"
+    BATCH = 16
+
+    def __init__(self, n_subjects: int, n_poses: int, seed: int, pose_seed: int, yaw_range: float,
+                 pose_strength: float):
+        from datamodules.synth import bodies
+
+        self.b = bodies
+        self.model = bodies.BodyModel()
+        self.n_subjects, self.n_poses, self.seed = n_subjects, n_poses, seed
+        self.pose_seed, self.yaw_range, self.strength = pose_seed, yaw_range, pose_strength
+        self._memo: tuple[str, dict] | None = None
+
+    def subjects(self):
+        return [f"anny{i:04d}" for i in range(self.n_subjects)]
+
+    def poses(self, subject):
+        return list(range(self.n_poses))
+
+    def canonical_pose(self, subject):
+        return "canonical"
+
+    def category(self, subject):
+        return "human"
+
+    def _pose(self, pose):
+        if pose == "canonical":
+            return None
+        return self.b.sample_pose(self.pose_seed, int(pose), self.strength, self.yaw_range)
+
+    def mesh(self, subject, pose):
+        if self._memo is None or self._memo[0] != subject:
+            pheno = self.b.sample_phenotype(self.seed, int(subject[len("anny"):]))
+            keys = ["canonical"] + self.poses(subject)
+            verts = {}
+            for i in range(0, len(keys), self.BATCH):
+                chunk = keys[i:i + self.BATCH]
+                verts.update(zip(chunk, self.model.vertices(pheno, [self._pose(k) for k in chunk])))
+            self._memo = (subject, verts)
+        key = pose if pose == "canonical" else int(pose)
+        return self._memo[1][key].astype(np.float64), self.model.faces
+
+
+class FaustSource(_MeshFileSource):
+    """FAUST meshes (y up); every pose, the canonical one included, is an item."""
+
+    kind = "faust"
+
+    def __init__(self, root: str, canonical_pose: int):
+        from datamodules.readers.posesets import index_faust
+
+        self.items, self.canon, self.up_axis = index_faust(root), canonical_pose, "y"
+        missing = sorted({s for s, _ in self.items} - {s for s, p in self.items if p == canonical_pose})
+        if missing:
+            raise DataError(f"{root}: no canonical pose {canonical_pose} for subject(s) {', '.join(missing)}")
+
+    def poses(self, subject):
+        return sorted(p for s, p in self.items if s == subject)
+
+    def category(self, subject):
+        return "human"
+
+
+class SumnerSource(_MeshFileSource):
+    """Sumner & Popovic's animals (y up); canonical = the reference pose (index 0)."""
+
+    kind = "sumner"
+
+    def __init__(self, root: str, classes: Sequence[str] | None):
+        from datamodules.readers.posesets import index_sumner
+
+        self.items = index_sumner(root, list(classes) if classes else None)
+        self.canon, self.up_axis = 0, "y"
+
+
 def make_source(hp) -> _Source:
     """The source named by ``hp.source`` built from the DataModule's hyper-parameters ``hp``."""
     if hp.source == "synth":
@@ -130,4 +216,10 @@ def make_source(hp) -> _Source:
         return ToscaSource(hp.root, hp.classes, hp.canonical_pose, hp.up_axis)
     if hp.source == "shrec14":
         return Shrec14Source(hp.root, hp.cla, hp.canonical_pose, hp.up_axis)
+    if hp.source == "anny":
+        return AnnySource(hp.n_subjects, hp.n_poses, hp.body_seed, hp.pose_seed, hp.yaw_range, hp.pose_strength)
+    if hp.source == "faust":
+        return FaustSource(hp.root, hp.canonical_pose)
+    if hp.source == "sumner":
+        return SumnerSource(hp.root, hp.classes)
     raise DataError(f"unknown canonical data source '{hp.source}' ({', '.join(SOURCES)})")
