@@ -96,6 +96,13 @@ def test_anny_datamodule_pairs_share_each_subjects_canonical(tmp_path):
     same = batch["subject_idx"][0] == batch["subject_idx"]
     assert np.allclose(batch["canon_depth"][same].numpy(), batch["canon_depth"][0].numpy())
     assert not np.allclose(batch["depth"][0].numpy(), batch["canon_depth"][0].numpy())
+    from PIL import Image
+
+    dm.show(2, tmp_path / "sheet.png")  # the depth pairs and the shaded bodies beside them
+    shaded = Image.open(tmp_path / "sheet_shaded.png")
+    assert shaded.size == (170 + 5 * 256, 2 * 44 + 2 * 256)  # canonical + 4 poses, 2 subjects, 256 px panels
+    cells = np.asarray(shaded.convert("L"))[88:, 170:]
+    assert (cells < 200).mean() > 0.03  # bodies drawn, not blank panels
     te = {r["subject"] for r in dm.splits["test"]}
     assert te and not te & {r["subject"] for r in dm.splits["train"]}
     # a second training seed keeps the people and the split (split_seed, body_seed)

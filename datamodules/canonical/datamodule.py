@@ -411,7 +411,14 @@ class CanonicalDataModule(pl.LightningDataModule):
         return out
 
     def show(self, n: int, path: str | Path, split: str = "test") -> Path:
-        """PNG with one row per sample: posed depth | posed mask | canonical depth | canonical mask."""
+        """PNG with one row per sample: posed depth | posed mask | canonical depth | canonical mask;
+        beside it ``<stem>_shaded.png``, shaded meshes of a few subjects in their canonical and first
+        poses (:func:`~datamodules.canonical.sheets.pose_sheet`)."""
+        from datamodules.canonical.sheets import pose_sheet
+
         if not self.datasets:
             self.setup()
+        path = Path(path)
+        shaded = pose_sheet(self, path.with_name(path.stem + "_shaded.png"), n_subjects=max(1, min(n, 6)))
+        log.info("wrote %s", shaded)
         return pairs_png(self.datasets[split], n, path)

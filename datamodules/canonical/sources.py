@@ -162,9 +162,13 @@ class AnnySource(_Source):
             return None
         return self.b.sample_pose(self.pose_seed, int(pose), self.strength, self.yaw_range)
 
+    def phenotype(self, subject) -> dict[str, float]:
+        """The subject's Anny phenotype ``{label: value in [0, 1]}``."""
+        return self.b.sample_phenotype(self.seed, int(subject[len("anny"):]))
+
     def mesh(self, subject, pose):
         if self._memo is None or self._memo[0] != subject:
-            pheno = self.b.sample_phenotype(self.seed, int(subject[len("anny"):]))
+            pheno = self.phenotype(subject)
             keys = ["canonical"] + self.poses(subject)
             verts = {}
             for i in range(0, len(keys), self.BATCH):

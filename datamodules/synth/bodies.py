@@ -140,13 +140,16 @@ class BodyModel:
     def model(self):
         if self._model is None:
             import torch
-            import warp
 
-            warp.config.log_level = warp.LOG_ERROR  # its start-up banner (devices, kernel cache)
+            # warp (anny's skinning) notes from native code on stderr that a CPU machine has no CUDA
+            # driver, and prints a banner (devices, kernel cache) on every start
             with _native_stderr_closed(not torch.cuda.is_available()):
-                import anny  # warp.init(): its native code notes on stderr that a CPU machine has no CUDA driver
+                import warp
 
-            self._model = anny.Anny().to(dtype=torch.float32)
+                warp.config.log_level = warp.LOG_ERROR
+                import anny
+
+                self._model = anny.Anny().to(dtype=torch.float32)
         return self._model
 
     @property
