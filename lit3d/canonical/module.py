@@ -87,6 +87,7 @@ class CanonicalTask(pl.LightningModule):
         on_nonfinite: str = "raise",
         identity_weight: float = 0.0,
         identity_classes: int = 0,
+        init_weights: str | None = None,
         unet_baseline: bool = False,
     ):
         super().__init__()
@@ -128,9 +129,28 @@ class CanonicalTask(pl.LightningModule):
         """``(B,1,S,S)`` depth, mask -> CanonicalOutput (depth, mask probabilities, mask logits)."""
         return self.net(depth, mask)
 
+    def load_initial_weights(self, path: str) -> None:
+        """Start from the net of another canonical checkpoint ``path`` (pretraining, e.g. on Anny
+        bodies): its ``net.*`` weights, every one present with the same shape, else one ValueError
+        naming the file and the first mismatch. The optimiser starts afresh."""
+        from lit3d.utils.checkpoints import load_checkpoint
+
+        state = load_checkpoint(path).get("state_dict", {})
+        net = {k[len("net."):]: v for k, v in state.items() if k.startswith("net.")}
+        own = self.net.state_dict()
+        for k, v in own.items():
+            if k not in net or tuple(net[k].shape) != tuple(v.shape):
+                have = "missing" if k not in net else f"shape {tuple(net[k].shape)}"
+                raise ValueError(f"{path}: not a pretrained net for this one (net.{k}: {have}, "
+                                 f"expected {tuple(v.shape)}; same task.arch and task.net sizes?)")
+        self.net.load_state_dict({k: net[k] for k in own})
+
     def on_fit_start(self) -> None:
-        """``arch=recall``: the templates are the training data's canonical images, seen from the first
+        """``init_weights``: a fresh fit (not a resume) starts from that checkpoint's net.
+        ``arch=recall``: the templates are the training data's canonical images, seen from the first
         evaluation view (the view every test target is drawn in)."""
+        if self.hparams.init_weights and getattr(self.trainer, "ckpt_path", None) is None:
+            self.load_initial_weights(self.hparams.init_weights)
         if self.hparams.arch != "recall":
             return
         dm = getattr(self.trainer, "datamodule", None)
