@@ -10,12 +10,19 @@ from hydra.core.global_hydra import GlobalHydra
 from omegaconf import DictConfig, OmegaConf, open_dict
 
 from lit3d.cli.common import CONF_DIR
+from lit3d.utils import quiet
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO.parent / "shared" / "data"
 
 os.environ.setdefault("WANDB_SILENT", "true")
 os.environ.setdefault("WANDB_MODE", "offline")
+
+
+@pytest.fixture(autouse=True)
+def _known_warnings():
+    """The entry points' filters for warnings lit3d cannot fix (lit3d.utils.quiet), in every test."""
+    quiet.install()
 
 
 @pytest.fixture(scope="package")

@@ -324,7 +324,8 @@ def test_resume_state_counts_batches_across_epochs(tmp_path):
     from lit3d.callbacks.resume import ResumeState
 
     saved = []
-    trainer = SimpleNamespace(fast_dev_run=False, sanity_checking=False, save_checkpoint=saved.append)
+    trainer = SimpleNamespace(fast_dev_run=False, sanity_checking=False,
+                              save_checkpoint=lambda path, **kwargs: saved.append(path))
     cb = ResumeState(str(tmp_path), every_n_train_batches=4)
     for _epoch in range(3):
         for batch_idx in range(3):

@@ -103,7 +103,9 @@ class ResumeState(pl.Callback):
         if trainer.fast_dev_run or trainer.sanity_checking:
             return
         self._adopt_last(trainer)
-        trainer.save_checkpoint(self.path)
+        # the full state (optimizers, loops, callbacks): what `ckpt_path=last` resumes from; said
+        # explicitly, else Lightning logs "`weights_only` was not set" at every save
+        trainer.save_checkpoint(self.path, weights_only=False)
         self.saves += 1
 
     def _adopt_last(self, trainer: pl.Trainer) -> None:

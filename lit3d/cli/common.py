@@ -29,6 +29,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from lit3d.utils import quiet
 from lit3d.utils.checkpoints import first_line
 
 log = logging.getLogger("lit3d")
@@ -211,6 +212,7 @@ def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None, c
     and overrides that do not compose (a misspelt key) stop with one line and exit 2 before
     Hydra runs anything.
     """
+    quiet.install()
     args = list(sys.argv[1:] if argv is None else argv)
     if "--debug" in args:
         args = [a for a in args if a != "--debug"]
@@ -265,6 +267,7 @@ def run_cli(fn: Callable[[DictConfig], Any], cfg: DictConfig) -> Any:
     """
     from omegaconf.errors import MissingMandatoryValue
 
+    quiet.install()  # again here: a submitit job process runs this, not cli_main
     try:
         missing = sorted(OmegaConf.missing_keys(cfg))
         if missing:  # before any work or logging: the one line is all the user sees

@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 from lit3d.cli.common import EXIT_USER  # light: no torch or Lightning
+from lit3d.utils import quiet
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -180,6 +181,7 @@ def _one(args, path: Path, completer, mapper, scorer) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
+    quiet.install()
     args = _parser().parse_args(argv)
     try:
         return _run(args)

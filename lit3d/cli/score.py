@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 
 from lit3d.cli.common import EXIT_USER  # light: no torch or Lightning
+from lit3d.utils import quiet
 
 DEFAULT_SIZE = 256
 
@@ -116,6 +117,7 @@ def save_contact_sheets(ref, dist, cfg, out_dir: str | Path, thumb: int = 64) ->
 
 
 def main(argv: list[str] | None = None) -> int:
+    quiet.install()
     args = _parser().parse_args(argv)
     try:
         return _run(args)

@@ -61,7 +61,11 @@ def build_loggers(cfg: DictConfig, wandb_id: str) -> list:
             continue
         if "WandbLogger" in str(lg_cfg.get("_target_", "")):
             os.environ.setdefault("WANDB_SILENT", "true")
-            loggers.append(instantiate(lg_cfg, id=wandb_id, resume="allow"))
+            logger = instantiate(lg_cfg, id=wandb_id, resume="allow")
+            # Lightning's WandbLogger always hands wandb.init `anonymous=None`, which W&B (>= 0.19)
+            # answers with "The anonymous setting has no effect"; left out, the run is the same
+            getattr(logger, "_wandb_init", {}).pop("anonymous", None)
+            loggers.append(logger)
         else:
             loggers.append(instantiate(lg_cfg))
     return loggers

@@ -290,6 +290,8 @@ class CompletionTask(pl.LightningModule):
             self._log_panels(batch)
 
     def on_validation_epoch_end(self) -> None:
+        if self.val_metrics["model"].update_count == 0:  # no validation batch (an empty val split)
+            return
         model = self.val_metrics["model"].compute()
         prior = self.val_metrics["prior"].compute()
         inp = self.val_metrics["input"].compute()
@@ -336,6 +338,8 @@ class CompletionTask(pl.LightningModule):
         for split in SPLITS:
             for src in SOURCES:
                 metric = self.test_metrics[f"{split}_{src}"]
+                if metric.update_count == 0:  # a split the test data lacks (e.g. no unseen categories)
+                    continue
                 res = metric.compute()
                 if float(res["count_per_category"].sum()) == 0:
                     metric.reset()
