@@ -33,19 +33,20 @@ def pose_sheet(dm, path: str | Path, n_subjects: int = 4, n_poses: int = 5, cell
     src = dm.source
     subjects = src.subjects()
     picks = [subjects[int(i)] for i in np.unique(np.linspace(0, len(subjects) - 1, min(n_subjects, len(subjects))).astype(int))]
-    rows, n_cols, header = [], 0, []
+    rows, n_cols = [], 0
     for s in picks:
         poses = list(src.poses(s))[:n_poses]
-        header = header if len(header) >= len(poses) else [f"pose {p}" for p in poses]
         cells = [_shaded(*dm.normalized_mesh(s, p), cell) for p in ["canonical", *poses]]
-        label = s if not hasattr(src, "phenotype") else s + "\n" + "\n".join(
-            f"{k} {v:.2f}" for k, v in src.phenotype(s).items())
+        ids = [str(p) for p in poses]  # pose ids differ per subject (TOSCA): listed per row, 5 a line
+        label = s + "\nposes " + ",\n".join(", ".join(ids[i:i + 5]) for i in range(0, len(ids), 5))
+        if hasattr(src, "phenotype"):
+            label += "\n" + "\n".join(f"{k} {v:.2f}" for k, v in src.phenotype(s).items())
         rows.append({"label": label, "cells": cells})
         n_cols = max(n_cols, len(cells))
     blank = np.full((cell, cell, 3), 255, np.uint8)
     for r in rows:
         r["cells"] += [blank] * (n_cols - len(r["cells"]))
-    columns = ["canonical"] + header
+    columns = ["canonical"] + [f"posed {i + 1}" for i in range(n_cols - 1)]
     title = f"{dm.hparams.source}: {len(subjects)} subjects, shaded as rendered (normalised, camera on +z)"
     img = labelled_grid(rows, columns, title, cell=cell, left=170)
     path = Path(path)
