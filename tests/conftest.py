@@ -19,10 +19,11 @@ os.environ.setdefault("WANDB_SILENT", "true")
 os.environ.setdefault("WANDB_MODE", "offline")
 
 
-@pytest.fixture(autouse=True)
-def _known_warnings():
-    """The entry points' filters for warnings lit3d cannot fix (lit3d.utils.quiet), in every test."""
+def pytest_configure(config):
+    """The entry points' filters for what lit3d cannot fix (lit3d.utils.quiet), in every test."""
     quiet.install()
+    for line in quiet.pytest_filters():
+        config.addinivalue_line("filterwarnings", line)
 
 
 @pytest.fixture(scope="package")

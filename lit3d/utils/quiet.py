@@ -2,7 +2,7 @@
 
 Every entry point (``lit3d-train``, ``lit3d-eval``, ``lit3d-data``, ``lit3d-score``,
 ``lit3d-reconstruct``, ``lit3d-summary``) calls :func:`install` before any work, and the tests
-apply the same filters (``tests/conftest.py``), so a warning is either fixed at its source or
+apply the same filters (``tests/conftest.py``: :func:`install` and :func:`pytest_filters`), so a warning is either fixed at its source or
 listed here with the reason it cannot be. A warning caused by lit3d's own code or configs is
 fixed where it arises, never added here.
 
@@ -54,6 +54,17 @@ class _DropMatching(logging.Filter):
 
     def filter(self, record: logging.LogRecord) -> bool:
         return not self.pattern.search(record.getMessage())
+
+
+def pytest_filters() -> list[str]:
+    """:data:`WARNING_FILTERS` as pytest ``filterwarnings`` lines (``tests/conftest.py`` adds them, so
+    they hold in every test's setup, call and teardown, module-scoped fixtures included)."""
+    lines = []
+    for message, category, _why in WARNING_FILTERS:
+        assert ":" not in message, "pytest splits filterwarnings lines at ':'"
+        name = category.__name__ if category.__module__ == "builtins" else f"{category.__module__}.{category.__qualname__}"
+        lines.append(f"ignore:{message}:{name}")
+    return lines
 
 
 def install() -> None:
