@@ -8,14 +8,19 @@ Examples::
     lit3d-reconstruct d.png --ckpt CKPT --out out/ --reference chair.obj --quality-ckpt Q.ckpt
     lit3d-reconstruct d.png --ckpt CKPT --out out/ --canonical logs/canonical/.../best.ckpt
 
-Inputs: 16-bit PNG/TIFF (depth units x --depth-scale metres, default millimetres), .npy/.npz
-float metres, .exr metres; 0 = background. A folder gives all its depth files. Camera: --fov
-(one field of view across width and height, principal point at the centre) or --fx --fy --cx
---cy in pixels (OpenCV convention); the default is the 3D-RecGAN++ camera (fov 49.124 deg).
-Per input NAME, DIR gets NAME.obj (camera frame: x right, y down, z forward, metres),
-NAME_occupancy.npz (packed bits), NAME.png (labelled picture) and NAME.json (timings, grid
-sizes, threshold, checkpoint, score). A bad input gets one line naming the file and the
-problem, the batch goes on, and the exit status is 2.
+Inputs: 16-bit PNG/TIFF and integer .npy/.npz (depth units x --depth-scale metres, default
+millimetres), float .npy/.npz metres, .exr metres; 0 and an integer type's maximum (65535:
+a sensor's "no reading") = background. A folder gives all its depth files. Camera: --fov
+(one field of view across width and height, in (0, 180) degrees, principal point at the
+centre) or --fx --fy --cx --cy in pixels (OpenCV convention); the default is the 3D-RecGAN++
+camera (fov 49.124 deg). Per input NAME, DIR gets NAME.obj (camera frame: x right, y down,
+z forward, metres), NAME_occupancy.npz (packed bits), NAME.png (labelled picture) and
+NAME.json (timings, grid sizes, threshold, checkpoint, units applied, score); where two
+inputs share a stem, NAME keeps the extension (a_cow_png, a_cow_npy) and a note says so.
+An input's files are written together (temp folder, renamed into place when all exist),
+never over an input file. A bad input gets one line naming the file and the problem, the
+batch goes on, and the exit status is 2; an unusable --out (a file, read-only, would replace
+an input) stops the run with exit 2 before the network is loaded.
 """
 from __future__ import annotations
 
@@ -71,7 +76,8 @@ def _intrinsics(args, width: int, height: int, label: str):
     given = [getattr(args, k) for k in ("fx", "fy", "cx", "cy")]
     if any(v is not None for v in given):
         return Intrinsics(*given).check(width, height, label)
-    return Intrinsics.from_fov(args.fov or RECGAN_FOV_DEG, width, height).check(width, height, label)
+    fov = RECGAN_FOV_DEG if args.fov is None else args.fov  # --fov 0 is refused, never the default
+    return Intrinsics.from_fov(fov, width, height).check(width, height, label)
 
 
 def _check_args(args) -> None:
@@ -82,6 +88,10 @@ def _check_args(args) -> None:
         raise InputError("--fx --fy --cx --cy: give all four intrinsics (or --fov)")
     if args.fov is not None and any(v is not None for v in given):
         raise InputError("--fov and --fx/--fy/--cx/--cy: give one camera, not both")
+    if args.fov is not None and not 0 < args.fov < 180:
+        raise InputError(f"--fov {args.fov:g}: expected a field of view in (0, 180) degrees")
+    if not args.depth_scale > 0 or args.depth_scale != args.depth_scale or args.depth_scale == float("inf"):
+        raise InputError(f"--depth-scale {args.depth_scale:g}: expected a positive number of metres per unit")
     if args.quality_ckpt and not args.reference:
         raise InputError("--quality-ckpt needs --reference (the shape to score against)")
     if not 64 <= args.size <= 2048:
@@ -136,15 +146,20 @@ class _Scorer:
         return out
 
 
-def _one(args, path: Path, completer, mapper, scorer) -> dict:
-    from lit3d.reconstruct.depth_io import read_depth
+def _one(args, path: Path, name: str, completer, mapper, scorer, protected) -> dict:
+    from lit3d.reconstruct.depth_io import read_depth_info
     from lit3d.reconstruct.figure import figure_png
     from lit3d.reconstruct.outputs import mesh_bytes, occupancy_npz, write_outputs
     from lit3d.reconstruct.pipeline import Options, reconstruct
 
     t_all = time.perf_counter()
     t0 = time.perf_counter()
-    depth = read_depth(path, args.depth_scale)
+    depth, units = read_depth_info(path, args.depth_scale)
+    notes = list(completer.notes)
+    if units["no_reading_pixels"]:
+        notes.append(f"{path}: {units['no_reading_pixels']} pixels at the {units['dtype']} maximum taken as "
+                     "'no reading' (background)")
+        _say(f"note: {notes[-1]}")
     t_read = time.perf_counter() - t0
     h, w = depth.shape
     intr = _intrinsics(args, w, h, str(path))
@@ -161,12 +176,13 @@ def _one(args, path: Path, completer, mapper, scorer) -> dict:
         files[".png"] = figure_png(depth, res.keep, res.points, res.mesh, title, args.size)
         timings["figure"] = time.perf_counter() - t0
     summary = {
-        "input": str(path), "image_size": [w, h], "intrinsics": intr.as_dict(), "depth_scale": args.depth_scale,
+        "input": str(path), "image_size": [w, h], "intrinsics": intr.as_dict(), "depth_scale": units["depth_scale_applied"],
+        "depth_units": units["units"], "depth_dtype": units["dtype"], "no_reading_pixels": units["no_reading_pixels"],
         "checkpoint": completer.path, "threshold": completer.threshold, "device": args.device,
         "geometry": completer.geometry.as_dict(), "placement": res.placement.as_dict(),
         "grids": {"input": [completer.geometry.input_res] * 3, "output": [completer.geometry.target_res] * 3},
         "fuse_input": opts.fuse_input, "counts": res.info, "mesh_frame": "camera (x right, y down, z forward), metres",
-        "notes": list(completer.notes),
+        "notes": notes, "output_name": name,
     }
     if mapper is not None:
         summary["mesh_frame"] += "; canonical pose placed at the posed subject's position and size"
@@ -176,7 +192,7 @@ def _one(args, path: Path, completer, mapper, scorer) -> dict:
         timings["score"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_all
     summary["timings_s"] = timings
-    write_outputs(args.out, path.stem, files, summary)
+    write_outputs(args.out, name, files, summary, protected)
     return summary
 
 
@@ -204,11 +220,54 @@ def _report(exc: Exception, prefix: str = "") -> int:
     return EXIT_USER if user else 1
 
 
+def _protected(args, inputs: list[Path]) -> list[Path]:
+    """Every file the run reads: no output may replace one."""
+    out = list(inputs)
+    for extra in (args.ckpt, args.canonical, args.reference, args.quality_ckpt):
+        if extra:
+            out.append(Path(extra))
+    if args.mask:
+        m = Path(args.mask)
+        out += [q for q in m.iterdir() if q.is_file()] if m.is_dir() else [m]
+    return out
+
+
+def _plan_outputs(args, inputs: list[Path]) -> tuple[list[str], list[Path]]:
+    """Output names per input and the files no output may replace; checks --out and every
+    planned output path before anything expensive runs (raises OutputError, exit 2)."""
+    from lit3d.reconstruct.outputs import output_files
+    from lit3d.utils.io import check_output_dir, check_targets, unique_names
+
+    names, notes = unique_names(inputs)
+    for note in notes:
+        _say(f"note: {note}")
+    protected = _protected(args, inputs)
+    out = Path(args.out)
+    planned = [out / f for n in names for f in output_files(n, args.format, not args.no_figure)]
+    check_targets(planned, protected)  # before --out is created: a refused run leaves nothing
+    check_output_dir(out)
+    return names, protected
+
+
+def _dedupe(inputs: list[Path]) -> list[Path]:
+    """One entry per file (a file given twice, or in a folder also given, is reconstructed once)."""
+    seen, out = set(), []
+    for p in inputs:
+        key = p.resolve() if p.exists() else p
+        if key in seen:
+            _say(f"note: {p}: given more than once; reconstructed once")
+            continue
+        seen.add(key)
+        out.append(p)
+    return out
+
+
 def _run(args) -> int:
     from lit3d.reconstruct.depth_io import list_inputs
 
     _check_args(args)
-    inputs = list_inputs(args.depth)  # a missing folder or file list is answered before the imports
+    inputs = _dedupe(list_inputs(args.depth))  # a missing folder or file list is answered before the imports
+    names, protected = _plan_outputs(args, inputs)
     from tqdm import tqdm
 
     from lit3d.reconstruct.pipeline import load_completer
@@ -225,19 +284,27 @@ def _run(args) -> int:
     failed = 0
     status = 0
     bar = tqdm(inputs, desc="reconstruct", unit="image", disable=len(inputs) < 2, file=sys.stderr)
-    for path in bar:
+    done = 0
+    for path, name in zip(bar, names):
         try:
-            s = _one(args, path, completer, mapper, scorer)
+            s = _one(args, path, name, completer, mapper, scorer, protected)
+            done += 1
             if len(inputs) < 2:
-                _say(f"wrote {Path(args.out) / path.stem}.{{{args.format},png,json}} and "
-                     f"{path.stem}_occupancy.npz ({s['timings_s']['total']:.1f} s)")
+                _say(f"wrote {Path(args.out) / name}.{{{args.format},png,json}} and "
+                     f"{name}_occupancy.npz ({s['timings_s']['total']:.1f} s)")
         except Exception as exc:
             if args.debug:
                 raise
+            from lit3d.utils.io import OutputError
+
             failed += 1
+            out_fault = isinstance(exc, OutputError)
             with bar.external_write_mode(file=sys.stderr):
-                code = _report(exc, "" if str(path) in str(exc) else f"{path}: ")
+                code = _report(exc, "" if out_fault or str(path) in str(exc) else f"{path}: ")
             status = max(status, code)
+            if out_fault:  # the output folder takes no more files (full, gone read-only): stop here
+                failed = len(inputs) - done
+                break
     if len(inputs) > 1:
         _say(f"{len(inputs) - failed} of {len(inputs)} images reconstructed into {args.out}"
              + (f"; {failed} failed (see above)" if failed else ""))

@@ -4,11 +4,14 @@ Formats (``read_depth``), all returned as ``(H, W) float32`` metres, 0 = backgro
 
 - ``.png`` / ``.tif``: 16-bit single channel, integer depth units times ``depth_scale``
   metres (default 0.001: millimetres, as Kinect/RealSense write them); 0 = no reading;
-- ``.npy`` / ``.npz``: a 2-D float array in metres (an ``.npz`` holds one array, or a key
-  named ``depth``); 0 = background;
+- ``.npy`` / ``.npz``: a 2-D array (an ``.npz`` holds one array, or a key named ``depth``):
+  float = metres, integer = depth units times ``depth_scale`` metres, as the images; 0 = background;
 - ``.exr``: a float depth channel in metres, read with OpenCV's OpenEXR codec.
 
-Pixels beyond ``1e4`` m (renderers' "infinitely far" background) count as background.
+Integer depth equal to its type's maximum (65535 for 16 bits: a sensor's "no reading") and
+pixels beyond ``1e4`` m (renderers' "infinitely far" background) count as background.
+:func:`read_depth_info` also says which units were applied and how many pixels were taken as
+"no reading" (written to the JSON of ``lit3d-reconstruct``, and printed as a note when non-zero).
 """
 from __future__ import annotations
 
@@ -77,6 +80,12 @@ def read_depth(path: str | os.PathLike, depth_scale: float = 0.001) -> np.ndarra
         InputError: missing file, unknown format, not an image, wrong shape or type, NaN/inf,
             negative depth, all background.
     """
+    return read_depth_info(path, depth_scale)[0]
+
+
+def read_depth_info(path: str | os.PathLike, depth_scale: float = 0.001) -> tuple[np.ndarray, dict]:
+    """:func:`read_depth` plus what was assumed: ``{"dtype", "units", "depth_scale_applied",
+    "no_reading_pixels"}`` (``units``: ``"integer units x depth_scale"`` or ``"metres (float)"``)."""
     p = Path(path)
     if not p.is_file():
         raise InputError(f"{p}: no such file")
@@ -92,14 +101,27 @@ def read_depth(path: str | os.PathLike, depth_scale: float = 0.001) -> np.ndarra
                              f"{tuple(raw.shape)} (a colour picture?)")
         if raw.dtype == np.uint8:
             raise InputError(f"{p}: 8-bit image: not a depth map (expected 16-bit depth units)")
-        depth = raw.astype(np.float64) * depth_scale if raw.dtype.kind in "iu" else raw.astype(np.float64)
     else:
-        arr = _exr(p) if suffix == ".exr" else _array(p)
-        arr = np.squeeze(np.asarray(arr))
-        if arr.ndim != 2 or arr.dtype.kind not in "fiu":
-            raise InputError(f"{p}: expected a 2-D numeric depth array, got {arr.dtype} {tuple(arr.shape)}")
-        depth = arr.astype(np.float64)
-    return check_depth(depth, p)
+        raw = np.asarray(_exr(p) if suffix == ".exr" else _array(p))
+        while raw.ndim > 2 and raw.shape[0] == 1:  # (1, H, W): one image; a (1, 1) image stays 2-D
+            raw = raw[0]
+        while raw.ndim > 2 and raw.shape[-1] == 1:
+            raw = raw[..., 0]
+        if raw.ndim != 2 or raw.dtype.kind not in "fiu" or raw.dtype == np.bool_:
+            raise InputError(f"{p}: expected a 2-D numeric depth array, got {raw.dtype} {tuple(raw.shape)}")
+    info = {"dtype": str(raw.dtype), "no_reading_pixels": 0}
+    if raw.dtype.kind in "iu":
+        no_reading = raw == np.iinfo(raw.dtype).max  # a sensor's "no reading" (65535 for 16 bits)
+        info["no_reading_pixels"] = int(no_reading.sum())
+        depth = np.where(no_reading, 0.0, raw.astype(np.float64) * depth_scale)
+        info.update(units="integer units x depth_scale", depth_scale_applied=float(depth_scale))
+    else:
+        depth = raw.astype(np.float64)
+        info.update(units="metres (float)", depth_scale_applied=None)
+    if info["no_reading_pixels"] and not (depth > 0).any():
+        raise InputError(f"{p}: all background (every depth pixel is 0 or {np.iinfo(raw.dtype).max}, "
+                         "the sensor's 'no reading')")
+    return check_depth(depth, p), info
 
 
 def check_depth(depth: np.ndarray, label: str | os.PathLike) -> np.ndarray:

@@ -9,8 +9,10 @@ For input ``NAME.*`` in ``out_dir``:
 - ``NAME.png``: the labelled picture (:mod:`lit3d.reconstruct.figure`);
 - ``NAME.json``: the summary (timings per step, grid sizes, threshold, checkpoint, notes, score).
 
-Nothing is written until every file's bytes exist, and each file is replaced atomically, so a
-failure leaves no half-written output.
+Nothing is written until every file's bytes exist; the set is written into a temp folder inside
+``out_dir`` and renamed into place only when complete (:func:`lit3d.utils.io.write_file_set`),
+so a failure leaves no half-written output and no part of a set. An output that would replace
+an input file, or that exists as a folder, is refused before anything is written.
 """
 from __future__ import annotations
 
@@ -21,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from lit3d.reconstruct.pipeline import Result, index_to_camera_matrix
-from lit3d.utils.io import atomic_write_bytes
+from lit3d.utils.io import write_file_set
 
 MESH_FORMATS = ("obj", "ply", "glb")
 
@@ -40,12 +42,21 @@ def mesh_bytes(mesh, fmt: str) -> bytes:
     return data.encode("utf-8") if isinstance(data, str) else bytes(data)
 
 
-def write_outputs(out_dir: str | Path, name: str, files: dict[str, bytes], summary: dict) -> list[Path]:
-    """Write ``files`` (suffix -> bytes) as ``out_dir/name<suffix>``, the JSON summary last."""
-    out = Path(out_dir)
-    blobs = dict(files)
-    blobs[".json"] = (json.dumps(_plain(summary), indent=2, sort_keys=True) + "\n").encode("utf-8")
-    return [atomic_write_bytes(out / f"{name}{suffix}", data) for suffix, data in blobs.items()]
+OUTPUT_SUFFIXES = ("_occupancy.npz", ".png", ".json")  # besides the mesh's ".<format>"
+
+
+def output_files(name: str, fmt: str, figure: bool = True) -> list[str]:
+    """The file names one input ``name`` gives (see the module doc)."""
+    return [f"{name}.{fmt}", f"{name}_occupancy.npz"] + ([f"{name}.png"] if figure else []) + [f"{name}.json"]
+
+
+def write_outputs(out_dir: str | Path, name: str, files: dict[str, bytes], summary: dict,
+                  protected=()) -> list[Path]:
+    """Write ``files`` (suffix -> bytes) as ``out_dir/name<suffix>`` as one set, the JSON summary
+    last; ``protected``: input files no output may replace."""
+    blobs = {f"{name}{suffix}": data for suffix, data in files.items()}
+    blobs[f"{name}.json"] = (json.dumps(_plain(summary), indent=2, sort_keys=True) + "\n").encode("utf-8")
+    return write_file_set(out_dir, blobs, protected)
 
 
 def _plain(obj):

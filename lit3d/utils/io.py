@@ -1,22 +1,65 @@
-"""Small file helpers: atomic writes and JSON that never leaves half a file behind."""
+"""Small file helpers: atomic writes, JSON that never leaves half a file behind, and the one
+output writer of the command-line tools (:func:`check_output_dir`, :func:`unique_names`,
+:func:`write_file_set`).
+
+Every file written here gets the mode an ordinary ``open()`` would give under the user's umask
+(``0644`` under umask ``022``), not the ``0600`` of :func:`tempfile.mkstemp`. File-system
+problems of outputs (exists as a file or folder, read-only, no permission, no space) are raised
+as :class:`OutputError`: one line ``<path>: <problem>``, a user error (exit 2) in every entry
+point.
+"""
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
+import shutil
 import tempfile
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
 TMP_SUFFIX = ".tmp"
 
 
+class OutputError(ValueError):
+    """An output path that cannot be written (or would replace an input): ``<path>: <problem>``."""
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def file_mode() -> int:
+    """The mode ``open(path, "w")`` gives a new file under the current umask (``0o644`` under 022)."""
+    return 0o666 & ~_umask()
+
+
+def _problem(exc: OSError) -> str:
+    """A short phrase for an OSError of an output path."""
+    known = {errno.EROFS: "read-only file system", errno.EACCES: "permission denied",
+             errno.EPERM: "permission denied", errno.ENOSPC: "no space left on the device",
+             errno.EDQUOT: "disk quota exceeded", errno.EISDIR: "exists and is a folder",
+             errno.ENOTDIR: "a parent of it is a file, not a folder", errno.EEXIST: "exists"}
+    return known.get(exc.errno, exc.strerror or type(exc).__name__)
+
+
+def output_error(path: str | os.PathLike, exc: OSError) -> OutputError:
+    """``OutputError("<path>: <problem>")`` for an OSError met while writing ``path``."""
+    return OutputError(f"{path}: cannot write here ({_problem(exc)})")
+
+
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
-    """Write ``data`` to ``path`` through a temp file in the same folder + ``os.replace``."""
+    """Write ``data`` to ``path`` through a temp file in the same folder + ``os.replace``
+    (the file gets the umask's mode, see :func:`file_mode`)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=TMP_SUFFIX)
     try:
+        os.fchmod(fd, file_mode())
         with os.fdopen(fd, "wb") as f:
             f.write(data)
         os.replace(tmp, path)
@@ -66,3 +109,126 @@ def _finite(obj: Any) -> Any:
     if isinstance(obj, (list, tuple)):
         return [_finite(v) for v in obj]
     return obj
+
+
+# ------------------------------------------------------------------ the output writer of the CLIs
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve() or (a.exists() and b.exists() and os.path.samefile(a, b))
+    except OSError:
+        return False
+
+
+def check_output_dir(path: str | os.PathLike, option: str = "--out") -> Path:
+    """Make sure ``path`` is (or can be made) a writable folder, before any expensive work.
+
+    Creates it (and its parents) when missing; probes it with a temp file that is removed again.
+    Raises :class:`OutputError` (``<path>: <problem>``): an existing file, a parent that is a
+    file, a read-only file system, no permission.
+    """
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise OutputError(f"{p}: {option} is an existing file, not a folder")
+    for parent in p.parents:  # the nearest existing ancestor must be a folder
+        if parent.exists():
+            if not parent.is_dir():
+                raise OutputError(f"{p}: {option} lies under {parent}, which is a file, not a folder")
+            break
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(dir=p, prefix=".lit3d-probe.", suffix=TMP_SUFFIX)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise OutputError(f"{p}: {option} is not writable ({_problem(exc)})") from None
+    return p
+
+
+def unique_names(inputs: Sequence[str | os.PathLike]) -> tuple[list[str], list[str]]:
+    """Output base names for ``inputs``, unique per input: the stem, or, where stems collide,
+    the stem with the extension (``a_cow.png`` -> ``a_cow_png``), then with the parent folder
+    (``x/scan.png`` -> ``x_scan_png``), then numbered. Returns ``(names, notes)``, a note per
+    renamed input saying so."""
+    paths = [Path(p) for p in inputs]
+    names = [p.stem for p in paths]
+
+    def colliding(ns: list[str]) -> set[int]:
+        seen: dict[str, list[int]] = {}
+        for i, n in enumerate(ns):
+            seen.setdefault(n.lower(), []).append(i)  # case-insensitive file systems too
+        return {i for idx in seen.values() if len(idx) > 1 for i in idx}
+
+    for rule in (lambda p: f"{p.stem}_{p.suffix.lstrip('.')}" if p.suffix else p.stem,
+                 lambda p: f"{p.parent.name}_{p.stem}_{p.suffix.lstrip('.')}".strip("_")):
+        clash = colliding(names)
+        if not clash:
+            break
+        for i in clash:
+            names[i] = rule(paths[i])
+    clash = colliding(names)
+    used = {n.lower() for i, n in enumerate(names) if i not in clash}
+    for i in sorted(clash):
+        k, base = 2, names[i]
+        while names[i].lower() in used:
+            names[i] = f"{base}_{k}"
+            k += 1
+        used.add(names[i].lower())
+    notes = [f"{p}: output name '{n}' (the stem '{p.stem}' is shared by another input)"
+             for p, n in zip(paths, names) if n != p.stem]
+    return names, notes
+
+
+def check_targets(targets: Iterable[str | os.PathLike], protected: Iterable[str | os.PathLike] = ()) -> None:
+    """Raise :class:`OutputError` when an output path is, or would replace, a ``protected`` file
+    (an input), or exists as a folder; all before anything is written."""
+    prot = [Path(p) for p in protected if p]
+    for t in map(Path, targets):
+        for q in prot:
+            if _same_file(t, q):
+                raise OutputError(f"{t}: the output would replace the input {q} (choose another output folder)")
+        if t.is_dir():
+            raise OutputError(f"{t}: an output file of this name exists as a folder")
+
+
+def write_file_set(out_dir: str | os.PathLike, files: dict[str, bytes],
+                   protected: Iterable[str | os.PathLike] = ()) -> list[Path]:
+    """Write ``files`` (file name -> bytes) into ``out_dir`` as one set.
+
+    Every file is written into a temp folder inside ``out_dir`` first; only when all of them are
+    there are they renamed into place (in the given order: put the summary last). A failure
+    before the renames leaves nothing; a failure during them (another process in the folder)
+    removes the files already renamed. Files get the umask's mode. ``protected``: input files
+    the set must not replace (:func:`check_targets`). Raises :class:`OutputError`.
+    """
+    out = Path(out_dir)
+    targets = [out / name for name in files]
+    check_targets(targets, protected)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(dir=out, prefix=f".{next(iter(files), 'set')}.", suffix=TMP_SUFFIX))
+    except OSError as exc:
+        raise output_error(out, exc) from None
+    done: list[Path] = []
+    try:
+        staged = []
+        for name, data in files.items():
+            src = tmp / name
+            try:
+                with open(src, "wb") as f:  # an ordinary open(): the umask's mode
+                    f.write(data)
+            except OSError as exc:
+                raise output_error(out / name, exc) from None
+            staged.append((src, out / name))
+        for src, dst in staged:
+            try:
+                os.replace(src, dst)
+            except OSError as exc:
+                raise output_error(dst, exc) from None
+            done.append(dst)
+    except BaseException:
+        for p in done:
+            p.unlink(missing_ok=True)
+        raise
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return done
