@@ -204,3 +204,53 @@ def test_tiny_array_is_reported_with_its_shape(tmp_path):
         read_depth(tmp_path / "one.npy")
     np.save(tmp_path / "batch.npy", np.ones((1, 6, 7), np.float32))
     assert read_depth(tmp_path / "batch.npy").shape == (6, 7)
+
+
+# ------------------------------------------------------------------ PLY colours (lit3d-score)
+def _ply(path: Path, colours: np.ndarray, kind: str, binary: bool) -> Path:
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-1, 1, (len(colours), 3))
+    head = ["ply", f"format {'binary_little_endian' if binary else 'ascii'} 1.0", f"element vertex {len(pts)}",
+            "property float x", "property float y", "property float z",
+            *(f"property {kind} {c}" for c in ("red", "green", "blue")), "end_header"]
+    head_b = ("\n".join(head) + "\n").encode()
+    if binary:
+        cd = "u1" if kind == "uchar" else "<f4"
+        rec_t = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("red", cd), ("green", cd), ("blue", cd)])
+        rec = np.zeros(len(pts), rec_t)
+        for i, c in enumerate("xyz"):
+            rec[c] = pts[:, i]
+        for i, c in enumerate(("red", "green", "blue")):
+            rec[c] = colours[:, i]
+        path.write_bytes(head_b + rec.tobytes())
+    else:
+        fmt = "%d" if kind == "uchar" else "%.6f"
+        body = "\n".join(" ".join([*(f"{v:.6f}" for v in p), *(fmt % v for v in c)]) for p, c in zip(pts, colours))
+        path.write_bytes(head_b + body.encode() + b"\n")
+    return path
+
+
+@pytest.mark.parametrize("binary", [False, True])
+def test_ply_colours_are_read_by_their_declared_type(tmp_path, binary):
+    from lit3d.render.points import load_points
+
+    rgb8 = np.random.default_rng(1).integers(0, 256, (50, 3))
+    a = load_points(_ply(tmp_path / "u8.ply", rgb8, "uchar", binary))
+    b = load_points(_ply(tmp_path / "f.ply", (rgb8 / 255.0).astype(np.float32), "float", binary))
+    np.testing.assert_allclose(a.colours, b.colours, atol=1e-6)
+    assert 0.5 < float(b.colours.max()) <= 1.0  # not divided by 255 a second time
+
+
+@pytest.mark.parametrize("binary", [False, True])
+def test_nan_colours_are_refused_in_one_line(tmp_path, binary, capsys):
+    from lit3d.cli import score
+
+    col = np.full((50, 3), 0.5, np.float32)
+    col[3, 1] = np.nan
+    bad = _ply(tmp_path / "nan.ply", col, "float", binary)
+    ok = _ply(tmp_path / "ok.ply", np.full((50, 3), 0.5, np.float32), "float", binary)
+    before = _tree(tmp_path)
+    assert score.main([str(ok), str(bad), "--no-cache"]) == 2
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and str(bad) in lines[0] and "NaN" in lines[0], lines
+    assert _tree(tmp_path) == before

@@ -80,6 +80,39 @@ def _ply_header(head: bytes, label: str) -> tuple[str, list[tuple[str, int, list
     return fmt, elements, (nl + 1 if nl >= 0 else len(head))
 
 
+PLY_INT_MAX = {"uchar": 255, "uint8": 255, "char": 127, "int8": 127, "ushort": 65535, "uint16": 65535,
+               "short": 32767, "int16": 32767}
+PLY_FLOAT = ("float", "float32", "double", "float64")
+
+
+def _vertex_types(head: bytes) -> dict[str, str]:
+    """Declared types of the PLY ``vertex`` element's properties (``red`` -> ``uchar``)."""
+    types: dict[str, str] = {}
+    element = ""
+    for ln in head[:head.find(b"end_header")].decode("ascii", "replace").splitlines():
+        tok = ln.split()
+        if len(tok) >= 2 and tok[0] == "element":
+            element = tok[1]
+        elif element == "vertex" and len(tok) == 3 and tok[0] == "property":
+            types[tok[2]] = tok[1]
+    return types
+
+
+def _ply_colours(cols: np.ndarray, kind: str, label: str) -> np.ndarray:
+    """``(N, 3)`` PLY colour values of declared type ``kind`` -> RGB in [0, 1]: integers are
+    divided by their type's maximum (uchar: 255), floats are taken as [0, 1] already."""
+    cols = np.asarray(cols, np.float64)
+    bad = ~np.isfinite(cols)
+    if bad.any():
+        raise ShapeError(f"{label}: {int(bad.any(1).sum())} points have NaN or inf colours")
+    if kind in PLY_FLOAT:
+        if cols.size and (cols.min() < 0 or cols.max() > 1):
+            raise ShapeError(f"{label}: float colours must lie in [0, 1] (found {cols.min():.4g} .. "
+                             f"{cols.max():.4g}); write 0-255 colours as uchar")
+        return cols.astype(np.float32)
+    return (cols / PLY_INT_MAX.get(kind, 255)).astype(np.float32)
+
+
 def read_ply_points(data: bytes, label: str) -> PointShape:
     """A point-only PLY (bytes) -> :class:`PointShape` (ASCII parsed here, binary via trimesh)."""
     fmt, elements, start = _ply_header(data[:65536], label)
@@ -99,8 +132,14 @@ def read_ply_points(data: bytes, label: str) -> PointShape:
             pc = trimesh.load(io.BytesIO(data), file_type="ply", process=False)
         except Exception as exc:
             raise ShapeError(f"{label}: unreadable ply file ({type(exc).__name__}: {exc})") from exc
-        col = getattr(pc, "colors", None)
-        col = np.asarray(col, np.float32)[:, :3] / 255.0 if col is not None and len(col) == len(pc.vertices) else None
+        # colours from the file's own values and declared type (trimesh turns floats into uint8,
+        # NaN into 0); the positions from trimesh
+        raw = (getattr(pc, "metadata", {}) or {}).get("_ply_raw", {}).get("vertex", {}).get("data")
+        names = raw.dtype.names if raw is not None and raw.dtype.names else ()
+        col = None
+        if {"red", "green", "blue"} <= set(names) and len(raw) == len(pc.vertices):
+            col = _ply_colours(np.stack([raw[c].ravel() for c in ("red", "green", "blue")], 1),
+                               _vertex_types(data[:65536]).get("red", "uchar"), label)
         return _checked(np.asarray(pc.vertices, np.float64), col, label)
     try:
         vals = np.loadtxt(io.BytesIO(data[start:]), dtype=np.float64, max_rows=n, ndmin=2)
@@ -111,7 +150,8 @@ def read_ply_points(data: bytes, label: str) -> PointShape:
                          f"body has {vals.shape[0]} rows of {vals.shape[1] if vals.ndim == 2 else 0}")
     col_idx = [props.index(c) for c in ("red", "green", "blue") if c in props]
     pts = vals[:, [props.index(c) for c in "xyz"]]
-    colours = (vals[:, col_idx] / 255.0).astype(np.float32) if len(col_idx) == 3 else None
+    colours = (_ply_colours(vals[:, col_idx], _vertex_types(data[:65536]).get("red", "uchar"), label)
+               if len(col_idx) == 3 else None)
     return _checked(pts, colours, label)
 
 
@@ -121,6 +161,8 @@ def _checked(points: np.ndarray, colours: np.ndarray | None, label: str) -> Poin
         raise ShapeError(f"{label}: expected (N, 3) points, got shape {tuple(p.shape)}")
     if not np.isfinite(p).all():
         raise ShapeError(f"{label}: points contain NaN or inf")
+    if colours is not None and not np.isfinite(np.asarray(colours, np.float64)).all():
+        raise ShapeError(f"{label}: colours contain NaN or inf")
     ext = float(np.ptp(p, axis=0).max())
     if len(p) < 4 or ext <= 0:
         raise ShapeError(f"{label}: degenerate point cloud ({len(p)} points, extent {ext:.3g})")
@@ -174,8 +216,9 @@ def is_point_source(src: Any) -> bool:
 def load_points(src: Any, name: str | None = None) -> PointShape:
     """Read any point input of :func:`is_point_source` into a validated :class:`PointShape`.
 
-    Colours: PLY ``red/green/blue`` (uchar 0..255, any order), columns 4..6 of an ``(N, 6)``
-    array or text file (0..255), ``trimesh.PointCloud.colors``.
+    Colours: PLY ``red/green/blue`` by their declared type (uchar 0..255, ushort 0..65535,
+    float 0..1; any order; NaN refused), columns 4..6 of an ``(N, 6)`` array or text file
+    (0..255), ``trimesh.PointCloud.colors``.
     """
     label = name or _name(src)
     if isinstance(src, PointShape):  # validated and put in canonical order
