@@ -339,7 +339,7 @@ CASES = [
     ("train-unknown-task", _option("task=nope"), train_cli, ["task=nope", "known: canonical, completion, quality"]),
     ("eval-unknown-experiment", _option("experiment=nope"), eval_cli, ["experiment=nope", "known: canonical_demo"]),
     ("data-unknown-experiment", _option("experiment=nope"), data_cli, ["experiment=nope", "known: canonical_demo"]),
-    ("data-unknown-data", _option("data=nope"), data_cli, ["data=nope", "known: canonical_synth"]),
+    ("data-unknown-data", _option("data=nope"), data_cli, ["data=nope", "known: ", "canonical_synth"]),
     ("train-tosca-without-data-root", _option("experiment=canonical_tosca", "data.root"), _subprocess("lit3d-train"),
      ["missing value for data.root", "set data.root="]),
     ("train-misspelt-key", _option("trainer.max_epoch=3"), train_cli,
@@ -449,3 +449,36 @@ def test_skip_bad_mos_row_naming_a_missing_mesh(tmp_path):
     with pytest.warns(UserWarning, match=r"Dyno_noise_2.*\(skipped\)"):
         pairs, _ = dm._real_pairs()
     assert len(pairs) == 7 and len(dm.skipped) == 1 and "no mesh file named 'Dyno_noise_2'" in dm.skipped[0]
+
+
+# ----------------------------------------------------------------------------- unwritable outputs
+from test_output_writer import readonly_dir  # noqa: E402,F401  (the fixture: a real read-only folder)
+
+HYDRA_MAINS = {"lit3d-train": train_cli, "lit3d-eval": eval_cli, "lit3d-data": data_cli}
+
+
+@pytest.mark.parametrize("fault", ["run-dir-under-a-file", "run-dir-is-a-file", "run-dir-read-only",
+                                   "data-dir-is-a-file", "data-dir-read-only"])
+@pytest.mark.parametrize("prog", sorted(HYDRA_MAINS))
+def test_unwritable_run_or_data_dir_is_one_line_before_any_work(prog, fault, tmp_path, readonly_dir, capsys,
+                                                                 monkeypatch):
+    """hydra.run.dir / data.data_dir that is a file, lies under one, or is read-only: exit 2 and
+    one line naming the path, before Hydra creates anything; the file is left as it was."""
+    if prog == "lit3d-eval" and fault.startswith("data"):
+        pytest.skip("lit3d-eval takes its data config from the checkpoint")
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+    a_file = tmp_path / "a_file"
+    a_file.write_text("mine")
+    bad = {"run-dir-under-a-file": a_file / "run", "run-dir-is-a-file": a_file,
+           "run-dir-read-only": readonly_dir / "run", "data-dir-is-a-file": a_file,
+           "data-dir-read-only": readonly_dir / "data"}[fault]
+    key = "hydra.run.dir" if fault.startswith("run") else "data.data_dir"
+    args = [f"{key}={bad}"] + ([] if key == "hydra.run.dir" else [f"hydra.run.dir={tmp_path}/run"])
+    if prog != "lit3d-eval":
+        args.insert(0, "experiment=completion_demo")
+    out = HYDRA_MAINS[prog](" ".join(args), Ctx(tmp_path, capsys, monkeypatch, None))
+    lines = [ln for ln in out.err.splitlines() if ln.strip()]
+    assert out.code == 2 and len(lines) == 1, out
+    assert lines[0].startswith(f"error: {bad}: {key}") and "Traceback" not in out.err, lines
+    assert a_file.read_text() == "mine" and not (tmp_path / "run").exists()
+    assert not any(readonly_dir.iterdir())

@@ -10,8 +10,9 @@ Errors the user can act on end the process with one line on stderr (see :func:`r
 what                                                       exit   line
 ========================================================  =====  =========================================
 bad option/file (UserError, DataError, ShapeError, ???)    2      ``error: <file or option>: <problem>``
+unwritable output (run dir, data_dir: a file, read-only)   2      ``error: <path>: <problem>``
 NaN/Inf loss (FloatingPointError)                          1      ``error: non-finite loss at ... step``
-SIGTERM during training (last.ckpt saved)                  143    ``error: <run dir>: stopped by SIGTERM``
+SIGTERM or Ctrl-C during training (last.ckpt saved)        143    ``error: <run dir>: stopped by SIGTERM``
 ========================================================  =====  =========================================
 
 ``--debug`` on the command line or ``HYDRA_FULL_ERROR=1`` shows the traceback instead.
@@ -181,14 +182,15 @@ def fail(exc: BaseException, code: int) -> None:
     sys.exit(code)
 
 
-def check_composes(args: Sequence[str], config_name: str, conf_dir: str = CONF_DIR) -> None:
+def check_composes(args: Sequence[str], config_name: str, conf_dir: str = CONF_DIR) -> DictConfig | None:
     """Raise :class:`UserError` when the overrides do not compose (e.g. a key that is not in the
-    config: ``trainer.max_epoch=3``), with Hydra's first two lines as the message.
+    config: ``trainer.max_epoch=3``), with Hydra's first two lines as the message; else return
+    the composed config (with its ``hydra`` node).
 
     Skipped for multiruns and Hydra's own flags (``-m``, ``--cfg`` ...): Hydra reports those.
     """
     if any(a.startswith("-") for a in args):
-        return
+        return None
     from hydra import compose, initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
     from hydra.errors import HydraException
@@ -196,12 +198,34 @@ def check_composes(args: Sequence[str], config_name: str, conf_dir: str = CONF_D
     GlobalHydra.instance().clear()
     try:
         with initialize_config_dir(config_dir=conf_dir, version_base="1.3"):
-            compose(config_name, overrides=list(args))
+            return compose(config_name, overrides=list(args), return_hydra_config=True)
     except HydraException as exc:
         lines = [ln.strip() for ln in str(exc).strip().splitlines() if ln.strip()]
         raise UserError("; ".join(ln.rstrip(".") for ln in lines[:2]) or type(exc).__name__) from exc
     finally:
         GlobalHydra.instance().clear()
+
+
+def check_output_paths(cfg: DictConfig | None) -> None:
+    """Raise :class:`UserError` (``<path>: <problem>``) before Hydra creates anything when the run
+    dir (``hydra.run.dir``) is a file, lies under a file or cannot be written, or when
+    ``data.data_dir`` is a file, lies under a file, or holds no prepared cache and cannot be written."""
+    from lit3d.utils.io import OutputError, check_writable
+
+    if cfg is None:
+        return
+    try:
+        run_dir = OmegaConf.select(cfg, "hydra.run.dir", default=None)
+        data_dir = OmegaConf.select(cfg, "data.data_dir", default=None)
+    except Exception:  # an interpolation only Hydra's runtime can resolve: Hydra checks it
+        return
+    try:
+        if run_dir:
+            check_writable(run_dir, "hydra.run.dir")
+        if data_dir:
+            check_writable(data_dir, "data.data_dir", need_write=not (Path(data_dir) / "manifest.json").is_file())
+    except OutputError as exc:
+        raise UserError(str(exc)) from None
 
 
 def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None, config_name: str = "train") -> Any:
@@ -219,7 +243,7 @@ def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None, c
         os.environ["HYDRA_FULL_ERROR"] = "1"
     try:
         check_group_overrides(args)
-        check_composes(args, config_name)
+        check_output_paths(check_composes(args, config_name))
     except UserError as exc:
         if _debug_requested():
             raise
@@ -239,9 +263,32 @@ def exit_code_for(exc: BaseException) -> int | None:
         return exc.exit_code
     if isinstance(exc, (UserError, DataError, ShapeError, MissingMandatoryValue)):
         return EXIT_USER
+    if _file_system_fault(exc):  # an output that cannot be written: the path and the problem
+        return EXIT_USER
     if isinstance(exc, FloatingPointError):  # NaN/Inf loss: the message names the step and the term
         return EXIT_DIVERGED
     return None
+
+
+def _file_system_fault(exc: BaseException) -> bool:
+    """An OSError of a path the user chose: read-only, no permission, no space, a file where a
+    folder should be (or the reverse)."""
+    import errno
+
+    from lit3d.utils.io import OutputError
+
+    return isinstance(exc, OutputError) or (isinstance(exc, OSError) and exc.filename is not None and exc.errno in (
+        errno.EROFS, errno.EACCES, errno.EPERM, errno.ENOSPC, errno.EDQUOT, errno.ENOTDIR, errno.EISDIR,
+        errno.EEXIST))
+
+
+def _as_user_error(exc: BaseException) -> BaseException:
+    """A file-system OSError as ``UserError("<path>: cannot write here (<problem>)")``."""
+    from lit3d.utils.io import OutputError, output_error
+
+    if isinstance(exc, OSError) and not isinstance(exc, OutputError) and _file_system_fault(exc):
+        return UserError(str(output_error(exc.filename, exc)))
+    return exc
 
 
 LIGHTNING_LOGGERS = ("lightning", "lightning.pytorch", "lightning.fabric")
@@ -281,7 +328,7 @@ def run_cli(fn: Callable[[DictConfig], Any], cfg: DictConfig) -> Any:
         if isinstance(exc, MissingMandatoryValue):
             key = getattr(exc, "full_key", "") or "a required option"
             exc = UserError(f"missing value for {key}: set {key}=... on the command line")
-        fail(exc, code)
+        fail(_as_user_error(exc), code)
 
 
 def scalar_metrics(metrics: dict) -> dict[str, float]:

@@ -144,6 +144,27 @@ def check_output_dir(path: str | os.PathLike, option: str = "--out") -> Path:
     return p
 
 
+def check_writable(path: str | os.PathLike, option: str, need_write: bool = True) -> Path:
+    """Like :func:`check_output_dir` but creates nothing: ``path`` must not be (or lie under) a
+    file, and, when ``need_write``, its nearest existing folder must be writable (a read-only
+    file system or a folder without write permission is refused). Raises :class:`OutputError`."""
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise OutputError(f"{p}: {option} is an existing file, not a folder")
+    anc = next((q for q in p.parents if q.exists()), None) if not p.exists() else p
+    if anc is not None and not anc.is_dir():
+        raise OutputError(f"{p}: {option} lies under {anc}, which is a file, not a folder")
+    if need_write and anc is not None:
+        try:  # a real probe (a temp file, removed again): access() ignores sysfs and some mounts
+            fd, probe = tempfile.mkstemp(dir=anc, prefix=".lit3d-probe.", suffix=TMP_SUFFIX)
+            os.close(fd)
+            os.unlink(probe)
+        except OSError as exc:
+            raise OutputError(f"{p}: {option} is not writable ({_problem(exc)}"
+                              f"{'' if anc == p else f' at {anc}'})") from None
+    return p
+
+
 def unique_names(inputs: Sequence[str | os.PathLike]) -> tuple[list[str], list[str]]:
     """Output base names for ``inputs``, unique per input: the stem, or, where stems collide,
     the stem with the extension (``a_cow.png`` -> ``a_cow_png``), then with the parent folder
