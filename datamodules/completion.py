@@ -49,6 +49,21 @@ class DataConfigError(DataError):
 
 
 # ---------------------------------------------------------------- synthetic item plan
+def check_sizes(sizes: dict | None) -> dict:
+    """``data.sizes`` as ``{split: int >= 0}``; an unknown split (``+data.sizes.trian=10``) or a
+    count that is not a whole number >= 0 raises :class:`DataConfigError` listing the known splits,
+    before any cache is touched (an unknown key would otherwise be dropped and change the cache hash)."""
+    out = {}
+    for k, v in dict(sizes or {}).items():
+        if k not in SPLITS:
+            raise DataConfigError(f"data.sizes.{k}: unknown split; known: {', '.join(SPLITS)}")
+        n = 0 if v is None else v
+        if isinstance(n, bool) or not isinstance(n, (int, float)) or n < 0 or n != int(n):
+            raise DataConfigError(f"data.sizes.{k}={v!r}: expected a whole number of items >= 0")
+        out[k] = int(n)
+    return out
+
+
 def synth_items(sizes: dict, categories: Sequence[str], unseen_categories: Sequence[str], seed: int,
                 views_per_shape: int = 4, unseen_view_set: str = "same") -> list[dict]:
     """The plan of every synthetic item (cheap: no geometry), deterministic in ``seed``.
@@ -155,7 +170,7 @@ class CompletionDataModule(pl.LightningDataModule):
         self.root = None if root in (None, "") else Path(root)
         self.target_res, self.input_factor = int(target_res), int(input_factor)
         self.input_res = self.target_res // self.input_factor
-        self.sizes = {**DEFAULT_SIZES, **(sizes or {})}
+        self.sizes = {**DEFAULT_SIZES, **check_sizes(sizes)}
         self.categories, self.unseen_categories = tuple(categories), tuple(unseen_categories)
         self.batch_size, self.num_workers = int(batch_size), int(num_workers)
         self.seed, self.skip_bad, self.pin_memory = int(seed), bool(skip_bad), bool(pin_memory)

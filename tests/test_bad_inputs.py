@@ -347,6 +347,10 @@ CASES = [
     ("eval-misspelt-key", _option("ckpt_pth=x.ckpt"), eval_cli, ["Could not override 'ckpt_pth'"]),
     ("train-bad-task-option-value", _option("experiment=canonical_demo task.on_nonfinite=bogus", "task config"),
      train_overrides, ["task.on_nonfinite must be one of", "'bogus'"]),
+    ("train-misspelt-split", _option("experiment=completion_demo +data.sizes.trian=10", "data.sizes.trian"),
+     train_overrides, ["unknown split", "known: train, val, test_same"]),
+    ("train-negative-split-size", _option("experiment=completion_demo data.sizes.val=-2", "data.sizes.val=-2"),
+     train_overrides, ["expected a whole number of items >= 0"]),
     ("eval-without-ckpt_path", lambda tmp: (None, "ckpt_path"), eval_no_ckpt, ["missing value for ckpt_path"]),
     # checkpoints
     ("eval-ckpt-missing", _missing("nowhere.ckpt"), eval_ckpt, ["checkpoint not found"]),
@@ -482,3 +486,16 @@ def test_unwritable_run_or_data_dir_is_one_line_before_any_work(prog, fault, tmp
     assert lines[0].startswith(f"error: {bad}: {key}") and "Traceback" not in out.err, lines
     assert a_file.read_text() == "mine" and not (tmp_path / "run").exists()
     assert not any(readonly_dir.iterdir())
+
+
+def test_misspelt_split_touches_no_cache(tmp_path, compose_cfg, capsys):
+    """``+data.sizes.trian=10`` (the form Hydra's own hint suggests) is refused before the data
+    folder is created or a cache hash is computed."""
+    from lit3d.cli.data import prepare
+
+    cfg = compose_cfg(["experiment=completion_demo", "+data.sizes.trian=10"])
+    with pytest.raises(SystemExit) as info:
+        run_cli(prepare, cfg)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert info.value.code == 2 and len(err) == 1 and "data.sizes.trian: unknown split" in err[0], err
+    assert not (tmp_path / "data").exists()
