@@ -171,6 +171,32 @@ def test_sigterm_saves_last_and_resume_continues_canonical(tmp_path, canonical_d
     assert sorted(p.name for p in (run / "checkpoints").glob("last*.ckpt")) == ["last.ckpt"]
 
 
+# ----------------------------------------------------------------------------- Ctrl-C (SIGINT)
+def test_ctrl_c_saves_last_and_says_how_to_resume(tmp_path, canonical_data):
+    """Ctrl-C takes the SIGTERM path (issue 29): ``last.ckpt`` saved, exit 143, one last line with
+    the resume command, no Lightning "Detected KeyboardInterrupt"; ``ckpt_path=last`` resumes."""
+    run = tmp_path / "run"
+    common = [*CANONICAL, "data.batch_size=2", "logger=none", "callbacks.resume_state.every_n_train_batches=1",
+              f"paths.data_dir={canonical_data}", f"hydra.run.dir={run}"]
+    last = run / "checkpoints" / "last.ckpt"
+    proc = _start(["lit3d-train", *common, "trainer.max_epochs=500"], tmp_path / "first")
+    _wait_for_checkpoint(proc, last, lambda c: c["global_step"] >= 3, tmp_path / "first")
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=120) == 143
+    err = (tmp_path / "first.err").read_text()
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err[-2000:]
+    assert [ln for ln in lines if ln.startswith("error:")] == [lines[-1]], err[-2000:]
+    assert lines[-1].startswith(f"error: {run}: stopped by SIGINT (Ctrl-C) at epoch ")
+    assert f"hydra.run.dir={run} ckpt_path=last" in lines[-1]
+    saved = _load(last)
+    assert saved["global_step"] >= 3 and _adam_steps(saved) == {saved["global_step"]}
+    res = subprocess.run([str(BIN / "lit3d-train"), *common, f"trainer.max_epochs={saved['epoch'] + 1}",
+                          "ckpt_path=last"], cwd=REPO, env=_env(), capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert _load(last)["global_step"] > saved["global_step"]
+
+
 # ----------------------------------------------------------------------------- SIGKILL: completion GAN
 @pytest.mark.slow
 def test_sigkill_then_resume_continues_completion_gan(tmp_path):

@@ -5,7 +5,8 @@
 - saves ``<dirpath>/last.ckpt`` every ``every_n_train_batches`` training batches, mid-epoch,
   so a hard kill (SIGKILL, OOM killer, power loss) loses at most that many batches;
 - saves ``last.ckpt`` when the run is stopped by SIGTERM (Lightning finishes the current
-  batch, then raises ``SIGTERMException``) or Ctrl-C;
+  batch, then raises ``SIGTERMException``) or Ctrl-C (``lit3d.cli.train.fit`` turns the first
+  SIGINT into the same flag, so Ctrl-C also ends with exit 143 and the resume line);
 - carries the Python, NumPy and torch (CPU and CUDA) RNG states in its checkpoint state
   and restores them on resume, so the resumed run continues the random streams of the
   saved one instead of restarting them from the seed.

@@ -93,15 +93,42 @@ def checkpoint_plugins(trainer_cfg: DictConfig) -> dict:
 
 
 def fit(trainer, task, datamodule, ckpt_path: str | None, output_dir: Path) -> None:
-    """``trainer.fit``; a SIGTERM (after ``last.ckpt`` is saved) becomes :class:`Interrupted`."""
+    """``trainer.fit``; SIGTERM or Ctrl-C (SIGINT) becomes :class:`Interrupted` after ``last.ckpt`` is saved.
+
+    Lightning stops on SIGTERM after the current batch (``SIGTERMException``; ``ResumeState`` saves
+    ``last.ckpt``). Ctrl-C is made to take the same path: the first SIGINT only raises Lightning's
+    SIGTERM flag (instead of its own KeyboardInterrupt handling, which exits 1 with no resume line);
+    a second Ctrl-C stops at once.
+    """
+    import signal
+    import threading
+
     from lightning.pytorch.utilities.exceptions import SIGTERMException
 
+    got: list[str] = []
+
+    def on_sigint(signum, frame):
+        if got:  # a second Ctrl-C: stop now
+            raise KeyboardInterrupt
+        got.append("SIGINT (Ctrl-C)")
+        trainer._signal_connector.received_sigterm = True  # noqa: SLF001 (Lightning's SIGTERM flag)
+
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, on_sigint) if main_thread else None
     try:
         trainer.fit(task, datamodule=datamodule, ckpt_path=ckpt_path, weights_only=True)
     except SIGTERMException as exc:
-        raise Interrupted(
-            f"{output_dir}: stopped by SIGTERM at epoch {trainer.current_epoch}; resume with the same "
-            f"overrides plus hydra.run.dir={output_dir} ckpt_path=last") from exc
+        raise Interrupted(_stopped(got[0] if got else "SIGTERM", trainer, output_dir)) from exc
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGINT, previous)
+    if got:  # Ctrl-C after the last batch: fitting ended, but the user asked to stop before testing
+        raise Interrupted(_stopped(got[0], trainer, output_dir))
+
+
+def _stopped(what: str, trainer, output_dir: Path) -> str:
+    return (f"{output_dir}: stopped by {what} at epoch {trainer.current_epoch}; resume with the same "
+            f"overrides plus hydra.run.dir={output_dir} ckpt_path=last")
 
 
 def train(cfg: DictConfig) -> float | None:
