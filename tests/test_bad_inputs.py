@@ -351,6 +351,8 @@ CASES = [
      train_overrides, ["unknown split", "known: train, val, test_same"]),
     ("train-negative-split-size", _option("experiment=completion_demo data.sizes.val=-2", "data.sizes.val=-2"),
      train_overrides, ["expected a whole number of items >= 0"]),
+    ("train-zero-epochs", _option("experiment=completion_demo trainer.max_epochs=0", "trainer.max_epochs=0"),
+     train_overrides, ["nothing would be trained", "untrained weights"]),
     ("eval-without-ckpt_path", lambda tmp: (None, "ckpt_path"), eval_no_ckpt, ["missing value for ckpt_path"]),
     # checkpoints
     ("eval-ckpt-missing", _missing("nowhere.ckpt"), eval_ckpt, ["checkpoint not found"]),
@@ -499,3 +501,15 @@ def test_misspelt_split_touches_no_cache(tmp_path, compose_cfg, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert info.value.code == 2 and len(err) == 1 and "data.sizes.trian: unknown split" in err[0], err
     assert not (tmp_path / "data").exists()
+
+
+def test_zero_epochs_writes_no_test_results(tmp_path, compose_cfg, capsys):
+    """trainer.max_epochs=0 is refused before anything is built: no metrics.json of untrained weights."""
+    from lit3d.cli.train import train
+
+    cfg = compose_cfg(["experiment=completion_demo", "logger=none", "trainer.max_epochs=0"])
+    with pytest.raises(SystemExit) as info:
+        run_cli(train, cfg)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert info.value.code == 2 and len(err) == 1 and err[0].startswith("error: trainer.max_epochs=0:"), err
+    assert not (tmp_path / "run").exists() and not (tmp_path / "data").exists()

@@ -131,6 +131,16 @@ def _stopped(what: str, trainer, output_dir: Path) -> str:
             f"overrides plus hydra.run.dir={output_dir} ckpt_path=last")
 
 
+def check_training_length(trainer_cfg: DictConfig) -> None:
+    """Refuse ``trainer.max_epochs=0`` / ``trainer.max_steps=0``: nothing would be trained, and the
+    test results written afterwards would be those of untrained weights."""
+    for key in ("max_epochs", "max_steps"):
+        value = trainer_cfg.get(key)
+        if value is not None and int(value) == 0:
+            raise UserError(f"trainer.{key}=0: nothing would be trained (the test results would be of untrained "
+                            "weights); give a positive number, or test a checkpoint with lit3d-eval ckpt_path=...")
+
+
 def train(cfg: DictConfig) -> float | None:
     """Fit, then test the best checkpoint. Returns the monitored metric value."""
     import lightning.pytorch as pl
@@ -138,6 +148,7 @@ def train(cfg: DictConfig) -> float | None:
 
     from lit3d.callbacks.metadata import MetadataCallback
 
+    check_training_length(cfg.trainer)
     output_dir = Path(cfg.paths.output_dir)
     output_dir.mkdir(parents=True, exist_ok=True)
     pl.seed_everything(cfg.seed, workers=True)
