@@ -1,7 +1,9 @@
 # make demo | make test | make bench  — each bootstraps .venv on first use.
+# make demo TASK=completion|quality|canonical runs one task's demo (default: all three).
 # GPU users: make demo TORCH_SPEC=torch   (or install your CUDA torch build into .venv first)
 VENV ?= .venv
 TORCH_SPEC ?= torch==2.13.0
+TASK ?= all
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 export VENV TORCH_SPEC
@@ -14,7 +16,7 @@ $(STAMP): pyproject.toml scripts/bootstrap.sh
 install: $(STAMP)
 
 demo: $(STAMP)
-	bash scripts/demo.sh
+	bash scripts/demo.sh $(TASK)
 
 test: $(STAMP)
 	$(BIN)/lint-imports

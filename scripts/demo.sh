@@ -1,24 +1,28 @@
 #!/usr/bin/env bash
-# The main job: shape-completion demo on built-in synthetic data.
-# generate -> train -> test best checkpoint -> evaluate from the checkpoint (tables + PNGs).
+# make demo [TASK=all|completion|quality|canonical]: each task at demo scale on built-in data.
+#   completion  scripts/demo_completion.sh  generate -> train -> evaluate the checkpoint   ($DEMO_DIR/{data,train,eval})
+#   quality     scripts/demo_quality.sh     one reference, 5 distorted versions, lit3d-score  ($DEMO_DIR/quality)
+#   canonical   scripts/demo_canonical.sh   generate -> train -> test + contact sheets       ($DEMO_DIR/canonical)
+# DEMO_DIR (default logs/demo) moves every output. Each task writes $DEMO_DIR/summary_<task>.txt;
+# the closing summary below lists them all.
 set -euo pipefail
-BIN=${VENV:-.venv}/bin
-OUT=${DEMO_DIR:-logs/demo}
-EXP=${EXPERIMENT:-completion_demo}  # e.g. EXPERIMENT=completion_cpu DEMO_DIR=logs/completion_cpu
-rm -rf "$OUT/train" "$OUT/eval" "$OUT/eval_recgan"
-"$BIN/lit3d-data" experiment="$EXP" hydra.run.dir="$OUT/data" --show 8
-"$BIN/lit3d-train" experiment="$EXP" hydra.run.dir="$OUT/train" "$@"
-CKPT=$(ls "$OUT"/train/checkpoints/best-*.ckpt | head -n 1)
-"$BIN/lit3d-eval" task=completion ckpt_path="$CKPT" hydra.run.dir="$OUT/eval"
-SAMPLE=../shared/data/recgan_sample
-if [ -d "$SAMPLE" ]; then
-  # the same checkpoint on the real 3D-RecGAN++ sample (max-pooled to the demo's 64^3 grid)
-  "$BIN/lit3d-eval" task=completion ckpt_path="$CKPT" data=recgan data.root="$SAMPLE" hydra.run.dir="$OUT/eval_recgan"
-fi
+TASK=${1:-${TASK:-all}}
+export DEMO_DIR=${DEMO_DIR:-logs/demo}
+case "$TASK" in
+  all) TASKS="completion quality canonical" ;;
+  completion|quality|canonical) TASKS=$TASK ;;
+  *) echo "make demo: TASK=$TASK: expected all, completion, quality or canonical" >&2; exit 2 ;;
+esac
+mkdir -p "$DEMO_DIR"
+T0=$(date +%s)
+for t in $TASKS; do
+  echo
+  echo "=== demo: $t (scripts/demo_$t.sh) ==="
+  s=$(date +%s)
+  rm -f "$DEMO_DIR/summary_$t.txt"
+  bash "scripts/demo_$t.sh"
+  echo "  ($t: $(( $(date +%s) - s )) s)" >> "$DEMO_DIR/summary_$t.txt"
+done
 echo
-echo "demo done:"
-echo "  data preview     $OUT/data/completion_samples.png"
-echo "  training run     $OUT/train  (checkpoints/, metrics.json, config.yaml, wandb/)"
-echo "  evaluation       $OUT/eval/results.md  $OUT/eval/metrics.json  $OUT/eval/*.png"
-[ -d "$OUT/eval_recgan" ] && echo "  real sample      $OUT/eval_recgan/results.md"
-cat "$OUT/eval/results.md"
+echo "=== demo done ($TASKS): $(( $(date +%s) - T0 )) s; outputs ==="
+for t in $TASKS; do cat "$DEMO_DIR/summary_$t.txt"; done

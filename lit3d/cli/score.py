@@ -84,20 +84,27 @@ def _summary(table, ref: str, dist: str, seconds: float, prediction: dict | None
     return "\n".join(lines)
 
 
-def save_contact_sheets(ref, dist, cfg, out_dir: str | Path, thumb: int = 64) -> list[Path]:
-    """Write one PNG per shading: rows = styles; columns = 12 reference views, 12 distorted
-    views, 12 SSIM maps (grey, white = 1). Returns the written paths."""
+def save_contact_sheets(ref, dist, cfg, out_dir: str | Path, thumb: int = 96,
+                        names: tuple[str, str] = ("reference", "distorted")) -> list[Path]:
+    """Write one labelled PNG per shading: rows = styles (named on the left); columns = the 12
+    reference views, the 12 distorted views, the 12 SSIM maps (grey, white = 1), each block titled
+    (``names``: the two shapes, for the title). Returns the written paths."""
+    import io
+
     import numpy as np
     import torch
     import torch.nn.functional as F
-    from PIL import Image
+    from PIL import Image, ImageDraw
 
     from lit3d.metrics.image import ssim_map, to_grey
     from lit3d.features.table import render_views
+    from lit3d.utils.figures import font
     from lit3d.utils.io import atomic_write_bytes
 
     out = Path(out_dir)
+    styles = cfg.resolved_styles()
     va, vb = render_views(ref, cfg, rgb=True), render_views(dist, cfg, rgb=True)
+    left, top, gap = 170, 64, 8  # style-name margin, title + block headers, space between blocks
     paths = []
     for shading in va.images:
         a, b = va.images[shading], vb.images[shading]  # (S, V, 3, H, W)
@@ -106,10 +113,19 @@ def save_contact_sheets(ref, dist, cfg, out_dir: str | Path, thumb: int = 64) ->
         smap = ssim_map(to_grey(fa), to_grey(fb)).clamp(0, 1).expand(-1, 3, -1, -1)
         tiles = torch.stack([fa, fb, smap]).flatten(0, 1)  # (3*S*V, 3, H, W)
         tiles = F.interpolate(tiles, size=(thumb, thumb), mode="area").view(3, s, v, 3, thumb, thumb)
-        grid = tiles.permute(1, 4, 0, 2, 5, 3).reshape(s * thumb, 3 * v * thumb, 3)
-        img = Image.fromarray((grid.clamp(0, 1).numpy() * 255 + 0.5).astype(np.uint8))
-        import io
-
+        block_w = v * thumb
+        img = Image.new("RGB", (left + 3 * block_w + 2 * gap, top + s * thumb), "white")
+        draw = ImageDraw.Draw(img)
+        draw.text((6, 6), f"lit3d-score contact sheet, {shading} shading: {names[0]} vs {names[1]}",
+                  fill="black", font=font(18))
+        titles = ("reference, 12 views", "distorted, same 12 views", "SSIM map per view (white = identical)")
+        for k, title in enumerate(titles):
+            block = tiles[k].permute(0, 3, 1, 4, 2).reshape(s * thumb, block_w, 3)  # (S*thumb, V*thumb, 3)
+            x = left + k * (block_w + gap)
+            img.paste(Image.fromarray((block.clamp(0, 1).numpy() * 255 + 0.5).astype(np.uint8)), (x, top))
+            draw.text((x + block_w // 2, top - 14), title, fill="black", font=font(16), anchor="mm")
+        for r, name in enumerate(styles[:s]):
+            draw.text((6, top + r * thumb + thumb // 2), name, fill="black", font=font(15), anchor="lm")
         buf = io.BytesIO()
         img.save(buf, format="PNG")
         paths.append(atomic_write_bytes(out / f"contact_{shading}.png", buf.getvalue()))
@@ -163,7 +179,7 @@ def _run(args) -> int:
                           device=args.device)
     seconds = time.perf_counter() - t0
     if args.save_views:
-        for p in save_contact_sheets(ref, dist, cfg, args.save_views):
+        for p in save_contact_sheets(ref, dist, cfg, args.save_views, names=(args.ref, args.dist)):
             print(f"wrote {p}", file=sys.stderr)
     prediction = None
     if predictor is not None:
