@@ -219,6 +219,45 @@ def test_cli_batch_with_bad_files(tiny_ckpt, tmp_path):
     assert proc.returncode == 2 and "empty after cropping" in proc.stderr
 
 
+@pytest.mark.slow
+def test_cli_units_name_collisions_and_modes(tiny_ckpt, tmp_path):
+    """Issue 29 end to end: an integer .npy is millimetres (--depth-scale) like the PNG, stems that
+    collide get names that keep the extension (with a note), a 65535 border is "no reading", the
+    input folder is untouched, the outputs get the umask's mode and no temp file is left."""
+    import os
+    import stat
+
+    from lit3d.reconstruct.synthetic import pose_in_front, render_depth_pinhole
+
+    src, out = tmp_path / "in", tmp_path / "out"
+    src.mkdir()
+    intr = Intrinsics.from_fov(RECGAN_FOV_DEG, 160, 120)
+    depth = render_depth_pinhole(pose_in_front(_chair_mesh(), azimuth=40.0, elevation=25.0), intr, 160, 120)
+    mm = np.round(depth * 1000).astype(np.uint16)
+    Image.fromarray(mm).save(src / "chair.png")
+    holes = np.where(mm == 0, 65535, mm).astype(np.uint16)  # a sensor's "no reading" all round
+    np.save(src / "chair.npy", holes)
+    before = {p.name: p.read_bytes() for p in src.iterdir()}
+    old = os.umask(0o022)
+    try:
+        proc = _cli(str(src), str(src / "chair.png"), "--ckpt", str(tiny_ckpt), "--out", str(out), "--size", "96")
+    finally:
+        os.umask(old)
+    assert proc.returncode == 0, proc.stderr
+    assert "chair.png: given more than once" in proc.stderr and "output name 'chair_npy'" in proc.stderr
+    assert "taken as 'no reading'" in proc.stderr
+    names = sorted(p.name for p in out.iterdir())
+    assert names == sorted(f"chair_{k}{s}" for k in ("png", "npy")
+                           for s in (".json", ".obj", ".png", "_occupancy.npz")), names
+    assert all(stat.S_IMODE(p.stat().st_mode) == 0o644 for p in out.iterdir())
+    assert {p.name: p.read_bytes() for p in src.iterdir()} == before
+    a, b = (json.loads((out / f"chair_{k}.json").read_text()) for k in ("png", "npy"))
+    assert b["depth_units"].startswith("integer") and b["depth_scale"] == 0.001 and b["depth_dtype"] == "uint16"
+    assert b["no_reading_pixels"] == int((mm == 0).sum()) and a["no_reading_pixels"] == 0
+    np.testing.assert_allclose(b["placement"]["centre_m"], a["placement"]["centre_m"], rtol=1e-6)
+    assert 0.5 < a["placement"]["centre_m"][2] < 5  # metres, not kilometres
+
+
 def test_iou_reference():
     a = np.zeros((4, 4, 4), bool)
     b = np.zeros((4, 4, 4), bool)
