@@ -66,6 +66,58 @@ def test_bad_inputs_one_line_no_traceback(pair, tmp_path, capsys):
         assert len(err.splitlines()) == 1 and str(bad) in err and "Traceback" not in err, (name, err)
 
 
+def test_save_views_file_system_faults_one_line(pair, tmp_path, capsys):
+    """--save-views that is a file, lies under one, is read-only, or would replace an input: exit 2,
+    one line naming the path, before anything is rendered; nothing of the user's is changed."""
+    import os
+    import stat
+    import subprocess as sp
+
+    from test_output_writer import _tree
+
+    ref, dist = pair
+    a_file = tmp_path / "notes.txt"
+    a_file.write_text("mine")
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    mounted = False
+    if os.geteuid() == 0:
+        mounted = sp.run(["mount", "-t", "tmpfs", "-o", "ro,size=64k", "tmpfs", str(ro)],
+                         capture_output=True).returncode == 0
+    else:
+        ro.chmod(0o555)
+    clash = tmp_path / "clash"
+    clash.mkdir()
+    ref_in_out = clash / "contact_flat.png"  # an input with the name of a sheet
+    ref_in_out.write_bytes(ref.read_bytes())
+    cases = [([ref, dist], a_file, "is an existing file"), ([ref, dist], a_file / "v", "which is a file"),
+             ([ref_in_out, dist], clash, "would replace the input")]
+    if mounted or os.geteuid() != 0:
+        cases.append(([ref, dist], ro / "views", "not writable"))
+    try:
+        for shapes, views, words in cases:
+            before = _tree(tmp_path)
+            code = main([*map(str, shapes), *FAST, "--no-cache", "--save-views", str(views)])
+            lines = capsys.readouterr().err.strip().splitlines()
+            assert code == 2 and len(lines) == 1 and words in lines[0], (views, lines)
+            assert lines[0].startswith("lit3d-score: error: ") and "internal error" not in lines[0]
+            assert _tree(tmp_path) == before
+        # a good folder: the sheets, with the umask's mode, no temp folder left
+        old = os.umask(0o022)
+        try:
+            assert main([str(ref), str(dist), *FAST, "--no-cache", "--save-views", str(tmp_path / "ok")]) == 0
+        finally:
+            os.umask(old)
+        sheets = sorted((tmp_path / "ok").iterdir())
+        assert [p.name for p in sheets] == ["contact_flat.png", "contact_smooth.png"]
+        assert all(stat.S_IMODE(p.stat().st_mode) == 0o644 for p in sheets)
+    finally:
+        if mounted:
+            sp.run(["umount", str(ro)], check=False)
+        elif os.geteuid() != 0:
+            ro.chmod(0o755)
+
+
 # ---------------------------------------------------------------- --ckpt: a trained quality model
 QUALITY_OPTIONS = {"size": 32, "styles": ["toon"], "measures": ["mask_ssim", "mse"], "n_samples": 500}
 

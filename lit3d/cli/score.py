@@ -10,7 +10,12 @@ Examples::
 The overall score is the mean Mask-SSIM over styles, shadings and the 12 views
 (1 = identical renders). Two point clouds (.xyz, a .ply without faces, a .zip holding one
 .ply) are rendered as points, with colour styles when both carry colour (the overall score
-then weighs geometry and colour styles equally) and the D1/D2/Y-PSNR baselines. With ``--ckpt`` (a quality model saved by
+is then the mean Mask-SSIM over the colour styles alone; the MatCap styles stay in the
+table as features for a learned score) and the D1/D2/Y-PSNR baselines. PLY colours are
+read by their declared type (uchar 0-255, float 0-1); NaN colours are refused. --save-views
+writes its sheets as one set into a folder checked first (a file, a read-only folder, or a
+sheet name that is an input gives one line and exit 2 before anything is rendered).
+With ``--ckpt`` (a quality model saved by
 ``lit3d-train task=quality``) the overall score is the model's prediction instead:
 the features are computed with the render size, styles, measures and shadings the
 model was trained on (``--size``/``--styles`` are then ignored, with a note), its
@@ -85,7 +90,7 @@ def _summary(table, ref: str, dist: str, seconds: float, prediction: dict | None
 
 
 def save_contact_sheets(ref, dist, cfg, out_dir: str | Path, thumb: int = 96,
-                        names: tuple[str, str] = ("reference", "distorted")) -> list[Path]:
+                        names: tuple[str, str] = ("reference", "distorted"), protected=()) -> list[Path]:
     """Write one labelled PNG per shading: rows = styles (named on the left); columns = the 12
     reference views, the 12 distorted views, the 12 SSIM maps (grey, white = 1), each block titled
     (``names``: the two shapes, for the title). Returns the written paths."""
@@ -99,13 +104,13 @@ def save_contact_sheets(ref, dist, cfg, out_dir: str | Path, thumb: int = 96,
     from lit3d.metrics.image import ssim_map, to_grey
     from lit3d.features.table import render_views
     from lit3d.utils.figures import font
-    from lit3d.utils.io import atomic_write_bytes
+    from lit3d.utils.io import write_file_set
 
     out = Path(out_dir)
     styles = cfg.resolved_styles()
     va, vb = render_views(ref, cfg, rgb=True), render_views(dist, cfg, rgb=True)
     left, top, gap = 170, 64, 8  # style-name margin, title + block headers, space between blocks
-    paths = []
+    sheets: dict[str, bytes] = {}
     for shading in va.images:
         a, b = va.images[shading], vb.images[shading]  # (S, V, 3, H, W)
         s, v = a.shape[:2]
@@ -128,8 +133,8 @@ def save_contact_sheets(ref, dist, cfg, out_dir: str | Path, thumb: int = 96,
             draw.text((6, top + r * thumb + thumb // 2), name, fill="black", font=font(15), anchor="lm")
         buf = io.BytesIO()
         img.save(buf, format="PNG")
-        paths.append(atomic_write_bytes(out / f"contact_{shading}.png", buf.getvalue()))
-    return paths
+        sheets[f"contact_{shading}.png"] = buf.getvalue()
+    return write_file_set(out, sheets, protected)  # one set: all sheets or none
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -160,6 +165,11 @@ def _run(args) -> int:
 
     if args.size is not None and not 16 <= args.size <= 4096:
         raise ValueError(f"--size {args.size}: expected 16..4096 pixels")
+    if args.save_views:  # before any shape is read or rendered
+        from lit3d.utils.io import check_output_dir, check_targets
+
+        check_targets([Path(args.save_views) / f"contact_{sh}.png" for sh in ("flat", "smooth")], _inputs(args))
+        check_output_dir(args.save_views, "--save-views")
     # shapes first: a bad file is reported before torch and the renderer are imported (about 1 s, not 10)
     if is_point_source(args.ref) and is_point_source(args.dist):  # two point clouds: rendered as points
         ref, dist = load_points(args.ref), load_points(args.dist)
@@ -179,7 +189,8 @@ def _run(args) -> int:
                           device=args.device)
     seconds = time.perf_counter() - t0
     if args.save_views:
-        for p in save_contact_sheets(ref, dist, cfg, args.save_views, names=(args.ref, args.dist)):
+        for p in save_contact_sheets(ref, dist, cfg, args.save_views, names=(args.ref, args.dist),
+                                     protected=_inputs(args)):
             print(f"wrote {p}", file=sys.stderr)
     prediction = None
     if predictor is not None:
@@ -194,6 +205,11 @@ def _run(args) -> int:
     else:
         print(_summary(table, args.ref, args.dist, seconds, prediction, notes))
     return 0
+
+
+def _inputs(args) -> list[Path]:
+    """The files this run reads: no output may replace one."""
+    return [Path(p) for p in (args.ref, args.dist, args.ckpt) if p]
 
 
 def _model_features(args, cli_cfg):
