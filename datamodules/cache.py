@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from lit3d.utils.io import TMP_SUFFIX, atomic_write_bytes, file_sha256, remove_temp_files, write_json
+from lit3d.utils.io import TMP_SUFFIX, atomic_write_bytes, file_mode, file_sha256, remove_temp_files, write_json
 
 log = logging.getLogger("lit3d.data")
 
@@ -84,6 +84,7 @@ def atomic_save_npz(path: str | os.PathLike, compress: bool = True, **arrays: np
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=TMP_SUFFIX)
     try:
+        os.fchmod(fd, file_mode())  # the umask's mode (0644 under 022), not mkstemp's 0600
         with os.fdopen(fd, "wb") as f:
             (np.savez_compressed if compress else np.savez)(f, **arrays)
         os.replace(tmp, path)

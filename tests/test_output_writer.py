@@ -254,3 +254,14 @@ def test_nan_colours_are_refused_in_one_line(tmp_path, binary, capsys):
     lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert len(lines) == 1 and str(bad) in lines[0] and "NaN" in lines[0], lines
     assert _tree(tmp_path) == before
+
+
+def test_data_cache_items_get_the_users_umask(tmp_path):
+    from datamodules.cache import atomic_save_npz
+
+    old = os.umask(0o022)
+    try:
+        p = atomic_save_npz(tmp_path / "items" / "a.npz", x=np.zeros(3))
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(p.stat().st_mode) == 0o644
