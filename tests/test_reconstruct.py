@@ -254,6 +254,7 @@ def test_cli_units_name_collisions_and_modes(tiny_ckpt, tmp_path):
     a, b = (json.loads((out / f"chair_{k}.json").read_text()) for k in ("png", "npy"))
     assert b["depth_units"].startswith("integer") and b["depth_scale"] == 0.001 and b["depth_dtype"] == "uint16"
     assert b["no_reading_pixels"] == int((mm == 0).sum()) and a["no_reading_pixels"] == 0
+    assert a["camera"].startswith("default: the 3D-RecGAN++ camera, fov 49.124")
     np.testing.assert_allclose(b["placement"]["centre_m"], a["placement"]["centre_m"], rtol=1e-6)
     assert 0.5 < a["placement"]["centre_m"][2] < 5  # metres, not kilometres
 

@@ -80,6 +80,17 @@ def _intrinsics(args, width: int, height: int, label: str):
     return Intrinsics.from_fov(fov, width, height).check(width, height, label)
 
 
+def _camera_source(args) -> str:
+    """Where the intrinsics came from (written to the JSON: a unit assumed is a unit stated)."""
+    from lit3d.reconstruct.backproject import RECGAN_FOV_DEG
+
+    if args.fx is not None:
+        return "--fx --fy --cx --cy (pixels)"
+    if args.fov is not None:
+        return f"--fov {args.fov:g} deg, principal point at the centre"
+    return f"default: the 3D-RecGAN++ camera, fov {RECGAN_FOV_DEG:g} deg across width and height, centred"
+
+
 def _check_args(args) -> None:
     from lit3d.reconstruct.depth_io import InputError
 
@@ -176,7 +187,7 @@ def _one(args, path: Path, name: str, completer, mapper, scorer, protected) -> d
         files[".png"] = figure_png(depth, res.keep, res.points, res.mesh, title, args.size)
         timings["figure"] = time.perf_counter() - t0
     summary = {
-        "input": str(path), "image_size": [w, h], "intrinsics": intr.as_dict(), "depth_scale": units["depth_scale_applied"],
+        "input": str(path), "image_size": [w, h], "intrinsics": intr.as_dict(), "camera": _camera_source(args), "depth_scale": units["depth_scale_applied"],
         "depth_units": units["units"], "depth_dtype": units["dtype"], "no_reading_pixels": units["no_reading_pixels"],
         "checkpoint": completer.path, "threshold": completer.threshold, "device": args.device,
         "geometry": completer.geometry.as_dict(), "placement": res.placement.as_dict(),
