@@ -38,12 +38,11 @@ Bad input: every depth image is checked when rendered and when the cache is read
 ``skip_bad=True`` a bad posed image or mesh drops that pose and a bad canonical image drops
 the subject, each with a logged warning, counted in ``describe()["skipped_bad_files"]``.
 
-Splits (``split``: ``subject_pose`` or ``pose``): :mod:`datamodules.canonical.splits`.
+Splits (``split``: ``subject_pose``, ``pose`` or ``all``): :mod:`datamodules.canonical.splits`.
 """
 from __future__ import annotations
 
 import logging
-from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -51,13 +50,16 @@ import lightning.pytorch as pl
 import numpy as np
 from torch.utils.data import DataLoader
 
-from datamodules.cache import CacheBuilder, DataError, atomic_save_npz, read_manifest
+from datamodules.cache import CacheBuilder, DataError, atomic_save_npz
 from datamodules.canonical.blends import add_blends
 from datamodules.canonical.dataset import PairDataset, mirror_views, subject_balanced_sampler
-from datamodules.canonical.images import depth_image_problem, pairs_png, read_subject, unpack_mask
+from datamodules.canonical.images import (depth_image_problem, pairs_png, read_subject, remove_legacy_subject_files,
+                                          unpack_mask)
 from datamodules.canonical.sources import ROOTLESS, SOURCES, Shrec14Source, SynthSource, ToscaSource, make_source
-from datamodules.canonical.splits import SPLITS, deal, split_pose, split_subject_pose, thin_training
+from datamodules.canonical.splits import (SPLIT_MODES, SPLITS, deal, fold_pairs, split_counts, split_pose,
+                                          split_subject_pose, thin_training)
 from datamodules.loaders import evaluation_loader
+from datamodules.synth import bodies
 from lit3d.geometry.normalise import normalise_vertices
 from lit3d.geometry.views import VIEW_MODES, base_azimuth
 from lit3d.render.depth import render_depth
@@ -67,7 +69,6 @@ log = logging.getLogger("lit3d")
 GENERATOR = "canonical"
 DATA_VERSION = "canonical-data-1"
 SUBJECTS_DIR = "subjects"  # the cache's item folder
-SPLIT_MODES = ("subject_pose", "pose", "all")
 
 __all__ = ["SPLITS", "CanonicalDataModule", "DataError", "PairDataset", "Shrec14Source", "SynthSource",
            "ToscaSource", "deal", "depth_image_problem", "read_subject", "split_pose", "split_subject_pose",
@@ -164,10 +165,8 @@ class CanonicalDataModule(pl.LightningDataModule):
         else:
             keys += ["root", "classes", "canonical_pose", "up_axis", "cla"]
         cfg = {k: (list(hp[k]) if isinstance(hp[k], (list, tuple)) else hp[k]) for k in keys}
-        if hp.source == "anny":
-            from datamodules.synth.bodies import BODIES_VERSION, anny_version
-
-            cfg["bodies"] = [BODIES_VERSION, anny_version()]
+        if hp.source == "anny":  # the sampler's and anny's versions: another release may pose differently
+            cfg["bodies"] = [bodies.BODIES_VERSION, bodies.anny_version()]
         if hp.skip_bad:  # a cache rendered while skipping may lack poses
             cfg["skip_bad"] = True
         if hp.view_mode != "fixed":  # absent for the old convention: its caches keep their hash
@@ -243,7 +242,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         builder = self.cache_builder()
         if builder.is_complete():
             return
-        self._remove_legacy_cache()
+        remove_legacy_subject_files(self.data_dir)
         builder.begin()
         subjects = self.source.subjects()
         try:
@@ -264,17 +263,6 @@ class CanonicalDataModule(pl.LightningDataModule):
                                      "image_size": self.hparams.image_size, "subjects": subjects,
                                      "categories": {s: self.source.category(s) for s in subjects},
                                      "skipped": skipped})
-
-    def _remove_legacy_cache(self) -> None:
-        """Delete the subject files of the cache layout before CacheBuilder (``data_dir/<subject>.npz``,
-        listed by a manifest without ``generator``); the new layout renders them again."""
-        try:
-            man = read_manifest(self.data_dir)
-        except DataError:
-            return
-        if man is not None and "generator" not in man:
-            for s in man.get("subjects", []):
-                (self.data_dir / f"{s}.npz").unlink(missing_ok=True)
 
     # ------------------------------------------------------------------ loading and splits
     def _load_cache(self) -> None:
@@ -341,15 +329,8 @@ class CanonicalDataModule(pl.LightningDataModule):
     def _pairs(self, fold: int) -> dict[str, list[tuple]]:
         """``{split: [(subject, pose), ...]}`` of fold ``fold`` over the loaded cache."""
         hp = self.hparams
-        subject_poses = {s: c["poses"] for s, c in self.cache.items()}
-        seed = self.split_seed
-        if hp.split == "all":
-            return {"train": [], "val": [], "test": [(s, p) for s, ps in sorted(subject_poses.items()) for p in ps]}
-        if hp.split == "subject_pose":
-            all_poses = sorted({p for ps in subject_poses.values() for p in ps})
-            pairs = split_subject_pose(list(subject_poses), all_poses, hp.n_folds, fold, seed)
-            return {k: [(s, p) for s, p in v if p in subject_poses[s]] for k, v in pairs.items()}
-        return split_pose(subject_poses, hp.n_folds, fold, seed, hp.val_per_subject)
+        return fold_pairs({s: c["poses"] for s, c in self.cache.items()}, hp.split, hp.n_folds, fold,
+                          self.split_seed, hp.val_per_subject)
 
     def held_out_records(self) -> list[dict]:
         """Every item some fold tests (``{"subject", "pose", "view"}``, sorted): the set that the
@@ -403,17 +384,12 @@ class CanonicalDataModule(pl.LightningDataModule):
                "skipped_bad_files": len(self.skipped),
                "split_mode": self.hparams.split, "fold": self.hparams.fold, "n_folds": self.hparams.n_folds,
                "subjects": len(self.cache)}
-        for k in SPLITS:
-            recs = self.splits[k]
-            out[k] = {"items": len(recs), "subjects": len({r["subject"] for r in recs}),
-                      "poses": len({r["pose"] for r in recs}),
-                      "per_category": dict(Counter(cats.get(r["subject"], r["subject"]) for r in recs))}
+        out.update({k: split_counts(self.splits[k], cats) for k in SPLITS})
         return out
 
     def show(self, n: int, path: str | Path, split: str = "test") -> Path:
-        """PNG with one row per sample: posed depth | posed mask | canonical depth | canonical mask;
-        beside it ``<stem>_shaded.png``, shaded meshes of a few subjects in their canonical and first
-        poses (:func:`~datamodules.canonical.sheets.pose_sheet`)."""
+        """PNG with one row per sample: posed depth | posed mask | canonical depth | canonical mask; beside
+        it ``<stem>_shaded.png`` (:func:`~datamodules.canonical.sheets.pose_sheet`: shaded subjects)."""
         from datamodules.canonical.sheets import pose_sheet
 
         if not self.datasets:

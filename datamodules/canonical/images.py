@@ -94,3 +94,18 @@ def pairs_png(dataset, n: int, path: str | Path) -> Path:
     Image.fromarray(img).save(buf, format="PNG")
     atomic_write_bytes(path, buf.getvalue())
     return path
+
+
+def remove_legacy_subject_files(data_dir: str | Path) -> None:
+    """Delete the subject files of the cache layout before CacheBuilder (``data_dir/<subject>.npz``,
+    listed by a manifest without ``generator``); the new layout renders them again."""
+    from datamodules.cache import read_manifest
+
+    data_dir = Path(data_dir)
+    try:
+        man = read_manifest(data_dir)
+    except DataError:
+        return
+    if man is not None and "generator" not in man:
+        for s in man.get("subjects", []):
+            (data_dir / f"{s}.npz").unlink(missing_ok=True)

@@ -8,9 +8,12 @@
     pose          (TOSCA: one subject per class) every subject's non-canonical poses are dealt
                   into ``n_folds`` groups; fold f tests group f; ``val_per_subject`` training
                   poses per subject go to validation.
+    all           evaluation only (FAUST, TOSCA's humans as new subjects): every item is a test
+                  item; train and val are empty.
 """
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Sequence
 
 import numpy as np
@@ -18,6 +21,7 @@ import numpy as np
 from datamodules.cache import DataError
 
 SPLITS = ("train", "val", "test")
+SPLIT_MODES = ("subject_pose", "pose", "all")
 
 
 def deal(items: Sequence, n_groups: int, seed: int) -> list[list]:
@@ -81,3 +85,23 @@ def thin_training(train: Sequence[tuple], fraction: float, seed: int) -> list[tu
         np.random.default_rng(seed + i).shuffle(order)
         keep |= {(s, p) for p in order[:max(1, round(float(fraction) * len(order)))]}
     return [sp for sp in train if sp in keep]
+
+
+def fold_pairs(subject_poses: dict[str, list], mode: str, n_folds: int, fold: int, seed: int,
+               val_per_subject: int = 1) -> dict[str, list[tuple]]:
+    """``{split: [(subject, pose), ...]}`` of fold ``fold`` under split ``mode`` (:data:`SPLIT_MODES`)
+    for ``subject_poses`` ``{subject: [pose, ...]}`` (only the poses each subject has)."""
+    if mode == "all":
+        return {"train": [], "val": [], "test": [(s, p) for s, ps in sorted(subject_poses.items()) for p in ps]}
+    if mode == "subject_pose":
+        all_poses = sorted({p for ps in subject_poses.values() for p in ps})
+        pairs = split_subject_pose(list(subject_poses), all_poses, n_folds, fold, seed)
+        return {k: [(s, p) for s, p in v if p in subject_poses[s]] for k, v in pairs.items()}
+    return split_pose(subject_poses, n_folds, fold, seed, val_per_subject)
+
+
+def split_counts(records: Sequence[dict], categories: dict[str, str]) -> dict:
+    """Items, subjects, poses and items per category of one split's ``{"subject", "pose", ...}`` records."""
+    return {"items": len(records), "subjects": len({r["subject"] for r in records}),
+            "poses": len({r["pose"] for r in records}),
+            "per_category": dict(Counter(categories.get(r["subject"], r["subject"]) for r in records))}
