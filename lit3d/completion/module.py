@@ -30,6 +30,8 @@ from lit3d.metrics.voxel import VoxelSweepMetrics, best_threshold, default_thres
 from lit3d.completion.nets import build_completion_nets, validate_net_config
 from lit3d.completion.paired import PairedSamples, extrude_silhouette
 from lit3d.completion.prior import mean_training_target
+from lit3d.completion.split_metrics import split_values, threshold_index
+from lit3d.metrics.gathered import compute_if_updated
 from lit3d.callbacks.nonfinite import NonFiniteLossError, guard_step, validate_mode  # noqa: F401 (re-exported)
 from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, select_seen_categories, select_unseen_categories
 
@@ -290,11 +292,10 @@ class CompletionTask(pl.LightningModule):
             self._log_panels(batch)
 
     def on_validation_epoch_end(self) -> None:
-        if self.val_metrics["model"].update_count == 0:  # no validation batch (an empty val split)
+        # updated together; skipped alike on every process when none saw a batch (an empty val split)
+        model, prior, inp = (compute_if_updated(self.val_metrics[s]) for s in ("model", "prior", "input"))
+        if model is None:
             return
-        model = self.val_metrics["model"].compute()
-        prior = self.val_metrics["prior"].compute()
-        inp = self.val_metrics["input"].compute()
         t, iou = best_threshold(model["iou"], self.thresholds)
         tp, iou_p = best_threshold(prior["iou"], self.thresholds)
         self.threshold.fill_(t)
@@ -302,16 +303,13 @@ class CompletionTask(pl.LightningModule):
         self.log_dict({
             "val/iou": iou, "val/threshold": t, "val/ce": float(model["ce"]),
             "val/iou_input": float(inp["iou"][0]), "val/iou_prior": iou_p,
-            "val/iou_at_0.5": float(model["iou"][self._thr_index(0.5)]),
+            "val/iou_at_0.5": float(model["iou"][threshold_index(self.thresholds, 0.5)]),
         }, sync_dist=False)
         for m in self.val_metrics.values():
             m.reset()
 
     def _source_thresholds(self) -> dict[str, float]:  # model and prior: chosen on validation
         return {"model": float(self.threshold), "prior": float(self.prior_threshold), "input": 0.5, "extrusion": 0.5}
-
-    def _thr_index(self, t: float) -> int:
-        return int(torch.argmin((self.thresholds - t).abs()))
 
     # ------------------------------------------------------------------ test
     def on_test_epoch_start(self) -> None:
@@ -331,30 +329,11 @@ class CompletionTask(pl.LightningModule):
         self.test_samples.update(SPLITS.index(split), cats, preds, batch["target"], self._source_thresholds())
 
     def on_test_epoch_end(self) -> None:
-        thresholds = self._source_thresholds()
         out: dict[str, float] = {"test/threshold": float(self.threshold)}
         out.update(self.test_samples.summary(SPLITS, self.eval_categories))
         self.test_samples.reset()
-        for split in SPLITS:
-            for src in SOURCES:
-                metric = self.test_metrics[f"{split}_{src}"]
-                if metric.update_count == 0:  # a split the test data lacks (e.g. no unseen categories)
-                    continue
-                res = metric.compute()
-                if float(res["count_per_category"].sum()) == 0:
-                    metric.reset()
-                    continue
-                j = self._thr_index(thresholds[src])
-                suffix = "" if src == "model" else f"_{src}"
-                out[f"test/{split}/iou{suffix}"] = float(res["iou"][j])
-                out[f"test/{split}/iou_pooled{suffix}"] = float(res["iou_pooled"][j])
-                out[f"test/{split}/ce{suffix}"] = float(res["ce"])
-                for c, cat in enumerate(self.eval_categories):
-                    if res["count_per_category"][c] > 0:
-                        out[f"test/{split}/iou{suffix}/{cat}"] = float(res["iou_per_category"][c, j])
-                        out[f"test/{split}/iou_pooled{suffix}/{cat}"] = float(res["iou_pooled_per_category"][c, j])
-                        out[f"test/{split}/ce{suffix}/{cat}"] = float(res["ce_per_category"][c])
-                metric.reset()
+        out.update(split_values(self.test_metrics, SPLITS, SOURCES, self._source_thresholds(), self.thresholds,
+                                self.eval_categories))
         self.log_dict(out, sync_dist=False)
 
     # ------------------------------------------------------------------ images

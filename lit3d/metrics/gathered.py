@@ -4,10 +4,15 @@ A protocol that needs every test sample at once (retrieval ranks each item again
 others) cannot be averaged batch by batch; :class:`GatheredTensors` keeps the batches as list
 states reduced by ``"cat"``, so :meth:`~GatheredTensors.compute` returns the samples of every
 process (torchmetrics gathers them; uneven shards are fine).
+
+:func:`compute_if_updated` computes any metric only when some process updated it, deciding the
+same way on every process (a ``compute()`` that syncs must be reached by all of them).
 """
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
+from typing import Any
 
 import torch
 from torchmetrics import Metric
@@ -44,3 +49,29 @@ class GatheredTensors(Metric):
         if any(isinstance(v, list) and not v for v in states.values()):
             return {}
         return {name: dim_zero_cat(v) for name, v in states.items()}
+
+
+def compute_if_updated(metric: Metric) -> Any | None:
+    """``metric.compute()``, or None when no process updated ``metric`` (nothing is computed).
+
+    The update counts are summed over the processes the metric syncs with (one ``all_reduce``,
+    only when its ``compute()`` would sync), so every process takes the same branch: a process
+    that saw no batch still joins the others' ``compute()`` and its state gathering, where a
+    decision on its own ``update_count`` would leave them waiting. It then computes from the
+    other processes' states, so torchmetrics' "compute called before update" warning is
+    silenced there; on one process an unused metric is simply skipped (no warning either).
+    """
+    local = int(metric.update_count)
+    total = local
+    if metric.sync_on_compute and metric.distributed_available_fn():
+        import torch.distributed as dist
+
+        count = torch.tensor([local], dtype=torch.int64, device=metric.device)
+        dist.all_reduce(count, op=dist.ReduceOp.SUM, group=metric.process_group)
+        total = int(count.item())
+    if total == 0:
+        return None
+    with warnings.catch_warnings():
+        if local == 0:
+            warnings.filterwarnings("ignore", message=r".*was called before the ``update`` method")
+        return metric.compute()
