@@ -5,7 +5,8 @@ bench, chair, couch, table) and unseen categories (car, faucet, firearm, guitar,
 monitor, plane), renders one depth view per sample and voxelises it like
 3D-RecGAN++ (see :mod:`datamodules.synth.depth_voxels`).
 ``CompletionDataModule(source="recgan", root=PATH)`` converts the real release
-(see :mod:`datamodules.readers.recgan`). Both write the same packed-bit cache
+(see :mod:`datamodules.readers.recgan`). ``source="meshes" | "shapenet" | "sweethome3d"`` renders
+real CAD models the procedural way (:mod:`datamodules.completion_meshes`). Both write the same packed-bit cache
 (:mod:`datamodules.voxel_cache`) with a ``manifest.json`` into ``data_dir``.
 
 Batches (default collate) are dicts:
@@ -26,6 +27,7 @@ import numpy as np
 from torch.utils.data import DataLoader
 
 from datamodules.cache import CacheBuilder, DataError, bytes_on_disk, stable_seed
+from datamodules.completion_meshes import MESH_SOURCES
 from datamodules.loaders import evaluation_loader
 from datamodules.synth.sensor import SENSORS, make_sensor
 from datamodules.voxel_cache import VoxelPairDataset, load_pair, save_pair
@@ -42,6 +44,9 @@ TEST_SPLITS = ("test_same", "test_cross", "test_unseen", "test_unseen_cross")
 DEFAULT_SIZES = {"train": 240, "val": 40, "test_same": 40, "test_cross": 40, "test_unseen": 40}
 SYNTH_VERSION = "1"
 RECGAN_VERSION = "1"
+MESHES_VERSION = "1"
+SOURCES = ("synth", "recgan") + MESH_SOURCES
+DEFAULT_MODEL_SPLIT = {"train": 0.7, "val": 0.1, "test": 0.2}
 
 
 class DataConfigError(DataError):
@@ -156,10 +161,11 @@ class CompletionDataModule(pl.LightningDataModule):
                  batch_size: int = 4, num_workers: int = 0, seed: int = 0, skip_bad: bool = False,
                  pin_memory: bool = False, views_per_shape: int = 4, unseen_view_set: str = "same",
                  val_fraction: float = 0.1, raw_res: int = 256, compress: bool = True, render_factor: int = 2,
-                 progress: bool = True, sensor: str | dict = "ortho"):
+                 progress: bool = True, sensor: str | dict = "ortho", model_split: dict | None = None,
+                 min_models: int = 8, up_axis: str = "y", prepare_workers: int = 0):
         super().__init__()
-        if source not in ("synth", "recgan"):
-            raise DataConfigError(f"data.source={source!r}: expected 'synth' or 'recgan'")
+        if source not in SOURCES:
+            raise DataConfigError(f"data.source={source!r}: expected one of {', '.join(SOURCES)}")
         if target_res % input_factor:
             raise DataConfigError(f"data.target_res={target_res} is not divisible by data.input_factor={input_factor}")
         try:
@@ -183,6 +189,11 @@ class CompletionDataModule(pl.LightningDataModule):
             self.sensor = make_sensor(dict(sensor) if hasattr(sensor, "keys") else sensor)
         except (TypeError, ValueError) as exc:
             raise DataConfigError(f"data.sensor: {exc}") from None
+        self.model_split = {str(k): float(v) for k, v in dict(model_split or DEFAULT_MODEL_SPLIT).items()}
+        if set(self.model_split) != set(DEFAULT_MODEL_SPLIT) or min(self.model_split.values()) < 0:
+            raise DataConfigError(f"data.model_split={dict(model_split)}: expected fractions >= 0 for train, val and test")
+        self.min_models, self.up_axis = int(min_models), str(up_axis)
+        self.prepare_workers = int(prepare_workers)
         self.manifest: dict | None = None
         self.datasets: dict[str, VoxelPairDataset] = {}
         self.test_split_names = []
@@ -193,18 +204,22 @@ class CompletionDataModule(pl.LightningDataModule):
         cfg = {"source": self.source, "target_res": self.target_res, "input_factor": self.input_factor,
                "categories": list(self.categories), "unseen_categories": list(self.unseen_categories),
                "seed": self.seed, "compress": self.compress}
-        if self.source == "synth":
+        if self.source != "recgan":
             cfg.update(sizes={k: int(v) for k, v in sorted(self.sizes.items())}, views_per_shape=self.views_per_shape,
                        unseen_view_set=self.unseen_view_set, render_factor=self.render_factor)
             if self.sensor != SENSORS["ortho"]:  # the original data keeps its hash
                 cfg.update(sensor=self.sensor.as_dict())
+        if self.source in MESH_SOURCES:
+            cfg.update(root=str(self.root.resolve()) if self.root else None, model_split=self.model_split,
+                       min_models=self.min_models, up_axis=self.up_axis, skip_bad=self.skip_bad)
         else:
             cfg.update(root=str(self.root.resolve()) if self.root else None, raw_res=self.raw_res,
                        val_fraction=self.val_fraction, skip_bad=self.skip_bad)
         return cfg
 
     def _builder(self) -> CacheBuilder:
-        gen, ver = ("completion_synth", SYNTH_VERSION) if self.source == "synth" else ("completion_recgan", RECGAN_VERSION)
+        gen, ver = {"synth": ("completion_synth", SYNTH_VERSION), "recgan": ("completion_recgan", RECGAN_VERSION)}.get(
+            self.source, (f"completion_{self.source}", MESHES_VERSION))
         return CacheBuilder(self.data_dir, gen, ver, self.cache_config())
 
     # ---------------------------------------------------------------- preparation
@@ -218,6 +233,10 @@ class CompletionDataModule(pl.LightningDataModule):
         builder.begin()
         if self.source == "synth":
             items, extra = self._prepare_synth(builder)
+        elif self.source in MESH_SOURCES:
+            from datamodules.completion_meshes import prepare_mesh_items  # noqa: PLC0415
+
+            items, extra = prepare_mesh_items(self, builder)
         else:
             items, extra = self._prepare_recgan(builder)
         extra.update(target_res=self.target_res, input_res=self.input_res,

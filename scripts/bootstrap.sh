@@ -25,6 +25,20 @@ if ! have_egl; then
   fi
 fi
 
+# Real CAD furniture for the completion data (data.source=sweethome3d, used by make demo): CC0 / CC-BY
+# models, about 120 MB. Optional: without it the demo falls back to procedural shapes and says so.
+SH3D_PKG=sweethome3d-furniture
+if ! compgen -G "/usr/share/sweethome3d/furniture/*.sh3f" >/dev/null; then
+  if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null; then
+    echo "bootstrap: installing real furniture models ($SH3D_PKG)"
+    (DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $SH3D_PKG >/dev/null 2>&1 \
+      || { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $SH3D_PKG; } >/dev/null 2>&1) \
+      || echo "bootstrap: could not install $SH3D_PKG; the completion demo will use procedural shapes"
+  else
+    echo "bootstrap: optional: 'sudo apt-get install $SH3D_PKG' gives the completion demo real furniture"
+  fi
+fi
+
 if [ ! -x "$VENV/bin/python" ]; then
   echo "bootstrap: creating $VENV"
   "$PYTHON" -m venv "$VENV"

@@ -1,15 +1,26 @@
 #!/usr/bin/env bash
-# Shape completion on built-in synthetic data (3D-RecGAN++ geometry):
+# Shape completion in the 3D-RecGAN++ geometry: real Sweet Home 3D furniture for the seen categories when
+# the catalogues are installed (the bootstrap installs them), else procedural shapes (said in one line):
 # generate -> train -> test the best checkpoint -> evaluate from the checkpoint (tables + PNGs).
 #   EXPERIMENT=completion_cpu DEMO_DIR=logs/completion_cpu bash scripts/demo_completion.sh   (the longer CPU run)
+#   COMPLETION_SOURCE=synth|sweethome3d  (default auto: sweethome3d when installed)
 set -euo pipefail
 BIN=${VENV:-.venv}/bin
 OUT=${DEMO_DIR:-logs/demo}
 EXP=${EXPERIMENT:-completion_demo}
+SOURCE=${COMPLETION_SOURCE:-auto}
+CATALOGUES=/usr/share/sweethome3d/furniture
+if [ "$SOURCE" = auto ]; then
+  if compgen -G "$CATALOGUES/*.sh3f" >/dev/null; then SOURCE=sweethome3d; else
+    SOURCE=synth
+    echo "note: no Sweet Home 3D furniture in $CATALOGUES (apt-get install sweethome3d-furniture): completion uses procedural shapes"
+  fi
+fi
+DATA=(data.source="$SOURCE" "data.data_dir=\${paths.data_dir}/${EXP}_$SOURCE")
 rm -rf "$OUT/train" "$OUT/eval" "$OUT/eval_recgan"
 mkdir -p "$OUT"
-"$BIN/lit3d-data" experiment="$EXP" hydra.run.dir="$OUT/data" --show 8 > "$OUT/data_summary.json"
-"$BIN/lit3d-train" experiment="$EXP" hydra.run.dir="$OUT/train" "$@"
+"$BIN/lit3d-data" experiment="$EXP" "${DATA[@]}" data.prepare_workers=2 hydra.run.dir="$OUT/data" --show 8 > "$OUT/data_summary.json"
+"$BIN/lit3d-train" experiment="$EXP" "${DATA[@]}" hydra.run.dir="$OUT/train" "$@"
 CKPT=$(ls "$OUT"/train/checkpoints/best-*.ckpt | head -n 1)
 "$BIN/lit3d-eval" task=completion ckpt_path="$CKPT" hydra.run.dir="$OUT/eval"
 SAMPLE=../shared/data/recgan_sample

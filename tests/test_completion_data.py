@@ -226,7 +226,7 @@ def test_recgan_without_root_says_how_to_fix(tmp_path):
     with pytest.raises(DataError, match=r"data\.root=PATH"):
         dm.prepare_data()
     with pytest.raises(DataError, match="source"):
-        CompletionDataModule(source="shapenet", data_dir=str(tmp_path))
+        CompletionDataModule(source="shapnet", data_dir=str(tmp_path))
 
 
 def test_categories_are_the_one_list_and_are_checked(tmp_path):

@@ -28,6 +28,7 @@ import itertools
 import numpy as np
 
 from datamodules.synth.furniture import Shape, shape_mesh
+from datamodules.synth.mesh_shapes import MeshShape
 from datamodules.synth.sensor import Sensor, bin_points, make_sensor, render_perspective, sensed_points
 from datamodules.voxel_cache import max_pool_bool
 from lit3d.render.camera import OrthoCamera, look_at, render_ortho_depth
@@ -122,12 +123,35 @@ def solid_occupancy(shape: Shape, geom: ViewGeometry, pad: float = 0.5) -> np.nd
     return occ
 
 
-def render_depth(shape: Shape, geom: ViewGeometry, pixels: int) -> np.ndarray:
+def mesh_solid(shape: MeshShape, geom: ViewGeometry, spacing: float = 0.5) -> np.ndarray:
+    """(res, res, res) bool solid of a real mesh on the view grid (:mod:`lit3d.geometry.solid_voxels`);
+    ``spacing``: the surface samples' largest gap in voxels (0.5 / f mimics a grid f times finer)."""
+    from lit3d.geometry.solid_voxels import solid_voxels  # noqa: PLC0415
+
+    h = geom.res / 2
+    gl = geom.to_voxel(shape.points)
+    index_coords = np.stack([gl[:, 0] + h, gl[:, 1] + h, h - gl[:, 2]], axis=1)
+    return solid_voxels(index_coords, shape.faces, geom.res, spacing=spacing)
+
+
+def target_occupancy(shape: Shape | MeshShape, geom: ViewGeometry, pad: float = 0.5, spacing: float = 0.5) -> np.ndarray:
+    """(res, res, res) bool target: analytic primitives (grown by ``pad`` voxels) or a real mesh's solid."""
+    if isinstance(shape, MeshShape):
+        return mesh_solid(shape, geom, spacing)
+    return solid_occupancy(shape, geom, pad)
+
+
+def surface_mesh(shape: Shape | MeshShape):
+    """The shape's triangles as one trimesh (what the depth camera sees)."""
+    return shape.mesh() if isinstance(shape, MeshShape) else shape_mesh(shape)
+
+
+def render_depth(shape: Shape | MeshShape, geom: ViewGeometry, pixels: int) -> np.ndarray:
     """(pixels, pixels) float64 orthographic eye depth in voxel units (0 = background).
 
     Row 0 is the top of the image (GL +y). The camera sits at GL z = res looking along -z.
     """
-    mesh = shape_mesh(shape)
+    mesh = surface_mesh(shape)
     res = geom.res
     camera = OrthoCamera(half_width=res / 2, znear=1.0, zfar=3.0 * res)
     depth, _ = render_ortho_depth(geom.to_voxel(np.asarray(mesh.vertices)), np.asarray(mesh.faces),
@@ -140,15 +164,18 @@ def max_pool(grid: np.ndarray, factor: int) -> np.ndarray:
     return max_pool_bool(grid, factor)
 
 
-def make_sample(shape: Shape, view: tuple[float, float, float], target_res: int = 64, input_factor: int = 4,
+def make_sample(shape: Shape | MeshShape, view: tuple[float, float, float], target_res: int = 64, input_factor: int = 4,
                 render_factor: int = 2, margin: float = 1.0, pad: float = 0.5, push: float = 0.25,
-                sensor: Sensor | str | dict | None = None, rng: np.random.Generator | None = None) -> dict[str, np.ndarray]:
+                sensor: Sensor | str | dict | None = None, rng: np.random.Generator | None = None,
+                with_target: bool = True) -> dict[str, np.ndarray]:
     """One view of ``shape`` -> dict(input=(r,r,r) bool, target=(R,R,R) bool, surface=(R,R,R) bool).
 
     ``R = target_res``, ``r = R / input_factor``; ``surface`` is the partial grid before pooling.
     ``sensor`` (:mod:`datamodules.synth.sensor`: a name, a dict or a Sensor; default the
     orthographic, noise-free one) decides the camera, handedness and noise; ``rng`` draws the
-    noise (required when the sensor is noisy).
+    noise (required when the sensor is noisy). ``with_target=False`` leaves ``target`` None.
+    With a raw-resolution sensor a real mesh's target is made on the target grid directly
+    (:mod:`datamodules.synth.mesh_shapes`); a procedural one's at the raw grid, then pooled.
     """
     if target_res % input_factor:
         raise ValueError(f"target_res={target_res} is not divisible by input_factor={input_factor}")
@@ -157,19 +184,30 @@ def make_sample(shape: Shape, view: tuple[float, float, float], target_res: int 
         if sensor.raw_res % target_res:
             raise ValueError(f"sensor raw_res={sensor.raw_res} is not a multiple of target_res={target_res}")
         f = sensor.raw_res // target_res
+        direct = isinstance(shape, MeshShape)
         raw = make_sample(shape, view, sensor.raw_res, input_factor * f, max(1, render_factor // f), margin, pad,
-                          push, sensor, rng)
-        surface, target = max_pool(raw["surface"], f), max_pool(raw["target"], f)
+                          push, sensor, rng, with_target=with_target and not direct)
+        surface = max_pool(raw["surface"], f)
+        if not with_target:
+            target = None
+        elif direct:  # the same normalisation as the raw grid's: margin / f voxels of the coarser grid
+            target = target_occupancy(shape, ViewGeometry(shape, camera_rotation(*view), target_res, margin / f), pad,
+                                      spacing=0.5 / f)
+            if sensor.mirror_x:
+                target = target[::-1].copy()
+        else:
+            target = max_pool(raw["target"], f)
         return {"input": max_pool(surface, input_factor), "target": target, "surface": surface}
     geom = ViewGeometry(shape, camera_rotation(*view), target_res, margin)
-    target = solid_occupancy(shape, geom, pad)
+    target = target_occupancy(shape, geom, pad) if with_target else None
     if sensor.camera == "perspective":
-        mesh = shape_mesh(shape)
+        mesh = surface_mesh(shape)
         depth = render_perspective(geom.to_voxel(np.asarray(mesh.vertices)), np.asarray(mesh.faces), sensor,
                                    target_res, render_factor)
     else:
         depth = render_depth(shape, geom, render_factor * target_res)
     surface = bin_points(sensed_points(depth, sensor, target_res, render_factor, push, rng), target_res)
     if sensor.mirror_x:  # 3D-RecGAN++'s x axis points to the image's left
-        surface, target = surface[::-1].copy(), target[::-1].copy()
+        surface = surface[::-1].copy()
+        target = None if target is None else target[::-1].copy()
     return {"input": max_pool(surface, input_factor), "target": target, "surface": surface}

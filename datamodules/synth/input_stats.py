@@ -14,8 +14,10 @@ Per pair of a 2.5D surface grid and its complete target (both ``(R, R, R) bool``
 
 ``recgan_rows`` reads a 3D-RecGAN++ folder (its pairs pooled from 256^3 to ``R``);
 ``synthetic_rows`` generates seen-category samples with a sensor of
-:mod:`datamodules.synth.sensor`. ``python -m datamodules.synth.input_stats --real ROOT`` prints
-both side by side per resolution (the README's calibration table).
+:mod:`datamodules.synth.sensor`; ``cad_rows`` does the same with real CAD models
+(``--cad sweethome3d``, ``--cad meshes=DIR``, ``--cad shapenet=DIR``).
+``python -m datamodules.synth.input_stats --real ROOT`` prints them side by side per resolution
+(the README's calibration table), then per category.
 """
 from __future__ import annotations
 
@@ -85,6 +87,46 @@ def synthetic_rows(res: int, sensor, per_category: int = 6, seed: int = 0, input
     return rows
 
 
+def cad_rows(res: int, sensor, source: str = "sweethome3d", root: str | None = None, per_category: int = 6,
+             seed: int = 0, input_factor: int = 4, categories: Sequence[str] = ("bench", "chair", "couch", "table"),
+             view_set: str = "same") -> list[dict]:
+    """Rows for up to ``per_category`` real models per category (seeded pick, one random view each)."""
+    from datamodules.cache import stable_seed
+    from datamodules.completion_meshes import index_models
+    from datamodules.synth.depth_voxels import VIEW_SETS, make_sample
+    from datamodules.synth.mesh_shapes import mesh_shape
+
+    models, _ = index_models(source, root)
+    views = VIEW_SETS[view_set]
+    rows = []
+    for category in categories:
+        ms = sorted((m for m in models if m.category == category), key=lambda m: m.model_id)
+        rng = np.random.default_rng(stable_seed(seed, "input_stats_cad", category))
+        for m in (ms[i] for i in rng.permutation(len(ms))[:per_category]):
+            s = make_sample(mesh_shape(m), views[int(rng.integers(len(views)))], target_res=res,
+                            input_factor=input_factor, sensor=sensor, rng=rng)
+            rows.append({"category": category, "folder": view_set, "name": m.model_id,
+                         **pair_statistics(s["surface"], s["target"], input_factor)})
+    return rows
+
+
+def category_table(columns: dict[str, list[dict]], stats: Sequence[str] = ("fill", "input_iou", "inside", "coverage")) -> str:
+    """A markdown table of per-category means (``n`` rows in brackets), one column per named row set."""
+    from lit3d.utils.tables import markdown_table as table
+
+    names = list(columns)
+    cats = sorted({r["category"] for rows in columns.values() for r in rows})
+    out = []
+    for cat in cats:
+        for k in stats:
+            cells = []
+            for n in names:
+                v = [r[k] for r in columns[n] if r["category"] == cat]
+                cells.append(f"{np.mean(v):.3f} ({len(v)})" if v else "–")
+            out.append([cat, k, *cells])
+    return table(["category", "statistic", *names], out)
+
+
 def summary(rows: Iterable[dict]) -> dict[str, tuple[float, float, float, float]]:
     """Per statistic: ``(mean, sd, min, max)`` over the rows."""
     rows = list(rows)
@@ -139,6 +181,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--sensor", nargs="+", default=["ortho", "recgan"], help="synthetic sensors (names)")
     ap.add_argument("--per-category", type=int, default=12)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--cad", nargs="*", default=[], metavar="SOURCE[=ROOT]",
+                    help="real CAD columns: sweethome3d (installed catalogues), meshes=DIR, shapenet=DIR")
     ap.add_argument("--write-fixture", metavar="JSON", help="only save the real folder's per-pair statistics "
                     "at the first --res to JSON (the tests' committed fixture)")
     args = ap.parse_args(argv)
@@ -146,10 +190,15 @@ def main(argv: list[str] | None = None) -> None:
         write_fixture(args.write_fixture, args.real, args.res[0])
         return
     for res in args.res:
-        cols = {"3D-RecGAN++ (real)": summary(recgan_rows(args.real, res))}
+        rows = {"3D-RecGAN++ (real)": recgan_rows(args.real, res)}
         for name in args.sensor:
-            cols[f"synthetic, {name}"] = summary(synthetic_rows(res, name, args.per_category, args.seed))
-        print(f"\n### R = {res}\n\n{markdown_table(cols)}")
+            rows[f"synthetic, {name}"] = synthetic_rows(res, name, args.per_category, args.seed)
+        for spec in args.cad:
+            source, _, root = spec.partition("=")
+            for name in args.sensor:
+                rows[f"{source}, {name}"] = cad_rows(res, name, source, root or None, args.per_category, args.seed)
+        cols = {k: summary(v) for k, v in rows.items()}
+        print(f"\n### R = {res}\n\n{markdown_table(cols)}\n\n#### per category, R = {res}\n\n{category_table(rows)}")
 
 
 if __name__ == "__main__":

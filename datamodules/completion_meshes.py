@@ -1,0 +1,203 @@
+"""Completion items from real CAD models (``data.source=meshes | shapenet | sweethome3d``).
+
+The plan is the procedural one (:func:`datamodules.completion.synth_items`: the same splits,
+view sets, views per shape and names) with a real model behind every item of a category that
+has at least ``min_models`` models; such a category's models are split by model id
+(:func:`datamodules.readers.cad_models.split_models`: train / val / test, test shared by
+test_same and test_cross as in 3D-RecGAN++), and unseen categories, never trained on, use all
+of theirs. A category with fewer models keeps procedural shapes, and the manifest says so
+(``fallback``). Each item is rendered and voxelised by
+:func:`datamodules.synth.depth_voxels.make_sample` like a procedural one.
+"""
+from __future__ import annotations
+
+import logging
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+from datamodules.cache import DataError, stable_seed
+from datamodules.readers.cad_models import CadModel, index_mesh_folder, index_shapenet, split_models
+
+log = logging.getLogger("lit3d.data")
+
+MESH_SOURCES = ("meshes", "shapenet", "sweethome3d")
+SPLIT_GROUP = {"train": "train", "val": "val", "test_same": "test", "test_cross": "test"}
+
+
+def index_models(source: str, root: str | Path | None) -> tuple[list[CadModel], list[dict]]:
+    """(models, dropped) of a mesh source; ``root`` None means the installed catalogues (sweethome3d)."""
+    if source == "sweethome3d":
+        from datamodules.readers.sweethome3d import index_sweethome3d  # noqa: PLC0415
+
+        return index_sweethome3d(root)
+    if root is None:
+        raise DataError(f"data.source={source} needs a folder: set data.root=PATH")
+    return (index_mesh_folder if source == "meshes" else index_shapenet)(root)
+
+
+def attach_models(items: list[dict], models: list[CadModel], seen: tuple[str, ...], fractions: dict[str, float],
+                  seed: int, min_models: int) -> tuple[list[dict], dict[str, str]]:
+    """Give every planned item of a category with enough models a ``model_id``.
+
+    Returns the items (those of fallback categories unchanged: procedural) and
+    ``{category: "procedural (N real models < min_models)"}`` for the categories that fell back.
+    """
+    by_cat: dict[str, list[CadModel]] = {}
+    for m in models:
+        by_cat.setdefault(m.category, []).append(m)
+    groups = split_models([m for m in models if m.category in seen], fractions, seed)
+    fallback = {}
+    for cat in sorted({it["category"] for it in items}):
+        n = len(by_cat.get(cat, []))
+        if n < min_models:
+            fallback[cat] = f"procedural ({n} real models < data.min_models={min_models})"
+    pools: dict[tuple[str, str], list[str]] = {}
+    for cat, ms in by_cat.items():
+        for m in sorted(ms, key=lambda m: m.model_id):
+            group = groups.get(m.model_id, "unseen") if cat in seen else "unseen"
+            pools.setdefault((cat, group), []).append(m.model_id)
+    out = []
+    for it in items:
+        cat = it["category"]
+        if cat in fallback:
+            out.append({**it, "shape_source": "procedural"})
+            continue
+        group = SPLIT_GROUP.get(it["split"], "unseen")
+        pool = pools.get((cat, group))
+        if not pool:
+            raise DataError(f"category {cat}: no {group} models after the model split; "
+                            f"raise data.min_models or change data.model_split")
+        model_id = pool[it["shape_index"] % len(pool)]
+        out.append({**it, "shape_source": "model", "model_id": model_id})
+    return out, fallback
+
+
+def mesh_pair(item: dict, shape, seed: int, target_res: int, input_factor: int, render_factor: int, sensor):
+    """One planned item of a real model -> (input, target) bool grids (noise seeded by the item)."""
+    from datamodules.synth.depth_voxels import make_sample  # noqa: PLC0415
+
+    noise = np.random.default_rng(stable_seed(seed, "sensor", item["split"], item["name"]))
+    out = make_sample(shape, tuple(item["view"]), target_res=target_res, input_factor=input_factor,
+                      render_factor=render_factor, sensor=sensor, rng=noise)
+    return out["input"], out["target"]
+
+
+def make_pairs(job: dict) -> list[tuple[str, str | None]]:
+    """Worker: generate and save every item of ``job`` (items of one or more models).
+
+    ``job``: items, models ({id: CadModel record}), data_dir, seed, target_res, input_factor,
+    render_factor, sensor (dict), compress, up_axis. Returns ``[(file, error or None)]``.
+    """
+    from datamodules.completion import synth_pair  # noqa: PLC0415
+    from datamodules.readers.cad_models import CadModel  # noqa: PLC0415
+    from datamodules.synth.mesh_shapes import mesh_shape  # noqa: PLC0415
+    from datamodules.synth.sensor import make_sensor  # noqa: PLC0415
+    from datamodules.voxel_cache import save_pair  # noqa: PLC0415
+
+    sensor = make_sensor(job["sensor"])
+    done, loaded = [], {}
+    for it in job["items"]:
+        try:
+            if it.get("shape_source") == "model":
+                mid = it["model_id"]
+                if mid not in loaded:
+                    loaded.clear()
+                    loaded[mid] = mesh_shape(CadModel(**job["models"][mid]), job["up_axis"])
+                inp, tgt = mesh_pair(it, loaded[mid], job["seed"], job["target_res"], job["input_factor"],
+                                     job["render_factor"], sensor)
+            else:
+                inp, tgt = synth_pair(it, job["seed"], job["target_res"], job["input_factor"], job["render_factor"], sensor)
+        except DataError as exc:
+            done.append((it["file"], str(exc)))
+            continue
+        save_pair(Path(job["data_dir"]) / it["file"], inp, tgt, compress=job["compress"])
+        done.append((it["file"], None))
+    return done
+
+
+def model_fields(m: CadModel) -> dict:
+    """The constructor fields of a CadModel (picklable, for worker jobs)."""
+    return {"model_id": m.model_id, "category": m.category, "files": m.files, "name": m.name, "licence": m.licence,
+            "creator": m.creator, "rotation": m.rotation, "size": m.size}
+
+
+def summary(models: list[CadModel], items: list[dict]) -> dict:
+    """Counts for the manifest: models per category, and models used per split."""
+    used: dict[str, set] = {}
+    for it in items:
+        if it.get("model_id"):
+            used.setdefault(it["split"], set()).add(it["model_id"])
+    return {"models_per_category": dict(sorted(Counter(m.category for m in models).items())),
+            "models_used_per_split": {s: len(v) for s, v in sorted(used.items())}}
+
+
+def _run_jobs(jobs: list[dict], workers: int):
+    """Run the worker jobs in-process (workers <= 1) or in ``workers`` spawned processes."""
+    if workers <= 1:
+        for job in jobs:
+            yield job, make_pairs(job)
+        return
+    import multiprocessing as mp  # noqa: PLC0415
+    from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: PLC0415
+
+    with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
+        futures = {pool.submit(make_pairs, job): job for job in jobs}
+        for fut in as_completed(futures):
+            yield futures[fut], fut.result()
+
+
+def prepare_mesh_items(dm, builder) -> tuple[list[dict], dict]:
+    """Plan, render and save the items of a mesh source into ``builder``; (items, manifest extra).
+
+    ``dm``: the :class:`~datamodules.completion.CompletionDataModule` (its sizes, categories,
+    sensor, model split, ``min_models``, ``up_axis``, ``skip_bad``, ``prepare_workers``).
+    """
+    from tqdm.auto import tqdm  # noqa: PLC0415
+
+    from datamodules.completion import synth_items  # noqa: PLC0415
+
+    models, dropped = index_models(dm.source, dm.root)
+    planned = synth_items(dm.sizes, dm.categories, dm.unseen_categories, dm.seed, dm.views_per_shape,
+                          dm.unseen_view_set)
+    items, fallback = attach_models(planned, models, dm.categories, dm.model_split, dm.seed, dm.min_models)
+    for cat, why in fallback.items():
+        log.warning("data.source=%s: %s keeps %s", dm.source, cat, why)
+    by_id = {m.model_id: m for m in models}
+    todo = sorted((it for it in items if not builder.has(it["file"])), key=lambda it: (it.get("model_id", ""), it["file"]))
+    jobs, chunk = [], []
+    for it in todo:  # jobs of whole models, about 8 items each
+        if chunk and len(chunk) >= 8 and it.get("model_id") != chunk[-1].get("model_id"):
+            jobs.append(chunk)
+            chunk = []
+        chunk.append(it)
+    if chunk:
+        jobs.append(chunk)
+    base = {"data_dir": str(builder.root), "seed": dm.seed, "target_res": dm.target_res, "input_factor": dm.input_factor,
+            "render_factor": dm.render_factor, "sensor": dm.sensor.as_dict(), "compress": dm.compress,
+            "up_axis": dm.up_axis}
+    jobs = [{**base, "items": c, "models": {it["model_id"]: model_fields(by_id[it["model_id"]])
+                                            for it in c if it.get("model_id")}} for c in jobs]
+    bad: dict[str, str] = {}
+    bar = tqdm(total=len(todo), desc=f"completion {dm.source}", unit="item", disable=not dm.progress, dynamic_ncols=True)
+    for _job, results in _run_jobs(jobs, dm.prepare_workers):
+        for file, error in results:
+            if error is not None:
+                if not dm.skip_bad:
+                    raise DataError(error)
+                bad[file] = error
+        bar.update(len(results))
+    bar.close()
+    if bad:
+        log.warning("skipped %d item(s) of unreadable models (data.skip_bad=true)", len(bad))
+    items = [it for it in items if it["file"] not in bad]
+    used = sorted({it["model_id"] for it in items if it.get("model_id")})
+    kept = [by_id[i] for i in used]
+    if dm.source == "sweethome3d":
+        from datamodules.readers.sweethome3d import credits_markdown  # noqa: PLC0415
+
+        (builder.root / "CREDITS.md").write_text(credits_markdown(kept))
+    extra = {"skipped": sorted(set(bad.values())), "fallback": fallback, "dropped": dropped,
+             "models": [m.record() for m in kept], **summary(models, items)}
+    return items, extra
