@@ -131,7 +131,7 @@ def mesh_solid(shape: MeshShape, geom: ViewGeometry, spacing: float = 0.5) -> np
     h = geom.res / 2
     gl = geom.to_voxel(shape.points)
     index_coords = np.stack([gl[:, 0] + h, gl[:, 1] + h, h - gl[:, 2]], axis=1)
-    return solid_voxels(index_coords, shape.faces, geom.res, spacing=spacing)
+    return solid_voxels(index_coords, shape.faces, geom.res, coarse=max(2, int(8 * spacing)), spacing=spacing)
 
 
 def target_occupancy(shape: Shape | MeshShape, geom: ViewGeometry, pad: float = 0.5, spacing: float = 0.5) -> np.ndarray:
