@@ -1,7 +1,7 @@
 """Solid 256^3 occupancy of real CAD meshes (the completion targets) vs trimesh's voxelise + fill.
 
-Models: six Sweet Home 3D chairs, tables and sofas when the catalogues are installed (multi-part,
-mostly open meshes), else six procedural chair meshes made of boxes. Each is placed like a
+Models: a Sweet Home 3D chair, table and sofa when the catalogues are installed (multi-part,
+mostly open meshes), else three procedural chair meshes made of boxes. Each is placed like a
 completion target (longest side 254 voxels of 256). Ours: :func:`lit3d.geometry.solid_voxels.solid_voxels`
 (shell, enclosed components, winding numbers for leaks). Baseline: ``mesh.voxelized(pitch).fill()``
 (trimesh's surface voxelisation and hole filling: the well-kept library's way, which leaks on open
@@ -18,7 +18,7 @@ from benchmarks.common import row
 RES = 256
 
 
-def sample_meshes(n: int = 6) -> tuple[list, str]:
+def sample_meshes(n: int = 3) -> tuple[list, str]:
     """(list of (name, vertices, faces) placed in the 256^3 grid, where they come from)."""
     try:
         from datamodules.readers.cad_models import load_model_mesh
@@ -26,7 +26,7 @@ def sample_meshes(n: int = 6) -> tuple[list, str]:
 
         models, _ = index_sweethome3d()
         picks = [m for cat in ("chair", "table", "couch") for m in sorted(
-            (m for m in models if m.category == cat), key=lambda m: m.model_id)[:2]][:n]
+            (m for m in models if m.category == cat), key=lambda m: m.model_id)[:1]][:n]
         meshes, where = [(m.model_id, load_model_mesh(m)) for m in picks], "Sweet Home 3D chairs, tables, sofas"
     except Exception:  # noqa: BLE001 (catalogues absent: procedural stand-ins)
         import trimesh

@@ -368,7 +368,8 @@ class CompletionDataModule(pl.LightningDataModule):
             inp, tgt = (torch.from_numpy(a).float() for a in load_pair(self.data_dir / it["file"]))
             views = [render_voxels(v, 0.5, cell, (FRONT_VIEW, BACK_VIEW), style) for v, style in
                      ((to_resolution(inp, self.target_res), "matt_blue"), (tgt, "clay_brown"))]
-            label = f"{s}\n{it['name']}\ninput {int(inp.sum())} of {inp.numel()} voxels\ntarget fill {float(tgt.mean()):.3f}"
+            origin = f"\nmodel {it['model_id'].split('/')[-1]}" if it.get("model_id") else ""
+            label = f"{s}\n{it['name']}{origin}\ninput {int(inp.sum())} of {inp.numel()} voxels\ntarget fill {float(tgt.mean()):.3f}"
             rows.append({"label": label, "cells": [views[0][0], views[1][0], views[0][1], views[1][1]]})
         if not rows:
             raise DataError(f"{self.data_dir}: no samples to show")

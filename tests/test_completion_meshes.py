@@ -249,3 +249,14 @@ def test_installed_sweethome3d_catalogues_give_real_furniture():
     counts = {c: sum(m.category == c for m in models) for c in ("chair", "table", "couch")}
     assert counts["chair"] >= 40 and counts["table"] >= 30 and counts["couch"] >= 15
     assert all(m.licence for m in models) and len(dropped) > 100
+
+
+def test_input_statistics_of_real_models(tmp_path):
+    from datamodules.synth.input_stats import STATS, cad_rows, category_table
+
+    write_chairs(tmp_path, 3)
+    rows = cad_rows(32, "ortho", "meshes", str(tmp_path), per_category=2, categories=("chair", "table"))
+    assert [r["category"] for r in rows] == ["chair", "chair"]
+    assert all(0 < r["fill"] < 0.5 and r["inside"] > 0.9 for r in rows) and set(STATS) <= set(rows[0])
+    table = category_table({"real": rows, "other": rows[:1]})
+    assert "| chair | fill |" in table and "(2)" in table and "(1)" in table
