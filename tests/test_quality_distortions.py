@@ -84,3 +84,39 @@ def test_levels_get_stronger(bumpy, kind):
         d = [float(np.linalg.norm(o.vertices - bumpy.vertices, axis=1).mean()) for o in outs]
     assert all(b > a for a, b in zip(d, d[1:])), d
     assert severity(kind, 0) == 1 / len(LEVELS[kind]) and severity(kind, len(LEVELS[kind]) - 1) == 1.0
+
+
+def _split_obj(mesh: trimesh.Trimesh) -> str:
+    """OBJ text of ``mesh`` with one normal per face (``f a//n``): trimesh loads every corner as
+    its own vertex, as it does the Stanford bunny's per-corner normals."""
+    lines = [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in mesh.vertices]
+    lines += [f"vn {x:.6f} {y:.6f} {z:.6f}" for x, y, z in mesh.face_normals]
+    lines += ["f " + " ".join(f"{a + 1}//{i + 1}" for a in face) for i, face in enumerate(mesh.faces)]
+    return "\n".join(lines) + "\n"
+
+
+def test_user_meshes_are_merged_by_position(tmp_path):
+    from datamodules.synth.quality_shapes import load_user_meshes
+
+    cube = trimesh.creation.box()
+    (tmp_path / "cube.obj").write_text(_split_obj(cube))
+    raw = trimesh.load(tmp_path / "cube.obj", force="mesh", process=False)
+    assert len(raw.vertices) == 3 * len(cube.faces) and not raw.is_watertight  # split by the loader
+    m = load_user_meshes(tmp_path)["cube"]
+    assert len(m.vertices) == len(np.unique(cube.vertices, axis=0)) == 8
+    assert len(m.faces) == 12 and m.is_watertight
+    np.testing.assert_allclose(m.volume, cube.volume, atol=1e-5)
+    # a per-vertex distortion keeps the surface closed (no seams along the split edges)
+    assert distort(m, "noise", 2, seed=1).is_watertight
+
+
+def test_user_mesh_faces_collapsed_by_merging_are_dropped(tmp_path):
+    from datamodules.synth.quality_shapes import load_user_meshes
+
+    cube = trimesh.creation.box()
+    # an extra face whose first two corners are two copies of one position (vertex 1 and a copy, 9)
+    x, y, z = cube.vertices[0]
+    text = _split_obj(cube) + f"v {x:.6f} {y:.6f} {z:.6f}\nf 1//1 9//1 2//1\n"
+    (tmp_path / "cube.obj").write_text(text)
+    m = load_user_meshes(tmp_path)["cube"]
+    assert len(m.vertices) == 8 and len(m.faces) == 12 and m.is_watertight

@@ -144,6 +144,8 @@ class QualityDataModule(pl.LightningDataModule):
         if self.source == "synth":
             cfg.update({"shapes": list(hp.shapes), "user_mesh_dir": hp.user_mesh_dir, "levels": self._levels(),
                         "subdivisions": hp.subdivisions, "seed": int(hp.seed)})
+            if hp.user_mesh_dir:  # user meshes merged by position (caches of split ones are stale)
+                cfg["user_meshes"] = "merged_by_position"
         else:
             cfg.update({"root": str(hp.root), "spreadsheet": hp.spreadsheet, "sheet": hp.sheet,
                         "score_range": list(hp.score_range) if hp.score_range else None,

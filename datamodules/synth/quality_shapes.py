@@ -75,8 +75,25 @@ def procedural_shape(name: str, subdivisions: int = 4, seed: int = 0) -> trimesh
     return trimesh.Trimesh(v, sphere.faces, process=False)
 
 
+def merge_by_position(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """``mesh`` with one vertex per position (in place): normals and texture coordinates ignored.
+
+    OBJ files with per-corner normals or UVs load split (the Stanford bunny: 19,794 vertices for
+    3,301 positions), and a per-vertex distortion would tear such a surface apart at every seam.
+    Faces that merging collapses (two corners on one position) are dropped; no other cleaning.
+    """
+    mesh.merge_vertices(merge_tex=True, merge_norm=True)
+    f = mesh.faces
+    keep = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
+    if not keep.all():
+        mesh.update_faces(keep)
+        mesh.remove_unreferenced_vertices()
+    return mesh
+
+
 def load_user_meshes(folder: str | Path) -> dict[str, trimesh.Trimesh]:
-    """Every mesh file in ``folder`` (name = file stem); one clear error per unreadable file."""
+    """Every mesh file in ``folder`` (name = file stem), its vertices merged by position
+    (:func:`merge_by_position`); one clear error per unreadable file."""
     folder = Path(folder).expanduser()
     if not folder.is_dir():
         raise FileNotFoundError(f"{folder}: user_mesh_dir not found")
@@ -88,7 +105,7 @@ def load_user_meshes(folder: str | Path) -> dict[str, trimesh.Trimesh]:
             m = trimesh.load(p, force="mesh", process=False)
         except Exception as exc:
             raise ValueError(f"{p}: not a readable mesh ({type(exc).__name__}: {exc})") from exc
-        if not isinstance(m, trimesh.Trimesh) or len(m.faces) == 0:
+        if not isinstance(m, trimesh.Trimesh) or len(m.faces) == 0 or len(merge_by_position(m).faces) == 0:
             raise ValueError(f"{p}: empty mesh (no faces)")
         out[p.stem] = m
     if not out:
