@@ -10,6 +10,9 @@
   (atomically). Re-running skips items already on disk (also when the manifest was
   deleted); a marker or manifest from another config/version, or item files of
   unknown origin, wipe the stale items first, so a cache never mixes two configs.
+  :meth:`CacheBuilder.locked` holds an inter-process lock (``flock`` on ``<root>/.lock``)
+  around a preparation: processes preparing one folder at once (the jobs of a multirun)
+  take turns, and the later ones find the cache complete.
 
 Manifest layout (``manifest.json``)::
 
@@ -22,14 +25,16 @@ Because every item carries the hash of its bytes, two preparations have the same
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import logging
 import os
 import shutil
 import tempfile
+import threading
 import zlib
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -41,9 +46,10 @@ log = logging.getLogger("lit3d.data")
 
 MANIFEST = "manifest.json"
 MARKER = "prepare.json"
+LOCK = ".lock"
 
 __all__ = [
-    "MANIFEST", "MARKER", "CacheBuilder", "DataError", "atomic_save_npz", "atomic_write_bytes",
+    "LOCK", "MANIFEST", "MARKER", "CacheBuilder", "DataError", "atomic_save_npz", "atomic_write_bytes",
     "clean_temp_files", "file_sha256", "read_manifest", "stable_hash", "stable_int_seed", "stable_seed", "write_json",
 ]
 
@@ -115,13 +121,20 @@ class CacheBuilder:
 
         b = CacheBuilder(root, generator="completion_synth", version="1", config=cfg)
         if not b.is_complete():
-            b.begin()
-            for item in items:
-                if not b.has(item["file"]):
-                    atomic_save_npz(b.path(item["file"]), ...)
-            b.finish(items, extra={...})
+            with b.locked():              # one process at a time prepares ``root``
+                if not b.is_complete():   # another one may have finished it meanwhile
+                    b.begin()
+                    for item in items:
+                        if not b.has(item["file"]):
+                            atomic_save_npz(b.path(item["file"]), ...)
+                    b.finish(items, extra={...})
         manifest = b.manifest()
     """
+
+    # (root, thread) -> depth of the locks this process holds: a nested ``locked()`` of the same
+    # folder in the same thread does not wait for itself (flock locks are per open file)
+    _held: dict[tuple[str, int], int] = {}
+    _held_guard = threading.Lock()
 
     def __init__(self, root: str | os.PathLike, generator: str, version: str, config: dict,
                  items_dir: str = "items"):
@@ -159,6 +172,40 @@ class CacheBuilder:
         return p.is_file() and p.stat().st_size > 0
 
     # ---------------------------------------------------------------- protocol
+    @contextlib.contextmanager
+    def locked(self) -> Iterator[None]:
+        """Hold the preparation lock of ``root`` (``flock`` on ``root/.lock``; blocking, with a log
+        line while another process holds it). Released on exit, exceptions included, and by the
+        system when the holder dies; re-entrant in one thread. Re-check :meth:`is_complete` inside."""
+        key = (str(self.root.resolve()), threading.get_ident())
+        with self._held_guard:
+            depth = self._held.get(key, 0)
+            if depth:
+                self._held[key] = depth + 1
+        if depth:
+            try:
+                yield
+            finally:
+                with self._held_guard:
+                    self._held[key] -= 1
+            return
+        self.root.mkdir(parents=True, exist_ok=True)
+        path = self.root / LOCK
+        with open(path, "a+") as f:
+            _flock_waiting(f, path)
+            with self._held_guard:
+                self._held[key] = 1
+            try:
+                f.seek(0)
+                f.truncate()
+                f.write(f"{os.getpid()}\n")  # who holds it, for the waiting processes' log line
+                f.flush()
+                yield
+            finally:
+                with self._held_guard:
+                    del self._held[key]
+                _funlock(f)
+
     def begin(self) -> None:
         """Start or resume: clean temp files, wipe items of another config, write the marker."""
         self.root.mkdir(parents=True, exist_ok=True)
@@ -200,6 +247,40 @@ class CacheBuilder:
         }
         write_json(self.root / MANIFEST, manifest)
         return manifest
+
+
+def _flock_waiting(f, path: Path) -> None:
+    """Exclusive ``flock`` on the open file ``f``; logs once when it has to wait. Without
+    ``fcntl`` (Windows) or on a file system that refuses locks: a warning, no lock."""
+    try:
+        import fcntl  # noqa: PLC0415
+    except ImportError:  # pragma: no cover - not POSIX
+        log.warning("%s: no fcntl here: preparing without the inter-process lock", path)
+        return
+    try:
+        fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        return
+    except BlockingIOError:
+        f.seek(0)
+        holder = f.read().strip() or "?"
+        log.info("%s: another process (pid %s) is preparing this data; waiting for it", path.parent, holder)
+    except OSError as exc:  # e.g. ENOLCK on some network file systems
+        log.warning("%s: cannot lock (%s): preparing without the inter-process lock", path, exc)
+        return
+    fcntl.flock(f.fileno(), fcntl.LOCK_EX)
+    log.info("%s: the other preparation is done; going on", path.parent)
+
+
+def _funlock(f) -> None:
+    """Forget the holder's pid, then release (closing the file would release it too)."""
+    try:
+        f.truncate(0)
+        f.flush()
+        import fcntl  # noqa: PLC0415
+
+        fcntl.flock(f.fileno(), fcntl.LOCK_UN)
+    except (ImportError, OSError):
+        pass
 
 
 def bytes_on_disk(root: str | os.PathLike, files: Iterable[str]) -> int:

@@ -230,18 +230,21 @@ class CompletionDataModule(pl.LightningDataModule):
         builder = self._builder()
         if builder.is_complete():
             return
-        builder.begin()
-        if self.source == "synth":
-            items, extra = self._prepare_synth(builder)
-        elif self.source in MESH_SOURCES:
-            from datamodules.completion_meshes import prepare_mesh_items  # noqa: PLC0415
+        with builder.locked():  # the jobs of a multirun may prepare one data_dir at once: one at a time
+            if builder.is_complete():  # another process prepared it while this one waited
+                return
+            builder.begin()
+            if self.source == "synth":
+                items, extra = self._prepare_synth(builder)
+            elif self.source in MESH_SOURCES:
+                from datamodules.completion_meshes import prepare_mesh_items  # noqa: PLC0415
 
-            items, extra = prepare_mesh_items(self, builder)
-        else:
-            items, extra = self._prepare_recgan(builder)
-        extra.update(target_res=self.target_res, input_res=self.input_res,
-                     seen_categories=list(SEEN_CATEGORIES))
-        builder.finish(items, extra)
+                items, extra = prepare_mesh_items(self, builder)
+            else:
+                items, extra = self._prepare_recgan(builder)
+            extra.update(target_res=self.target_res, input_res=self.input_res,
+                         seen_categories=list(SEEN_CATEGORIES))
+            builder.finish(items, extra)
 
     def _progress(self, iterable, total: int, desc: str):
         from tqdm.auto import tqdm  # noqa: PLC0415

@@ -242,27 +242,30 @@ class CanonicalDataModule(pl.LightningDataModule):
         builder = self.cache_builder()
         if builder.is_complete():
             return
-        remove_legacy_subject_files(self.data_dir)
-        builder.begin()
-        subjects = self.source.subjects()
-        try:
-            from tqdm import tqdm
+        with builder.locked():  # the jobs of a multirun may prepare one data_dir at once: one at a time
+            if builder.is_complete():  # another process prepared it while this one waited
+                return
+            remove_legacy_subject_files(self.data_dir)
+            builder.begin()
+            subjects = self.source.subjects()
+            try:
+                from tqdm import tqdm
 
-            it = tqdm(subjects, desc="render canonical pairs", leave=False)
-        except ImportError:  # pragma: no cover
-            it = subjects
-        items, skipped = [], []
-        for s in it:
-            rel = f"{SUBJECTS_DIR}/{s}.npz"
-            if not builder.has(rel):
-                atomic_save_npz(builder.path(rel), **self._render_subject(s))
-            with np.load(builder.path(rel), allow_pickle=False) as z:
-                skipped += [str(m) for m in z["skipped"]] if "skipped" in z.files else []
-            items.append({"file": rel, "subject": s})
-        builder.finish(items, extra={"complete": True, "source": self.hparams.source,
-                                     "image_size": self.hparams.image_size, "subjects": subjects,
-                                     "categories": {s: self.source.category(s) for s in subjects},
-                                     "skipped": skipped})
+                it = tqdm(subjects, desc="render canonical pairs", leave=False)
+            except ImportError:  # pragma: no cover
+                it = subjects
+            items, skipped = [], []
+            for s in it:
+                rel = f"{SUBJECTS_DIR}/{s}.npz"
+                if not builder.has(rel):
+                    atomic_save_npz(builder.path(rel), **self._render_subject(s))
+                with np.load(builder.path(rel), allow_pickle=False) as z:
+                    skipped += [str(m) for m in z["skipped"]] if "skipped" in z.files else []
+                items.append({"file": rel, "subject": s})
+            builder.finish(items, extra={"complete": True, "source": self.hparams.source,
+                                         "image_size": self.hparams.image_size, "subjects": subjects,
+                                         "categories": {s: self.source.category(s) for s in subjects},
+                                         "skipped": skipped})
 
     # ------------------------------------------------------------------ loading and splits
     def _load_cache(self) -> None:

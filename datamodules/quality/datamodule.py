@@ -222,26 +222,29 @@ class QualityDataModule(pl.LightningDataModule):
         builder = self.cache_builder()
         if builder.is_complete():
             return
-        builder.begin()
-        if self.source == "synth":
-            pairs = self._synth_pairs()
-            scaling = TargetScaling(0.0, 1.0, False, SEVERITY_NAME)
-        else:
-            pairs, scaling = self._real_pairs()
-        hp = self.hparams
-        tables, pairs, skipped = write_feature_tables(builder.root, pairs, hp.feature_fn, hp.feature_options,
-                                                      int(hp.feature_workers), bool(hp.skip_bad))
-        self.skipped += skipped
-        raw = np.array([p["score"] for p in pairs], dtype=np.float64)
-        fm = FeatureMatrix.from_tables(tables, [p["shape"] for p in pairs], scaling.forward(raw),
-                                       [p["item"] for p in pairs], dataset=self.name, target_name=scaling.name)
-        atomic_save_npz(builder.path("matrix.npz"), compress=False, X=fm.X, names=np.array(fm.names),
-                        shapes=fm.shapes, target=fm.target, items=np.array(fm.items), raw_score=raw)
-        write_json(builder.path("pairs.json"), pairs)
-        items = [{"file": feature_file(p["item"]), "item": p["item"], "shape": p["shape"]} for p in pairs]
-        builder.finish(items + [{"file": "matrix.npz"}, {"file": "pairs.json"}], extra={
-            "scaling": scaling.to_dict(), "target_name": scaling.name, "n_pairs": len(pairs),
-            "n_features": len(fm.names), "dataset": self.name, "skipped": self.skipped})
+        with builder.locked():  # the jobs of a multirun may prepare one data_dir at once: one at a time
+            if builder.is_complete():  # another process prepared it while this one waited
+                return
+            builder.begin()
+            if self.source == "synth":
+                pairs = self._synth_pairs()
+                scaling = TargetScaling(0.0, 1.0, False, SEVERITY_NAME)
+            else:
+                pairs, scaling = self._real_pairs()
+            hp = self.hparams
+            tables, pairs, skipped = write_feature_tables(builder.root, pairs, hp.feature_fn, hp.feature_options,
+                                                          int(hp.feature_workers), bool(hp.skip_bad))
+            self.skipped += skipped
+            raw = np.array([p["score"] for p in pairs], dtype=np.float64)
+            fm = FeatureMatrix.from_tables(tables, [p["shape"] for p in pairs], scaling.forward(raw),
+                                           [p["item"] for p in pairs], dataset=self.name, target_name=scaling.name)
+            atomic_save_npz(builder.path("matrix.npz"), compress=False, X=fm.X, names=np.array(fm.names),
+                            shapes=fm.shapes, target=fm.target, items=np.array(fm.items), raw_score=raw)
+            write_json(builder.path("pairs.json"), pairs)
+            items = [{"file": feature_file(p["item"]), "item": p["item"], "shape": p["shape"]} for p in pairs]
+            builder.finish(items + [{"file": "matrix.npz"}, {"file": "pairs.json"}], extra={
+                "scaling": scaling.to_dict(), "target_name": scaling.name, "n_pairs": len(pairs),
+                "n_features": len(fm.names), "dataset": self.name, "skipped": self.skipped})
 
     # ------------------------------------------------------------ setup
     def load_matrix(self) -> FeatureMatrix:
