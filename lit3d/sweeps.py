@@ -1,11 +1,13 @@
 """Collect the metrics.json of a multirun's jobs into one markdown table.
 
-Used as a Hydra callback by the configs in ``sweeps/`` (written when the
-multirun ends) and by hand:  ``python -m lit3d.sweeps SWEEP_DIR [METRIC ...]``.
+Used as a Hydra callback by every multirun (``hydra.callbacks.collect`` in ``conf/hydra/``;
+the configs in ``sweeps/`` set its metrics and title; written when the multirun ends) and by
+hand:  ``python -m lit3d.sweeps SWEEP_DIR [METRIC ...]``.
 """
 from __future__ import annotations
 
 import json
+import logging
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -16,6 +18,8 @@ from hydra.experimental.callback import Callback
 
 from lit3d.utils.tables import fmt, markdown_table
 from lit3d.utils.io import atomic_write_text
+
+log = logging.getLogger("lit3d.sweeps")
 
 
 def _override_key(override: str) -> str:
@@ -125,7 +129,11 @@ def over_seeds(results: dict[str, dict | None], metrics: Sequence[str]) -> dict[
 
 
 class CollectResults(Callback):
-    """Hydra callback: write ``sweep_results.md`` into the sweep dir when the multirun ends."""
+    """Hydra callback: write ``sweep_results.md`` into the sweep dir when the multirun ends.
+
+    On by default for every multirun (``conf/hydra/default.yaml`` and ``eval.yaml``:
+    ``hydra.callbacks.collect``); a table that cannot be made is a warning, not a failed multirun.
+    """
 
     def __init__(self, metrics: Sequence[str] | None = None, thesis: dict | None = None, title: str = "Sweep results"):
         self.metrics = list(metrics) if metrics else None
@@ -134,8 +142,13 @@ class CollectResults(Callback):
 
     def on_multirun_end(self, config, **kwargs) -> None:
         sweep_dir = Path(config.hydra.sweep.dir)
-        if sweep_dir.is_dir():
+        if not sweep_dir.is_dir():
+            return
+        try:
             print(collect(sweep_dir, self.metrics, self.thesis, self.title))
+        except Exception as exc:  # the jobs ran: a summary problem must not fail the multirun
+            log.warning("%s: no sweep_results.md (%s: %s); re-collect with python -m lit3d.sweeps %s",
+                        sweep_dir, type(exc).__name__, exc, sweep_dir)
 
 
 if __name__ == "__main__":

@@ -59,8 +59,7 @@ def test_two_job_multirun_through_submitit_local(tmp_path, compose_cfg):
     res = subprocess.run(
         [str(Path(sys.executable).parent / "lit3d-train"), "-m", "hydra/launcher=slurm_local", *TINY, "seed=1,2",
          f"paths.data_dir={data}", f"hydra.sweep.dir={sweep}",
-         "+hydra.callbacks.collect._target_=lit3d.sweeps.CollectResults",
-         f"+hydra.callbacks.collect.metrics=[{','.join(METRICS)}]"],
+         f"hydra.callbacks.collect.metrics=[{','.join(METRICS)}]"],  # the default collector's columns
         cwd=REPO, env={**os.environ, "OMP_NUM_THREADS": "1"},  # two jobs at once on a small CPU
         capture_output=True, text=True, timeout=600)
     job_logs = "\n".join(p.read_text()[-2000:] for p in sorted(sweep.glob(".submitit/*/*_log.*")))

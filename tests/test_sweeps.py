@@ -2,11 +2,23 @@
 from __future__ import annotations
 
 import json
+import logging
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
+import pytest
 import yaml
+from hydra import compose, initialize_config_dir
+from hydra.core.global_hydra import GlobalHydra
+from omegaconf import OmegaConf
 
-from lit3d.sweeps import collect, over_seeds
+from lit3d.cli.common import CONF_DIR
+from lit3d.sweeps import CollectResults, collect, over_seeds
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 def _job(root, name, overrides, metrics):
@@ -50,3 +62,49 @@ def test_seeds_given_on_the_command_line_are_grouped_too(tmp_path):
     text = collect(tmp_path, ["m"])
     assert "| 0 | task.nets.k=50, seed=42 | 0.400 |" in text
     assert f"| task.nets.k=100 | 2 | 0.700 ± {np.std([0.6, 0.8], ddof=1):.3f} |" in text
+
+
+def _hydra_callbacks(config_name: str, overrides: list[str]) -> dict:
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+            cfg = compose(config_name, overrides=overrides, return_hydra_config=True)
+        return OmegaConf.to_container(cfg.hydra.callbacks, resolve=False)
+    finally:
+        GlobalHydra.instance().clear()
+
+
+@pytest.mark.parametrize("config_name", ["train", "eval"])
+def test_every_multirun_collects_by_default(config_name):
+    assert _hydra_callbacks(config_name, [])["collect"] == {"_target_": "lit3d.sweeps.CollectResults", "metrics": None}
+    # its columns can be set without "+"
+    assert _hydra_callbacks(config_name, ["hydra.callbacks.collect.metrics=[test/a]"])["collect"]["metrics"] == ["test/a"]
+    # a sweep config sets the table's metrics and title on the same callback
+    collect_cb = _hydra_callbacks("train", ["experiment=completion_demo", "+sweep=completion_classifier"])["collect"]
+    assert collect_cb["_target_"] == "lit3d.sweeps.CollectResults" and collect_cb["metrics"]
+    assert "collect" not in _hydra_callbacks(config_name, ["~hydra.callbacks.collect"])
+
+
+def test_plain_multirun_writes_sweep_results_and_single_run_does_not(tmp_path):
+    """No callback on the command line: lit3d-summary (no training) as a 2-job multirun, then once."""
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "HYDRA_FULL_ERROR": "1"}
+    exe = str(Path(sys.executable).parent / "lit3d-summary")
+    sweep, run = tmp_path / "sweep", tmp_path / "run"
+    res = subprocess.run([exe, "-m", "experiment=completion_demo", "seed=1,2", f"hydra.sweep.dir={sweep}"],
+                         cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-3000:]
+    table = (sweep / "sweep_results.md").read_text()
+    assert "| 0 | seed=1 |" in table and "| 1 | seed=2 |" in table
+    res = subprocess.run([exe, "experiment=completion_demo", f"hydra.run.dir={run}"],
+                         cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert (run / ".hydra").is_dir() and not (run / "sweep_results.md").exists()
+
+
+def test_a_collect_failure_does_not_fail_the_multirun(tmp_path, caplog):
+    _job(tmp_path, "0", ["seed=0"], None)
+    (tmp_path / "0" / "metrics.json").write_text("{not json")
+    cfg = OmegaConf.create({"hydra": {"sweep": {"dir": str(tmp_path)}}})
+    with caplog.at_level(logging.WARNING, logger="lit3d.sweeps"):
+        CollectResults().on_multirun_end(cfg)
+    assert "no sweep_results.md" in caplog.text and not (tmp_path / "sweep_results.md").exists()
