@@ -247,15 +247,11 @@ class CanonicalDataModule(pl.LightningDataModule):
                 return
             remove_legacy_subject_files(self.data_dir)
             builder.begin()
-            subjects = self.source.subjects()
-            try:
-                from tqdm import tqdm
+            from tqdm import tqdm  # noqa: PLC0415 (a dependency)
 
-                it = tqdm(subjects, desc="render canonical pairs", leave=False)
-            except ImportError:  # pragma: no cover
-                it = subjects
+            subjects = self.source.subjects()
             items, skipped = [], []
-            for s in it:
+            for s in tqdm(subjects, desc="render canonical pairs", leave=False):
                 rel = f"{SUBJECTS_DIR}/{s}.npz"
                 if not builder.has(rel):
                     atomic_save_npz(builder.path(rel), **self._render_subject(s))
