@@ -42,6 +42,9 @@ LOG_LEVELS: tuple[tuple[str, int, str], ...] = (
     ("OpenGL.acceleratesupport", logging.WARNING,
      "PyOpenGL says at INFO that its optional C speed-up (OpenGL_accelerate) is not installed; "
      "lit3d renders through EGL and does not need it"),
+    ("trimesh", logging.WARNING,
+     "trimesh logs at INFO for every OBJ part made of polygons ('triangulating faces') and similar "
+     "loader notes; a folder of real CAD models prints hundreds of them, none asking for action"),
 )
 
 
