@@ -345,6 +345,7 @@ class CompletionDataModule(pl.LightningDataModule):
             "manifest_hash": m["manifest_hash"], "config_hash": m["config_hash"],
             "skipped_bad_files": len(m.get("skipped", [])),
             "test_split_names": list(self.test_split_names),
+            **{k: m[k] for k in ("models_per_category", "models_used_per_split", "fallback") if k in m},
         }
 
     def show(self, n: int, path: str | Path, cell: int = 256) -> Path:

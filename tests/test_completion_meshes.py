@@ -222,6 +222,8 @@ def test_datamodule_on_a_mesh_folder(tmp_path):
     dm.setup()
     m = json.loads((tmp_path / "cache" / "manifest.json").read_text())
     assert set(m["fallback"]) == {"table", "car"} and m["models_per_category"] == {"chair": 10}
+    described = dm.describe()
+    assert described["fallback"] == m["fallback"] and described["models_used_per_split"]["train"] >= 1
     chair_items = [it for it in m["items"] if it["category"] == "chair"]
     assert all(it["shape_source"] == "model" for it in chair_items)
     train = {it["model_id"] for it in chair_items if it["split"] == "train"}
