@@ -114,11 +114,18 @@ def synth_pair(item: dict, seed: int, target_res: int, input_factor: int, render
     ``sensor``: :mod:`datamodules.synth.sensor` (name or fields; None = orthographic, noise-free);
     its noise is drawn from a generator seeded by ``seed`` and the item's name.
     """
-    from datamodules.synth.depth_voxels import make_sample  # noqa: PLC0415
     from datamodules.synth.furniture import make_shape  # noqa: PLC0415
 
     rng = np.random.default_rng(stable_seed(seed, "shape", item["shape_group"], item["category"], item["shape_index"]))
-    shape = make_shape(item["category"], rng)
+    return view_pair(make_shape(item["category"], rng), item, seed, target_res, input_factor, render_factor, sensor)
+
+
+def view_pair(shape, item: dict, seed: int, target_res: int, input_factor: int, render_factor: int = 2,
+              sensor: str | dict | None = None):
+    """One planned item's view of ``shape`` (procedural or a real mesh) -> (input, target) bool grids;
+    the sensor noise is drawn from a generator seeded by ``seed`` and the item's split and name."""
+    from datamodules.synth.depth_voxels import make_sample  # noqa: PLC0415
+
     noise = np.random.default_rng(stable_seed(seed, "sensor", item["split"], item["name"]))
     out = make_sample(shape, tuple(item["view"]), target_res=target_res, input_factor=input_factor,
                       render_factor=render_factor, sensor=sensor, rng=noise)

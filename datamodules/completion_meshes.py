@@ -7,17 +7,16 @@ has at least ``min_models`` models; such a category's models are split by model 
 test_same and test_cross as in 3D-RecGAN++), and unseen categories, never trained on, use all
 of theirs. A category with fewer models keeps procedural shapes, and the manifest says so
 (``fallback``). Each item is rendered and voxelised by
-:func:`datamodules.synth.depth_voxels.make_sample` like a procedural one.
+:func:`datamodules.completion.view_pair` like a procedural one.
 """
 from __future__ import annotations
 
 import logging
 from collections import Counter
+from dataclasses import fields
 from pathlib import Path
 
-import numpy as np
-
-from datamodules.cache import DataError, stable_seed
+from datamodules.cache import DataError
 from datamodules.readers.cad_models import CadModel, index_mesh_folder, index_shapenet, split_models
 
 log = logging.getLogger("lit3d.data")
@@ -74,23 +73,13 @@ def attach_models(items: list[dict], models: list[CadModel], seen: tuple[str, ..
     return out, fallback
 
 
-def mesh_pair(item: dict, shape, seed: int, target_res: int, input_factor: int, render_factor: int, sensor):
-    """One planned item of a real model -> (input, target) bool grids (noise seeded by the item)."""
-    from datamodules.synth.depth_voxels import make_sample  # noqa: PLC0415
-
-    noise = np.random.default_rng(stable_seed(seed, "sensor", item["split"], item["name"]))
-    out = make_sample(shape, tuple(item["view"]), target_res=target_res, input_factor=input_factor,
-                      render_factor=render_factor, sensor=sensor, rng=noise)
-    return out["input"], out["target"]
-
-
 def make_pairs(job: dict) -> list[tuple[str, str | None]]:
     """Worker: generate and save every item of ``job`` (items of one or more models).
 
     ``job``: items, models ({id: CadModel record}), data_dir, seed, target_res, input_factor,
     render_factor, sensor (dict), compress, up_axis. Returns ``[(file, error or None)]``.
     """
-    from datamodules.completion import synth_pair  # noqa: PLC0415
+    from datamodules.completion import synth_pair, view_pair  # noqa: PLC0415
     from datamodules.readers.cad_models import CadModel  # noqa: PLC0415
     from datamodules.synth.mesh_shapes import mesh_shape  # noqa: PLC0415
     from datamodules.synth.sensor import make_sensor  # noqa: PLC0415
@@ -105,7 +94,7 @@ def make_pairs(job: dict) -> list[tuple[str, str | None]]:
                 if mid not in loaded:
                     loaded.clear()
                     loaded[mid] = mesh_shape(CadModel(**job["models"][mid]), job["up_axis"])
-                inp, tgt = mesh_pair(it, loaded[mid], job["seed"], job["target_res"], job["input_factor"],
+                inp, tgt = view_pair(loaded[mid], it, job["seed"], job["target_res"], job["input_factor"],
                                      job["render_factor"], sensor)
             else:
                 inp, tgt = synth_pair(it, job["seed"], job["target_res"], job["input_factor"], job["render_factor"], sensor)
@@ -118,9 +107,8 @@ def make_pairs(job: dict) -> list[tuple[str, str | None]]:
 
 
 def model_fields(m: CadModel) -> dict:
-    """The constructor fields of a CadModel (picklable, for worker jobs)."""
-    return {"model_id": m.model_id, "category": m.category, "files": m.files, "name": m.name, "licence": m.licence,
-            "creator": m.creator, "rotation": m.rotation, "size": m.size}
+    """The constructor fields of a CadModel but ``extra`` (picklable, for worker jobs)."""
+    return {f.name: getattr(m, f.name) for f in fields(m) if f.name != "extra"}
 
 
 def summary(models: list[CadModel], items: list[dict]) -> dict:
@@ -137,15 +125,14 @@ def _run_jobs(jobs: list[dict], workers: int):
     """Run the worker jobs in-process (workers <= 1) or in ``workers`` spawned processes."""
     if workers <= 1:
         for job in jobs:
-            yield job, make_pairs(job)
+            yield make_pairs(job)
         return
     import multiprocessing as mp  # noqa: PLC0415
     from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: PLC0415
 
     with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
-        futures = {pool.submit(make_pairs, job): job for job in jobs}
-        for fut in as_completed(futures):
-            yield futures[fut], fut.result()
+        for fut in as_completed([pool.submit(make_pairs, job) for job in jobs]):
+            yield fut.result()
 
 
 def prepare_mesh_items(dm, builder) -> tuple[list[dict], dict]:
@@ -181,7 +168,7 @@ def prepare_mesh_items(dm, builder) -> tuple[list[dict], dict]:
                                             for it in c if it.get("model_id")}} for c in jobs]
     bad: dict[str, str] = {}
     bar = tqdm(total=len(todo), desc=f"completion {dm.source}", unit="item", disable=not dm.progress, dynamic_ncols=True)
-    for _job, results in _run_jobs(jobs, dm.prepare_workers):
+    for results in _run_jobs(jobs, dm.prepare_workers):
         for file, error in results:
             if error is not None:
                 if not dm.skip_bad:
