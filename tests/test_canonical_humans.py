@@ -204,3 +204,30 @@ def test_real_sumner_is_four_animals_with_references():
     items = posesets.index_sumner(SHARED / "sumner_poses")
     counts = {a: sum(1 for b, _ in items if b == a) for a in ("cat", "horse", "elephant", "lion")}
     assert counts == {"cat": 10, "horse": 11, "elephant": 11, "lion": 10}
+
+
+def test_adult_phenotypes_come_from_annys_shape_distribution(body_model):
+    """phenotypes="adult": realistic adults (the uniform draw gave heights up to 2.36 m and teenagers)."""
+    draws = [bodies.sample_phenotype(0, i, "adult", body_model.model) for i in range(24)]
+    assert draws[3] == bodies.sample_phenotype(0, 3, "adult", body_model.model)  # seeded per subject
+    assert len({round(d["height"], 6) for d in draws}) == 24
+    assert min(d["age"] for d in draws) > 0.7  # Anny's age 2/3 = young adult
+    assert max(d["height"] for d in draws) < 0.7 and min(d["height"] for d in draws) > 0.1
+    uniform = [bodies.sample_phenotype(0, i) for i in range(24)]
+    assert max(d["height"] for d in uniform) > max(d["height"] for d in draws)
+    with pytest.raises(ValueError, match="phenotype mode"):
+        bodies.sample_phenotype(0, 0, "teen", body_model.model)
+
+
+def test_validation_subjects_are_neither_tested_nor_trained_on():
+    from datamodules.canonical.splits import split_subject_pose
+
+    subjects, poses = [f"s{i}" for i in range(20)], list(range(10))
+    out = split_subject_pose(subjects, poses, 5, 0, seed=3, val_subjects=3)
+    test_s, val_s, train_s = ({s for s, _ in out[k]} for k in ("test", "val", "train"))
+    test_p, val_p, train_p = ({p for _, p in out[k]} for k in ("test", "val", "train"))
+    assert len(val_s) == 3 and not (val_s & test_s) and not (val_s & train_s) and not (test_s & train_s)
+    assert not (test_p & train_p) and not (test_p & val_p) and val_p == train_p
+    assert len(out["test"]) == 4 * 2 and len(out["train"]) == 13 * 8 and len(out["val"]) == 3 * 8
+    old = split_subject_pose(subjects, poses, 5, 0, seed=3)  # the old rule: test subjects in validation
+    assert {s for s, _ in old["val"]} & test_s

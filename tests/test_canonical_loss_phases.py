@@ -6,7 +6,7 @@ import pytest
 import torch
 from torch.utils.data import DataLoader, TensorDataset
 
-from lit3d.canonical.loss_phases import THESIS_FRACTIONS, THESIS_PHASES, LossPhases, phase_at
+from lit3d.canonical.loss_phases import THESIS_FRACTIONS, THESIS_PHASES, LossPhases, phase_at, phase_starts
 from lit3d.canonical.losses import canonical_loss, mask_loss, masked_depth_loss
 
 
@@ -35,6 +35,13 @@ def test_thesis_schedule_in_epochs(epoch, expected):
 def test_fractions_scale_with_run_length(epoch, expected):
     # 8 epochs: starts at round(0.125 * 8) = 1 and round(0.375 * 8) = 3
     assert _weights(LossPhases(THESIS_FRACTIONS, unit="fraction"), epoch, 8) == expected
+
+
+@pytest.mark.parametrize("max_epochs,starts", [(3, [0, 1, 2]), (4, [0, 1, 2]), (8, [0, 1, 3]), (30, [0, 4, 11])])
+def test_short_runs_give_every_phase_an_epoch(max_epochs, starts):
+    # 4 epochs used to round to [0, 0, 2]: the first (mask-first) phase never ran
+    assert phase_starts(THESIS_FRACTIONS, "fraction", max_epochs) == starts
+    assert _weights(LossPhases(THESIS_FRACTIONS, unit="fraction"), 0, max_epochs) == (10, 1000)
 
 
 def test_fractions_at_thesis_length_equal_epoch_schedule():

@@ -18,11 +18,15 @@ inputs turned in the image plane by up to that many degrees (a rolled camera; th
 ``blend_poses``: that many extra training poses per subject, each a vertex blend of two of the fold's
 training poses (:mod:`datamodules.canonical.blends`; one connectivity per subject, as TOSCA).
 ``train_pose_fraction``: train on that share of each subject's training poses (a learning curve).
+``flow_targets``: also cache, for every pose whose mesh corresponds to the canonical one, the backward
+flow and visibility of the warp head (:mod:`datamodules.canonical.flow`); items then carry them.
 
 Batches (``B`` samples, ``S = image_size``):
     depth, mask              (B, 1, S, S) float32   posed input; mask in {0, 1}
     canon_depth, canon_mask  (B, 1, S, S) float32   canonical target
     subject (list[str]), subject_idx (B,) int64, pose (B,) int64, view (B,) int64
+    flow (B, 2, S, S), vis (B, 1, S, S) float32, has_flow (B,) bool   (``flow_targets``; zeros and False
+                             for items without targets)
 
 Cache (:class:`datamodules.cache.CacheBuilder`, the one cache scheme of every DataModule):
 ``data_dir/subjects/<subject>.npz`` per subject (depth as float16, masks packed bits; layout in
@@ -55,20 +59,20 @@ from datamodules.canonical.blends import add_blends
 from datamodules.canonical.dataset import PairDataset, mirror_views, subject_balanced_sampler
 from datamodules.canonical.images import (depth_image_problem, pairs_png, read_subject, remove_legacy_subject_files,
                                           unpack_mask)
+from datamodules.canonical.rendering import PairRenderer
 from datamodules.canonical.sources import ROOTLESS, SOURCES, Shrec14Source, SynthSource, ToscaSource, make_source
 from datamodules.canonical.splits import (SPLIT_MODES, SPLITS, deal, fold_pairs, split_counts, split_pose,
                                           split_subject_pose, thin_training)
 from datamodules.loaders import evaluation_loader
 from datamodules.synth import bodies
-from lit3d.geometry.normalise import normalise_vertices
-from lit3d.geometry.views import VIEW_MODES, base_azimuth
-from lit3d.render.depth import render_depth
+from lit3d.geometry.views import VIEW_MODES
 
 log = logging.getLogger("lit3d")
 
 GENERATOR = "canonical"
 DATA_VERSION = "canonical-data-1"
 SUBJECTS_DIR = "subjects"  # the cache's item folder
+FLOW_VERSION = "flow-1"  # bump when datamodules.canonical.flow changes what it writes
 
 __all__ = ["SPLITS", "CanonicalDataModule", "DataError", "PairDataset", "Shrec14Source", "SynthSource",
            "ToscaSource", "deal", "depth_image_problem", "read_subject", "split_pose", "split_subject_pose",
@@ -120,6 +124,9 @@ class CanonicalDataModule(pl.LightningDataModule):
         roll_deg: float = 0.0,
         blend_poses: int = 0,
         train_pose_fraction: float = 1.0,
+        flow_targets: bool = False,
+        val_subjects: int | None = None,
+        phenotypes: str = "uniform",
     ):
         super().__init__()
         self.save_hyperparameters()
@@ -167,10 +174,14 @@ class CanonicalDataModule(pl.LightningDataModule):
         cfg = {k: (list(hp[k]) if isinstance(hp[k], (list, tuple)) else hp[k]) for k in keys}
         if hp.source == "anny":  # the sampler's and anny's versions: another release may pose differently
             cfg["bodies"] = [bodies.BODIES_VERSION, bodies.anny_version()]
+            if hp.phenotypes != "uniform":  # absent for the old draw: its caches keep their hash
+                cfg["phenotypes"] = hp.phenotypes
         if hp.skip_bad:  # a cache rendered while skipping may lack poses
             cfg["skip_bad"] = True
         if hp.view_mode != "fixed":  # absent for the old convention: its caches keep their hash
             cfg["view_mode"] = hp.view_mode
+        if hp.flow_targets:  # absent without flows: those caches keep their hash
+            cfg["flow_targets"] = FLOW_VERSION
         return cfg
 
     def cache_builder(self) -> CacheBuilder:
@@ -182,60 +193,23 @@ class CanonicalDataModule(pl.LightningDataModule):
         return self.cache_builder().config_hash
 
     # ------------------------------------------------------------------ generation
+    @property
+    def renderer(self) -> PairRenderer:
+        """Renders subjects (:class:`~datamodules.canonical.rendering.PairRenderer`)."""
+        return PairRenderer(self.source, self.hparams)
+
     def normalized_mesh(self, subject: str, pose) -> tuple[np.ndarray, np.ndarray]:
         """The mesh of (subject, pose) centred and scaled as it is rendered (``pose="canonical"`` ok)."""
-        v, f = self._raw_mesh(subject, pose)
-        return self._normalise(subject, v), f
+        return self.renderer.normalized_mesh(subject, pose)
 
-    def _raw_mesh(self, subject: str, pose) -> tuple[np.ndarray, np.ndarray]:
-        src = self.source
-        return src.mesh(subject, src.canonical_pose(subject) if pose == "canonical" else pose)
-
-    def _normalise(self, subject: str, v: np.ndarray) -> np.ndarray:
-        """Raw ``(V, 3)`` vertices of ``subject`` centred and scaled by ``scale_mode``."""
-        scale = None
-        if self.hparams.scale_mode == "subject":
-            _, scale = normalise_vertices(self._raw_mesh(subject, "canonical")[0])
-        return normalise_vertices(v, scale)[0]
-
-    def _render_views(self, subject: str, v: np.ndarray, f: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-        """(depth, mask) ``(S, S)`` of every azimuth of raw mesh ``v, f``; DataError for a bad image."""
-        hp = self.hparams
-        v = self._normalise(subject, v)
-        base, out = base_azimuth(v, f, hp.view_mode), []
-        for vi, az in enumerate(hp.azimuths):
-            d, m = render_depth(v, f, hp.image_size, base + az)
-            problem = depth_image_problem(d, m, hp.image_size)
-            if problem:
-                raise DataError(f"view {vi}: rendered {problem} (mesh outside the view?)")
-            out.append((d, m))
-        return out
-
-    def _render_pose(self, subject: str, pose) -> dict[str, np.ndarray]:
-        """Depth (float16) and packed mask of every view of one pose; DataError for a bad image."""
-        out = {}
-        for vi, (d, m) in enumerate(self._render_views(subject, *self._raw_mesh(subject, pose))):
-            out[f"depth_{pose}_{vi}"] = d.astype(np.float16)
-            out[f"mask_{pose}_{vi}"] = np.packbits(m)
-        return out
+    def canonical_turned(self, subject: str, view: int, turn_deg: float) -> tuple[np.ndarray, np.ndarray]:
+        """Canonical depth and mask ``(S, S)`` of ``subject`` from view ``view`` turned by ``turn_deg``
+        (the jittered ceiling row of the evaluation, :func:`lit3d.canonical.evaluator.jittered_target`)."""
+        return self.renderer.canonical_turned(subject, view, turn_deg)
 
     def _render_subject(self, subject: str) -> dict[str, np.ndarray]:
-        """Arrays of one subject's cache file; ``skipped`` lists the poses dropped by ``skip_bad``."""
-        arrays: dict[str, np.ndarray] = {}
-        poses, skipped = ["canonical"] + list(self.source.poses(subject)), []
-        for p in poses:
-            try:
-                arrays.update(self._render_pose(subject, p))
-            except Exception as exc:
-                msg = f"{subject} pose {p}: {exc}"
-                if not self.hparams.skip_bad or p == "canonical":
-                    raise DataError(msg) from exc
-                log.warning("skipping: %s", msg)
-                skipped.append(msg)
-        kept = [p for p in poses[1:] if f"depth_{p}_0" in arrays]
-        arrays["poses"] = np.array([str(p) for p in kept])
-        arrays["skipped"] = np.array(skipped, dtype=str)
-        return arrays
+        """Arrays of one subject's cache file (:meth:`PairRenderer.render_subject`)."""
+        return self.renderer.render_subject(subject)
 
     def prepare_data(self) -> None:
         """Render every subject once into ``data_dir`` (resumable, atomic); no-op when cached."""
@@ -300,8 +274,8 @@ class CanonicalDataModule(pl.LightningDataModule):
         self.splits = {k: [{"subject": s, "pose": p, "view": v} for s, p in v_ for v in self.views(k)]
                        for k, v_ in pairs.items()}
         if hp.blend_poses:  # rendered now: they depend on the fold's training poses
-            added = add_blends(self.cache, pairs["train"], hp.blend_poses, hp.seed, hp.fold, self._raw_mesh,
-                               self._render_views)
+            added = add_blends(self.cache, pairs["train"], hp.blend_poses, hp.seed, hp.fold, self.renderer.raw_mesh,
+                               self.renderer.render_views)
             self.splits["train"] += [{"subject": s, "pose": p, "view": v} for s, p in added for v in self.views("train")]
         for k in SPLITS:
             if not self.splits[k] and hp.split == "all" and k != "test":
@@ -315,10 +289,17 @@ class CanonicalDataModule(pl.LightningDataModule):
                                            roll_deg=hp.roll_deg if k == "train" else 0.0)
         tr = {(r["subject"], r["pose"]) for r in self.splits["train"]}
         te = self.splits["test"]
+        leaks = []
         if hp.split == "subject_pose":
-            assert not ({r["subject"] for r in te} & {s for s, _ in tr}), "test subject leaked into training"
-            assert not ({r["pose"] for r in te} & {p for _, p in tr}), "test pose leaked into training"
-        assert not ({(r["subject"], r["pose"]) for r in te} & tr), "test item leaked into training"
+            leaks += ["test subject in training"] * bool({r["subject"] for r in te} & {s for s, _ in tr})
+            leaks += ["test pose in training"] * bool({r["pose"] for r in te} & {p for _, p in tr})
+            if hp.get("val_subjects") is not None:
+                va = {r["subject"] for r in self.splits["val"]}
+                leaks += ["validation subject in test or training"] * bool(va & ({r["subject"] for r in te} |
+                                                                                {s for s, _ in tr}))
+        leaks += ["test item in training"] * bool({(r["subject"], r["pose"]) for r in te} & tr)
+        if leaks:  # a raise, not an assert: it must hold under python -O too
+            raise DataError(f"{self.data_dir}: split leak: {', '.join(leaks)}")
 
     @property
     def split_seed(self) -> int:
@@ -329,7 +310,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         """``{split: [(subject, pose), ...]}`` of fold ``fold`` over the loaded cache."""
         hp = self.hparams
         return fold_pairs({s: c["poses"] for s, c in self.cache.items()}, hp.split, hp.n_folds, fold,
-                          self.split_seed, hp.val_per_subject)
+                          self.split_seed, hp.val_per_subject, hp.get("val_subjects"))
 
     def held_out_records(self) -> list[dict]:
         """Every item some fold tests (``{"subject", "pose", "view"}``, sorted): the set that the

@@ -2,7 +2,10 @@
 subject-balanced training sampler.
 
 Items (``S = image_size``): ``depth``, ``mask``, ``canon_depth``, ``canon_mask`` ``(1, S, S)``
-float32; ``subject`` str, ``subject_idx``, ``pose``, ``view`` int. With ``flip_lr`` (training
+float32; ``subject`` str, ``subject_idx``, ``pose``, ``view`` int; ``flow`` ``(2, S, S)`` (backward
+flow in pixels, :mod:`datamodules.canonical.flow`), ``vis`` ``(1, S, S)`` float32 and ``has_flow``
+bool (zeros and False for an item without targets, or whose input is rolled or mirrored without its
+target). With ``flip_lr`` (training
 only) the posed images of an item are mirrored left-right with probability 1/2, and the canonical
 images with them only when ``flip_target`` (the camera convention decides, see
 :class:`PairDataset`).
@@ -61,13 +64,26 @@ class PairDataset(Dataset):
             return torch.from_numpy(np.ascontiguousarray(a[:, ::-1] if mirror else a, dtype=np.float32))[None]
 
         depth, mask = t(c["depth"][pk], flip), t(c["mask"][pk], flip)
-        if self.roll_deg:
-            depth, mask = roll(depth, mask, float((torch.rand(()) * 2 - 1) * self.roll_deg))
+        angle = float((torch.rand(()) * 2 - 1) * self.roll_deg) if self.roll_deg else 0.0
+        if angle:
+            depth, mask = roll(depth, mask, angle)
+        # flow targets hold only when input and target moved together (not rolled; mirrored both or neither)
+        has_flow = pk in c.get("flow", {}) and not angle and flip == flip_canon and target_view == r["view"]
+        if has_flow:
+            flow, vis = c["flow"][pk].astype(np.float32), c["vis"][pk]
+            if flip:  # mirrored pair: the flow of the mirrored image, its x component negated
+                flow = flow[:, :, ::-1] * np.array([-1.0, 1.0], np.float32)[:, None, None]
+                vis = vis[:, ::-1]
+            flow, vis = torch.from_numpy(np.ascontiguousarray(flow)), t(vis, False)
+        else:
+            size = depth.shape[-1]
+            flow, vis = torch.zeros(2, size, size), torch.zeros(1, size, size)
         return {
             "depth": depth, "mask": mask,
             "canon_depth": t(c["depth"][ck], flip_canon), "canon_mask": t(c["mask"][ck], flip_canon),
             "subject": r["subject"], "subject_idx": self.subject_index[r["subject"]],
             "pose": int(r["pose"]), "view": int(r["view"]), "index": i,
+            "flow": flow, "vis": vis, "has_flow": has_flow,
         }
 
     def canonical_templates(self, view: int = 0) -> tuple[torch.Tensor, torch.Tensor]:

@@ -19,6 +19,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from datamodules.cache import DataError
+from datamodules.canonical.flow import skinned_canonical
 
 SOURCES = ("synth", "tosca", "shrec14", "anny", "faust", "sumner")
 ROOTLESS = ("synth", "anny")  # sources that need no root folder
@@ -35,6 +36,15 @@ class _Source:
     def mesh(self, subject: str, pose) -> tuple[np.ndarray, np.ndarray]: ...
     def category(self, subject: str) -> str:
         return subject
+
+    def correspondence(self, subject: str, pose, canon_verts: np.ndarray, canon_faces: np.ndarray,
+                       posed_verts: np.ndarray, posed_faces: np.ndarray) -> np.ndarray | None:
+        """Raw posed positions ``(V, 3)`` of the raw canonical mesh's vertices ``canon_verts``, or None
+        when the two meshes do not correspond. Here: meshes with one vertex order (Anny, TOSCA, Sumner,
+        FAUST), recognised by equal vertex counts and equal faces."""
+        if len(canon_verts) != len(posed_verts) or not np.array_equal(canon_faces, posed_faces):
+            return None
+        return np.asarray(posed_verts, np.float64)
 
 
 class SynthSource(_Source):
@@ -66,15 +76,26 @@ class SynthSource(_Source):
     def category(self, subject):
         return self._subjects[subject][0]
 
-    def mesh(self, subject, pose):
+    def _posing(self, subject, pose) -> tuple:
+        """(figure, joint rotations or None, turn in degrees as figure_mesh applies it) of one pose."""
         kind, sseed = self._subjects[subject]
         subj = self.f.make_subject(kind, sseed)
+        turn = 90.0 if kind == "quadruped" else 0.0  # figure_mesh shows quadrupeds from the side
         if pose == "canonical":
-            return self.f.figure_mesh(subj, None, self.res)
+            return subj, None, 0.0, turn
         rng = np.random.default_rng([self.pose_seed, int(pose), 17])
         yaw = float(rng.uniform(-self.yaw_range, self.yaw_range))
-        return self.f.figure_mesh(subj, self.f.make_pose(kind, int(pose), self.pose_seed, self.strength),
-                                  self.res, yaw_deg=yaw)
+        return subj, self.f.make_pose(kind, int(pose), self.pose_seed, self.strength), yaw, turn + yaw
+
+    def mesh(self, subject, pose):
+        subj, rotations, yaw, _ = self._posing(subject, pose)
+        return self.f.figure_mesh(subj, rotations, self.res, yaw_deg=yaw)
+
+    def correspondence(self, subject, pose, canon_verts, canon_faces, posed_verts, posed_faces):
+        """The canonical mesh skinned to the pose (:func:`datamodules.canonical.flow.skinned_canonical`):
+        each figure is remeshed per pose, so vertices move with their nearest bone."""
+        subj, rotations, _, turn = self._posing(subject, pose)
+        return skinned_canonical(subj, canon_verts, rotations, self._posing(subject, "canonical")[3], turn)
 
 
 class _MeshFileSource(_Source):
@@ -136,13 +157,16 @@ class AnnySource(_Source):
     BATCH = 16
 
     def __init__(self, n_subjects: int, n_poses: int, seed: int, pose_seed: int, yaw_range: float,
-                 pose_strength: float):
+                 pose_strength: float, phenotypes: str = "uniform"):
         from datamodules.synth import bodies
 
         self.b = bodies
         self.model = bodies.BodyModel()
         self.n_subjects, self.n_poses, self.seed = n_subjects, n_poses, seed
         self.pose_seed, self.yaw_range, self.strength = pose_seed, yaw_range, pose_strength
+        if phenotypes not in bodies.PHENOTYPE_MODES:
+            raise DataError(f"unknown phenotypes '{phenotypes}' ({', '.join(bodies.PHENOTYPE_MODES)})")
+        self.phenotypes = phenotypes
         self._memo: tuple[str, dict] | None = None
 
     def subjects(self):
@@ -164,7 +188,7 @@ class AnnySource(_Source):
 
     def phenotype(self, subject) -> dict[str, float]:
         """The subject's Anny phenotype ``{label: value in [0, 1]}``."""
-        return self.b.sample_phenotype(self.seed, int(subject[len("anny"):]))
+        return self.b.sample_phenotype(self.seed, int(subject[len("anny"):]), self.phenotypes, self.model.model)
 
     def mesh(self, subject, pose):
         if self._memo is None or self._memo[0] != subject:
@@ -221,7 +245,8 @@ def make_source(hp) -> _Source:
     if hp.source == "shrec14":
         return Shrec14Source(hp.root, hp.cla, hp.canonical_pose, hp.up_axis)
     if hp.source == "anny":
-        return AnnySource(hp.n_subjects, hp.n_poses, hp.body_seed, hp.pose_seed, hp.yaw_range, hp.pose_strength)
+        return AnnySource(hp.n_subjects, hp.n_poses, hp.body_seed, hp.pose_seed, hp.yaw_range, hp.pose_strength,
+                          hp.get("phenotypes", "uniform"))
     if hp.source == "faust":
         return FaustSource(hp.root, hp.canonical_pose)
     if hp.source == "sumner":

@@ -3,8 +3,11 @@
 
     subject_pose  subjects and poses are each dealt into ``n_folds`` groups (seeded); fold f
                   tests subject group f x pose group f and trains on the other subjects x other
-                  poses only (no test subject and no test pose in training). Validation = the
-                  items that share exactly one of the two (held out from training, too).
+                  poses only (no test subject and no test pose in training). Validation, with
+                  ``val_subjects`` = N: N further subjects (not tested, not trained on) in the
+                  training poses, so checkpoints and settings are chosen on people the test never
+                  sees; with ``val_subjects`` null (the old rule): the items that share exactly one
+                  of subject and pose with the test (test subjects in training poses among them).
     pose          (TOSCA: one subject per class) every subject's non-canonical poses are dealt
                   into ``n_folds`` groups; fold f tests group f; ``val_per_subject`` training
                   poses per subject go to validation.
@@ -31,8 +34,11 @@ def deal(items: Sequence, n_groups: int, seed: int) -> list[list]:
     return [sorted(order[g::n_groups], key=str) for g in range(n_groups)]
 
 
-def split_subject_pose(subjects, poses, n_folds: int, fold: int, seed: int) -> dict[str, list[tuple]]:
-    """Strict split: test = S_f x P_f, train = (S \\ S_f) x (P \\ P_f), val = the mixed rest."""
+def split_subject_pose(subjects, poses, n_folds: int, fold: int, seed: int,
+                       val_subjects: int | None = None) -> dict[str, list[tuple]]:
+    """Strict split: test = S_f x P_f. ``val_subjects`` = N: val = S_v x (P \\ P_f) for N subjects S_v
+    drawn (seeded) outside S_f, train = (S \\ S_f \\ S_v) x (P \\ P_f). None: train = (S \\ S_f) x
+    (P \\ P_f), val = the mixed rest."""
     if n_folds < 2:
         raise DataError("subject_pose split needs n_folds >= 2")
     if len(subjects) < n_folds or len(poses) < n_folds:
@@ -41,6 +47,21 @@ def split_subject_pose(subjects, poses, n_folds: int, fold: int, seed: int) -> d
     sg = deal(subjects, n_folds, seed)[fold % n_folds]
     pg = deal(poses, n_folds, seed + 1)[fold % n_folds]
     out = {k: [] for k in SPLITS}
+    if val_subjects is not None:
+        rest = [s for s in subjects if s not in sg]
+        if not 1 <= int(val_subjects) < len(rest):
+            raise DataError(f"val_subjects={val_subjects}: needs 1 .. {len(rest) - 1} (subjects outside the test "
+                            f"group: {len(rest)})")
+        np.random.default_rng(seed + 2).shuffle(rest)
+        vg = set(rest[:int(val_subjects)])
+        for s in subjects:
+            for p in poses:
+                if s in sg or p in pg:
+                    if s in sg and p in pg:
+                        out["test"].append((s, p))
+                    continue
+                out["val" if s in vg else "train"].append((s, p))
+        return out
     for s in subjects:
         for p in poses:
             a, b = s in sg, p in pg
@@ -88,14 +109,14 @@ def thin_training(train: Sequence[tuple], fraction: float, seed: int) -> list[tu
 
 
 def fold_pairs(subject_poses: dict[str, list], mode: str, n_folds: int, fold: int, seed: int,
-               val_per_subject: int = 1) -> dict[str, list[tuple]]:
+               val_per_subject: int = 1, val_subjects: int | None = None) -> dict[str, list[tuple]]:
     """``{split: [(subject, pose), ...]}`` of fold ``fold`` under split ``mode`` (:data:`SPLIT_MODES`)
     for ``subject_poses`` ``{subject: [pose, ...]}`` (only the poses each subject has)."""
     if mode == "all":
         return {"train": [], "val": [], "test": [(s, p) for s, ps in sorted(subject_poses.items()) for p in ps]}
     if mode == "subject_pose":
         all_poses = sorted({p for ps in subject_poses.values() for p in ps})
-        pairs = split_subject_pose(list(subject_poses), all_poses, n_folds, fold, seed)
+        pairs = split_subject_pose(list(subject_poses), all_poses, n_folds, fold, seed, val_subjects)
         return {k: [(s, p) for s, p in v if p in subject_poses[s]] for k, v in pairs.items()}
     return split_pose(subject_poses, n_folds, fold, seed, val_per_subject)
 

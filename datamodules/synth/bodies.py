@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 # Bump when the sampling below changes: it is part of every Anny cache's config hash.
-BODIES_VERSION = "anny-bodies-1"
+BODIES_VERSION = "anny-bodies-1"  # phenotypes="adult" adds its own tag (datamodules.canonical.datamodule)
 
 # Adult subjects: Anny's age anchors are newborn 0 (-1/3 extrapolated), baby 0, child 1/3,
 # young 2/3, old 1; 0.55 is a teenager.
@@ -82,10 +82,30 @@ def right_of(bone: str) -> str:
     return bone[:-2] + ".R"
 
 
-def sample_phenotype(seed: int, index: int) -> dict[str, float]:
-    """Subject ``index`` of the phenotype draw ``seed``: ``{label: value in [0, 1]}``."""
-    rng = np.random.default_rng([int(seed), int(index), 31])
-    return {k: float(rng.uniform(lo, hi)) for k, (lo, hi) in PHENOTYPE_RANGES.items()}
+PHENOTYPE_MODES = ("uniform", "adult")
+ADULT_AGES = (20.0, 65.0)  # morphological ages (years) of Anny's shape distribution for phenotypes="adult"
+
+
+def sample_phenotype(seed: int, index: int, mode: str = "uniform", model=None) -> dict[str, float]:
+    """Subject ``index`` of the phenotype draw ``seed``: ``{label: value in [0, 1]}``.
+
+    ``uniform``: each label uniform in :data:`PHENOTYPE_RANGES` (heights up to 2.36 m, teenagers);
+    ``adult``: Anny's own shape distribution (``anny.shape_distribution.SimpleShapeDistribution``:
+    height, weight, muscle and proportions conditioned on age and gender, calibrated on WHO data) at
+    morphological ages :data:`ADULT_AGES`; needs the loaded Anny ``model``."""
+    if mode == "uniform":
+        rng = np.random.default_rng([int(seed), int(index), 31])
+        return {k: float(rng.uniform(lo, hi)) for k, (lo, hi) in PHENOTYPE_RANGES.items()}
+    if mode != "adult":
+        raise ValueError(f"unknown phenotype mode '{mode}' ({', '.join(PHENOTYPE_MODES)})")
+    import torch
+    from anny.shape_distribution import SimpleShapeDistribution
+
+    ages = torch.distributions.Uniform(torch.tensor(ADULT_AGES[0]), torch.tensor(ADULT_AGES[1]))
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(int(np.random.default_rng([int(seed), int(index), 37]).integers(2**31)))
+        _, pheno = SimpleShapeDistribution(model, morphological_age_distribution=ages).sample(1)
+    return {k: float(pheno[k][0]) for k in PHENOTYPE_RANGES}
 
 
 def sample_pose(pose_seed: int, index: int, strength: float = 1.0, yaw_range: float = 15.0) -> dict[str, np.ndarray]:

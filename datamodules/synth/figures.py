@@ -148,11 +148,12 @@ def make_pose(kind: str, pose_index: int, seed: int = 0, strength: float = 1.0) 
     raise ValueError(f"unknown figure kind '{kind}'")
 
 
-def joint_positions(subject: Subject, pose: dict[str, np.ndarray] | None = None) -> np.ndarray:
-    """Forward kinematics: ``(J, 3)`` joint positions for a pose (None/{} = canonical)."""
+def joint_frames(subject: Subject, pose: dict[str, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Forward kinematics: joint positions ``(J, 3)`` and world rotations ``(J, 3, 3)`` for a pose
+    (None/{} = canonical, every rotation the identity)."""
     pose = pose or {}
     J = len(subject.names)
-    G = [np.eye(3)] * J
+    G = np.zeros((J, 3, 3))
     P = np.zeros((J, 3))
     for j in range(J):
         par = subject.parents[j]
@@ -163,7 +164,22 @@ def joint_positions(subject: Subject, pose: dict[str, np.ndarray] | None = None)
         else:
             P[j] = P[par] + G[par] @ subject.offsets[j]
             G[j] = G[par] @ local
-    return P
+    return P, G
+
+
+def joint_positions(subject: Subject, pose: dict[str, np.ndarray] | None = None) -> np.ndarray:
+    """Forward kinematics: ``(J, 3)`` joint positions for a pose (None/{} = canonical)."""
+    return joint_frames(subject, pose)[0]
+
+
+SPHERE_JOINTS = ("head", "pelvis", "chest", "hips", "mid", "withers")
+
+
+def capsule_bones(subject: Subject) -> list[tuple[int, int]]:
+    """Per capsule of :func:`capsules` (same order): (anchor joint, joint whose world rotation moves it).
+    A bone capsule from parent p to joint j moves with p's frame about p; a sphere with its own joint."""
+    bones = [(par, par) for par in subject.parents if par >= 0]
+    return bones + [(subject.names.index(n),) * 2 for n in SPHERE_JOINTS if n in subject.names]
 
 
 def capsules(subject: Subject, pose=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -174,7 +190,7 @@ def capsules(subject: Subject, pose=None) -> tuple[np.ndarray, np.ndarray, np.nd
         if par < 0:
             continue
         A.append(P[par]); B.append(P[j]); RA.append(subject.radii[par]); RB.append(subject.radii[j])  # noqa: E702
-    for name in ("head", "pelvis", "chest", "hips", "mid", "withers"):
+    for name in SPHERE_JOINTS:
         if name in subject.names:
             j = subject.names.index(name)
             A.append(P[j]); B.append(P[j]); RA.append(subject.radii[j]); RB.append(subject.radii[j])  # noqa: E702

@@ -7,7 +7,9 @@ test (``task.test_outputs``, DDP-correct) and returns ``test/retrieval/<source>/
 
 - ``model`` (or ``unet`` when the task is the plain U-Net, ``arch=unet``): the predicted canonical
   depth, back-projected to a surface, then the CM-BOF-style descriptor;
-- ``input``: the posed input depth; ``target``: the true canonical depth (the ceiling);
+- ``input``: the posed input depth; ``target``: the true canonical depth (1.00 by construction: one
+  image per subject); ``target_jitter``: the true canonical rendered with the camera turned by up to
+  ``ceiling_jitter_deg`` degrees per item (the ceiling that is not trivial);
 - ``chance``: random distances;
 - each of ``mesh_baselines`` (cmds, smacof, nmds, gps, posed): the non-learned canonical forms of
   the full test meshes, one per unique (subject, pose), from ``datamodule.normalized_mesh``.
@@ -95,6 +97,7 @@ def retrieval_results(hp, outputs: dict[str, torch.Tensor], datamodule=None) -> 
         log.info("retrieval skipped: fewer than %d test subjects with 2+ items", hp.retrieval_min_subjects)
         return {}
     results = depth_retrieval(hp, outputs, labels)
+    results.update(jittered_target(hp, outputs, labels, datamodule))
     results.update(mesh_baseline_retrieval(hp, outputs, datamodule))
     return results
 
@@ -118,6 +121,29 @@ def depth_retrieval(hp, outputs: dict[str, torch.Tensor], labels: np.ndarray) ->
         out[name] = retrieval_scores(dist, labels)
     out["chance"] = chance_scores(labels, hp.chance_trials, seed=0)
     return out
+
+
+def jittered_target(hp, outputs: dict[str, torch.Tensor], labels: np.ndarray, datamodule) -> dict[str, dict]:
+    """``{"target_jitter": scores}``: the true canonical form of every test item rendered again with the
+    camera turned by U(-j, j) degrees (``ceiling_jitter_deg`` = j, seeded per item), through the same
+    descriptor. Every pose of a subject has one identical true canonical image, so the plain ``target``
+    row is 1.00 by construction; this row is the ceiling a perfect canonical form reaches when its
+    image is not pixel-identical. Empty when ``ceiling_jitter_deg`` is 0/absent or the datamodule cannot
+    render (``canonical_turned``)."""
+    jitter = float(hp.get("ceiling_jitter_deg") or 0.0)
+    if not jitter or datamodule is None or not hasattr(datamodule, "canonical_turned"):
+        return {}
+    from lit3d.metrics.retrieval import retrieval_scores
+    from lit3d.retrieval.descriptor import DescriptorConfig, distance_matrix_from_depths
+
+    names = {i: s for s, i in datamodule.subject_index.items()}
+    turns = np.random.default_rng(0).uniform(-jitter, jitter, len(labels))
+    views = [datamodule.canonical_turned(names[int(s)], int(v), t)
+             for s, v, t in zip(outputs["subject_idx"], outputs["view"], turns)]
+    depth = np.stack([d for d, _ in views]).astype(np.float32)
+    mask = np.stack([m for _, m in views]).astype(np.float32)
+    dist = distance_matrix_from_depths(depth, mask, DescriptorConfig(**(hp.retrieval or {})))
+    return {"target_jitter": retrieval_scores(dist, labels)}
 
 
 def mesh_baseline_retrieval(hp, outputs: dict[str, torch.Tensor], datamodule) -> dict[str, dict]:

@@ -93,7 +93,7 @@ def subject_sheets(task, dataset, n: int = 4, size: int = CELL) -> dict[str, Ima
 def validation_panel(batch: dict, out, n: int, threshold: float) -> np.ndarray:
     """uint8 image ``(n * (S + 2), 4 * (S + 2))`` of the first ``n`` samples of a batch, one row each:
     input | predicted | target depth | |error| (each tile padded by 1 px); ``out`` the net's
-    :class:`~lit3d.canonical.nets.CanonicalOutput`, its mask binarised at ``threshold``."""
+    :class:`~lit3d.canonical.outputs.CanonicalOutput`, its mask binarised at ``threshold``."""
     n = min(n, batch["depth"].shape[0])
     rows = []
     for i in range(n):

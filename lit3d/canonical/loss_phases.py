@@ -32,14 +32,21 @@ THESIS_FRACTIONS = tuple({**p, "start": p["start"] / THESIS_EPOCHS} for p in THE
 
 
 def phase_starts(phases: Sequence[dict], unit: str, max_epochs: int | None) -> list[int]:
-    """Start epoch of each phase. ``unit``: "epochs" or "fraction" (of ``max_epochs``, rounded)."""
+    """Start epoch of each phase. ``unit``: "epochs" or "fraction" (of ``max_epochs``, rounded; each
+    later phase starts at least one epoch after the one before, so none is skipped in a short run)."""
     if unit == "epochs":
         return [int(p["start"]) for p in phases]
     if unit != "fraction":
         raise ValueError(f"loss phase unit must be 'epochs' or 'fraction', got '{unit}'")
     if not max_epochs or max_epochs < 0:
         raise ValueError("loss phases given as fractions need trainer.max_epochs > 0")
-    return [int(round(float(p["start"]) * max_epochs)) for p in phases]
+    starts = []
+    for i, p in enumerate(phases):
+        s = int(round(float(p["start"]) * max_epochs))
+        if i and float(p["start"]) > float(phases[i - 1]["start"]):
+            s = max(s, starts[-1] + 1)  # a short run still gives every phase an epoch (4 epochs: 0, 1, 2)
+        starts.append(s)
+    return starts
 
 
 def phase_at(epoch: int, phases: Sequence[dict], unit: str = "epochs", max_epochs: int | None = None) -> int:

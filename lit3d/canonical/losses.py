@@ -1,5 +1,5 @@
-"""Losses of the canonical-form task (thesis eq. 5.8-5.10); its image metrics are in
-:mod:`lit3d.metrics.depth`.
+"""Losses of the canonical-form task (thesis eq. 5.8-5.10) and of the warp head (flow, visibility,
+smoothness); its image metrics are in :mod:`lit3d.metrics.depth`.
 
 All inputs are ``(B, 1, H, W)`` float tensors: depths in [0, 1] (0 = background),
 masks in [0, 1] (predicted: probabilities; target: {0, 1}). Computed in fp32.
@@ -41,3 +41,32 @@ def mask_bce_loss(mask_logits: torch.Tensor, mask: torch.Tensor) -> torch.Tensor
     """Binary cross-entropy of the mask, from logits (fp32). An option beside the thesis's MSE:
     at small scale the MSE on sigmoid probabilities collapses to an all-background mask."""
     return torch.nn.functional.binary_cross_entropy_with_logits(mask_logits.float(), mask.float())
+
+
+def _per_item(weight: torch.Tensor, has_flow: torch.Tensor) -> torch.Tensor:
+    """``weight`` ``(B, 1, H, W)`` zeroed for the items without flow targets (``has_flow`` ``(B,)`` bool)."""
+    return weight.float() * has_flow.float().view(-1, 1, 1, 1).to(weight.device)
+
+
+def flow_loss(flow: torch.Tensor, target: torch.Tensor, vis: torch.Tensor, has_flow: torch.Tensor) -> torch.Tensor:
+    """Mean end-point distance (normalised grid units, the net's) between the predicted backward flow
+    ``(B, 2, H, W)`` and the target ``(B, 2, H, W)`` (same units) over the visible pixels ``vis``
+    ``(B, 1, H, W)`` of the items with targets; 0 when there are none. Scalar, fp32."""
+    w = _per_item(vis, has_flow)
+    epe = torch.sqrt(((flow.float() - target.float()) ** 2).sum(1, keepdim=True) + 1e-8)
+    return (w * epe).sum() / w.sum().clamp_min(1.0)
+
+
+def visibility_loss(vis_logits: torch.Tensor, vis: torch.Tensor, canon_mask: torch.Tensor,
+                    has_flow: torch.Tensor) -> torch.Tensor:
+    """Binary cross-entropy of the visibility logits ``(B, 1, H, W)`` against ``vis`` on the canonical
+    foreground (``canon_mask``) of the items with targets; 0 when there are none. Scalar, fp32."""
+    w = _per_item(canon_mask, has_flow)
+    bce = torch.nn.functional.binary_cross_entropy_with_logits(vis_logits.float(), vis.float(), reduction="none")
+    return (w * bce).sum() / w.sum().clamp_min(1.0)
+
+
+def flow_smoothness(flow: torch.Tensor) -> torch.Tensor:
+    """Mean absolute difference of neighbouring flow vectors ``(B, 2, H, W)`` (first-order total variation). Scalar."""
+    f = flow.float()
+    return (f[..., 1:, :] - f[..., :-1, :]).abs().mean() + (f[..., :, 1:] - f[..., :, :-1]).abs().mean()

@@ -21,7 +21,13 @@ already name the subject (one canonical image each); this asks the latent to say
 are filled from the training data at fit start and saved in the checkpoint; its cross-entropy x
 ``identity_weight`` joins the image loss.
 
-Logged: ``train/loss|depth_loss|mask_loss|alpha|beta`` (``identity_loss`` with the classifier); ``val/`` and ``test/`` ``depth_mse``
+``net.head="warp"`` (:mod:`lit3d.canonical.warp`) moves the posed pixels instead of redrawing them; its
+flow, visibility and smoothness terms (:mod:`lit3d.canonical.losses`), times ``flow_weight``,
+``vis_weight`` and ``smooth_weight``, join the loss where the batch has flow targets
+(``data.flow_targets``; items without them train on depth and mask only).
+
+Logged: ``train/loss|depth_loss|mask_loss|alpha|beta`` (``identity_loss`` with the classifier;
+``flow_loss|vis_loss|smooth_loss`` and ``val/flow_epe`` in pixels with the warp head); ``val/`` and ``test/`` ``depth_mse``
 (masked depth error, :class:`lit3d.metrics.depth.MaskedDepthMSE`), ``iou`` (mask IoU,
 :class:`lit3d.metrics.depth.MaskIoU`), and the same with suffix ``_input`` for the posed-input
 baseline (the input taken as its own canonical form).
@@ -43,12 +49,14 @@ import torch
 from lit3d.callbacks.nonfinite import guard_step, validate_mode
 from lit3d.canonical.figures import validation_panel
 from lit3d.canonical.loss_phases import THESIS_FRACTIONS, LossPhases
-from lit3d.canonical.losses import canonical_loss
-from lit3d.canonical.nets import build_canonical_net, summarize
+from lit3d.canonical.warp import pixels_to_grid
+from lit3d.canonical.losses import canonical_loss, flow_loss, flow_smoothness, visibility_loss
+from lit3d.canonical.factory import build_canonical_net, summarize
 from lit3d.metrics.depth import MaskedDepthMSE, MaskIoU
 from lit3d.metrics.gathered import GatheredTensors
 
 METRICS = ("depth_mse", "iou", "depth_mse_input", "iou_input")
+WARP_TERMS = ("flow", "vis", "smooth")  # the warp head's loss terms (flow_weight, vis_weight, smooth_weight)
 # per test item, gathered for the evaluator: prediction (depth, mask probability), posed input,
 # true canonical form ((N, 1, S, S) float32), subject index, pose and view ((N,) int64)
 # "index": the item's place in the test set, so the evaluator sees the items in one order under DDP too
@@ -80,6 +88,7 @@ class CanonicalTask(pl.LightningModule):
         retrieval: dict | None = None,
         retrieval_min_subjects: int = 2,
         chance_trials: int = 100,
+        ceiling_jitter_deg: float = 0.0,
         mesh_baselines: Sequence[str] | None = None,
         baseline_max_vertices: int | None = None,
         baseline_smacof_eps: float = 1e-4,
@@ -88,6 +97,9 @@ class CanonicalTask(pl.LightningModule):
         identity_weight: float = 0.0,
         identity_classes: int = 0,
         init_weights: str | None = None,
+        flow_weight: float = 0.0,
+        vis_weight: float = 0.0,
+        smooth_weight: float = 0.0,
         unet_baseline: bool = False,
     ):
         super().__init__()
@@ -177,6 +189,11 @@ class CanonicalTask(pl.LightningModule):
         if self.hparams.identity_weight > 0:  # the MSFE's identity head, or the recall net's own logits
             terms["identity"] = self._identity_loss(out.latent, batch["subject_idx"])
             terms["loss"] = terms["loss"] + self.hparams.identity_weight * terms["identity"]
+        if out.flow is not None:  # the warp head: flow, visibility and smoothness terms
+            terms.update(self._warp_terms(out, batch))
+            hp = self.hparams
+            terms["loss"] = terms["loss"] + hp.flow_weight * terms["flow"] + hp.vis_weight * terms["vis"] + \
+                hp.smooth_weight * terms["smooth"]
         where = f"step {self.global_step} (epoch {self.current_epoch}, batch {batch_idx})"
         if not guard_step(self, terms, where, self.hparams.on_nonfinite):
             return None  # no backward, no optimizer step
@@ -185,10 +202,27 @@ class CanonicalTask(pl.LightningModule):
                        "train/mask_loss": losses["mask"]}, on_step=True, on_epoch=True, batch_size=bs)
         if "identity" in terms:
             self.log("train/identity_loss", terms["identity"], on_step=False, on_epoch=True, batch_size=bs)
+        for k in WARP_TERMS:
+            if k in terms:
+                self.log(f"train/{k}_loss", terms[k], on_step=False, on_epoch=True, batch_size=bs)
         if not self.hparams.use_phases:
             self.log_dict({"train/alpha": self.loss_alpha, "train/beta": self.loss_beta},
                           on_step=False, on_epoch=True, batch_size=bs)
         return terms["loss"]
+
+    @staticmethod
+    def _warp_terms(out, batch: dict) -> dict[str, torch.Tensor]:
+        """The warp head's ``flow`` (end-point distance, grid units), ``vis`` (BCE) and ``smooth`` terms;
+        items without flow targets (``has_flow`` false or absent) add to the smoothness only."""
+        has = batch.get("has_flow")
+        if has is None or "flow" not in batch:
+            has = torch.zeros(out.flow.shape[0], dtype=torch.bool, device=out.flow.device)
+            target, vis = torch.zeros_like(out.flow), torch.zeros_like(out.mask)
+        else:
+            target, vis = pixels_to_grid(batch["flow"].float()), batch["vis"]
+        return {"flow": flow_loss(out.flow, target, vis, has),
+                "vis": visibility_loss(out.vis_logits, vis, batch["canon_mask"], has),
+                "smooth": flow_smoothness(out.flow)}
 
     def _identity_loss(self, latent: torch.Tensor, subject_idx) -> torch.Tensor:
         """Cross-entropy of the subject classifier on the MSFE latent ``(B, fuser_out)`` (``arch=recall``: of
@@ -215,8 +249,12 @@ class CanonicalTask(pl.LightningModule):
         out = self(batch["depth"], batch["mask"])
         self._update(self.val_metrics, batch, out)
         loss = canonical_loss(out.depth, out.mask, batch["canon_depth"], batch["canon_mask"], 1.0, 1.0)
-        self.log_dict({"val/depth_loss": loss["depth"], "val/mask_loss": loss["mask"]},
-                      on_epoch=True, batch_size=batch["depth"].shape[0])
+        bs = batch["depth"].shape[0]
+        self.log_dict({"val/depth_loss": loss["depth"], "val/mask_loss": loss["mask"]}, on_epoch=True, batch_size=bs)
+        if out.flow is not None and "has_flow" in batch and bool(batch["has_flow"].any()):
+            # end-point error in pixels on the visible pixels of the items with targets
+            epe = self._warp_terms(out, batch)["flow"] * batch["depth"].shape[-1] / 2
+            self.log("val/flow_epe", epe, on_epoch=True, batch_size=bs)
         if batch_idx == 0 and self.hparams.image_every_n_epochs and \
                 self.current_epoch % self.hparams.image_every_n_epochs == 0:
             self._log_panels(batch, out)

@@ -19,13 +19,13 @@ transposed convolutions with kernels 3, 3, 6, 2, 2, 2, 3 (stride 2) and resized 
 """
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
-from dataclasses import dataclass
-
 import torch
 import torch.nn as nn
 import torch.nn.functional as F
+
+from lit3d.canonical.outputs import CanonicalOutput, OutputHead
+from lit3d.canonical.warp import WarpHead
 
 UP_KERNELS = (5, 3, 5, 2, 2)
 UP_STRIDES = (1, 1, 2, 2, 2)  # three stride-2 ups undo the three 2x max-pools
@@ -154,28 +154,7 @@ class MSFE(nn.Module):
         return self.decode(self.encode(x), x.shape[-2:])
 
 
-@dataclass
-class CanonicalOutput:
-    """Predicted canonical depth ``(B,1,H,W)`` in [0,1], mask probability and mask logits ``(B,1,H,W)``;
-    ``latent``: the MSFE's fused latent ``(B, fuser_out)`` (None without an MSFE, and for the U-Net)."""
-
-    depth: torch.Tensor
-    mask: torch.Tensor
-    mask_logits: torch.Tensor
-    latent: torch.Tensor | None = None
-
-
-class _Head(nn.Module):
-    """1x1 conv -> depth (sigmoid) and mask logits."""
-
-    def __init__(self, cin: int):
-        super().__init__()
-        self.conv = nn.Conv2d(cin, 2, 1)
-
-    def forward(self, h: torch.Tensor) -> CanonicalOutput:
-        o = self.conv(h)
-        logits = o[:, 1:2]
-        return CanonicalOutput(depth=torch.sigmoid(o[:, 0:1]), mask=torch.sigmoid(logits), mask_logits=logits)
+HEADS = ("redraw", "warp")
 
 
 class CanonicalNet(nn.Module):
@@ -183,14 +162,18 @@ class CanonicalNet(nn.Module):
 
     ``use_lfe=False`` drops the LFE (the MSFE and the reconstruction see depth+mask only);
     ``use_msfe=False`` drops the MSFE. Reconstruction input = [depth, mask, Y_LFE, Y_MSFE].
+    ``head``: ``redraw`` (the thesis: a 1x1 conv draws depth and mask) or ``warp``
+    (:class:`~lit3d.canonical.warp.WarpHead`: moves the posed pixels, ``warp_hidden`` channels; its
+    coarse flow comes from the MSFE's fused latent).
     """
 
-    def __init__(self, image_size: int = 128, use_lfe: bool = True, use_msfe: bool = True,
-                 lfe_channels: Sequence[int] = (32, 64, 128), lfe_out: int = 1,
-                 msfe_channels: Sequence[int] = (16, 16, 10), msfe_grid: int = 40, fuser_hidden: int = 500,
-                 fuser_out: int = 500, msfe_dec_channels: Sequence[int] = (256, 128, 64, 32, 16, 8),
-                 msfe_out: int = 1, rec_channels: Sequence[int] = (32, 64, 128)):
+    def __init__(self, image_size: int, lfe_channels: Sequence[int], lfe_out: int, msfe_channels: Sequence[int],
+                 msfe_grid: int, fuser_hidden: int, fuser_out: int, msfe_dec_channels: Sequence[int], msfe_out: int,
+                 rec_channels: Sequence[int], use_lfe: bool = True, use_msfe: bool = True, head: str = "redraw",
+                 warp_hidden: int = 32):
         super().__init__()
+        if head not in HEADS:
+            raise ValueError(f"unknown canonical net head '{head}' ({', '.join(HEADS)})")
         self.image_size = image_size
         self.lfe = LFE(2, lfe_out, lfe_channels) if use_lfe else None
         c = 2 + (lfe_out if use_lfe else 0)
@@ -199,7 +182,9 @@ class CanonicalNet(nn.Module):
         c += msfe_out if use_msfe else 0
         hidden = max(rec_channels[0] // 2, 4)
         self.reconstruction = DownUp(c, hidden, rec_channels, up_act="leaky", final_act=True)
-        self.head = _Head(hidden + 2)  # the input is given to the head again (skip link)
+        # the input is given to the head again (skip link)
+        self.head = (WarpHead(hidden + 2, warp_hidden, fuser_out if use_msfe else 0) if head == "warp"
+                     else OutputHead(hidden + 2))
 
     def forward(self, depth: torch.Tensor, mask: torch.Tensor) -> CanonicalOutput:
         x = torch.cat([depth, mask], dim=1)
@@ -209,8 +194,8 @@ class CanonicalNet(nn.Module):
         if self.msfe is not None:
             latent = self.msfe.encode(torch.cat(feats, dim=1))
             feats.append(self.msfe.decode(latent, x.shape[-2:]))
-        h = self.reconstruction(torch.cat(feats, dim=1))
-        out = self.head(torch.cat([h, x], dim=1))
+        h = torch.cat([self.reconstruction(torch.cat(feats, dim=1)), x], dim=1)
+        out = self.head(h, depth, mask, latent) if isinstance(self.head, WarpHead) else self.head(h)
         out.latent = latent
         return out
 
@@ -238,7 +223,7 @@ class UNet(nn.Module):
             self.ups.append(nn.ConvTranspose2d(prev, c, 2, stride=2))
             self.dec.append(nn.Sequential(nn.Conv2d(2 * c, c, 3, padding=1), nn.LeakyReLU(0.2)))
             prev = c
-        self.head = _Head(prev)
+        self.head = OutputHead(prev)
         self.factor = 2 ** len(ch)
 
     def forward(self, depth: torch.Tensor, mask: torch.Tensor) -> CanonicalOutput:
@@ -256,98 +241,3 @@ class UNet(nn.Module):
             x = dec(torch.cat([up(x), s], dim=1))
         out = self.head(x)
         return CanonicalOutput(out.depth[..., :H, :W], out.mask[..., :H, :W], out.mask_logits[..., :H, :W])
-
-
-INITS = ("he", "torch")
-LEAKY_SLOPE = 0.2
-
-
-def he_init_(net: nn.Module) -> nn.Module:
-    """He (fan-in) initialisation for LeakyReLU(0.2) of every conv, transposed conv and linear layer,
-    biases zero; in place, returns ``net``.
-
-    A transposed convolution of stride ``s`` feeds each output pixel from ``cin * k^2 / s^2`` inputs
-    (not ``cin * k^2``), so its fan-in is counted that way. Why not PyTorch's default: measured on
-    TOSCA (README "Real TOSCA"), the default's per-layer gain of about 1/sqrt(3) shrinks the MSFE's
-    12 layers so far that its output is the same image for every input at initialisation (spread
-    over a batch 4e-8, its biases alone), the global path learns slowly and after 750 steps the net
-    still did not fit its own training masks (IoU .5); with this init the spread is 6e-2 and the
-    training masks reach IoU .98 in 600 steps.
-    """
-    gain = nn.init.calculate_gain("leaky_relu", LEAKY_SLOPE)
-    for m in net.modules():
-        if isinstance(m, (nn.Conv2d, nn.Linear)):
-            nn.init.kaiming_normal_(m.weight, a=LEAKY_SLOPE, nonlinearity="leaky_relu")
-        elif isinstance(m, nn.ConvTranspose2d):
-            cin, k = m.weight.shape[0], m.weight.shape[2] * m.weight.shape[3]
-            fan_in = cin * k / (m.stride[0] * m.stride[1])
-            nn.init.normal_(m.weight, 0.0, gain / math.sqrt(fan_in))
-        else:
-            continue
-        if m.bias is not None:
-            nn.init.zeros_(m.bias)
-    return net
-
-
-def build_canonical_net(net: dict) -> nn.Module:
-    """Build from a plain dict: ``{"kind": "canonical"|"unet"|"recall", "init": "he"|"torch", **kwargs}``
-    (``init``: :func:`he_init_`, or PyTorch's default layer initialisation; ``recall``:
-    :class:`lit3d.canonical.recall.SubjectRecallNet`, sized by ``recall_channels`` and ``n_subjects``)."""
-    net = dict(net)
-    kind = net.pop("kind", "canonical")
-    init = net.pop("init", "torch")
-    if init not in INITS:
-        raise ValueError(f"unknown canonical net init '{init}' ({', '.join(INITS)})")
-    if kind == "canonical":
-        net.pop("unet_channels", None)
-        net.pop("recall_channels", None)
-        model = CanonicalNet(**net)
-    elif kind == "unet":
-        keep = {k: v for k, v in net.items() if k in ("channels", "image_size")}
-        if "unet_channels" in net:
-            keep["channels"] = net["unet_channels"]
-        model = UNet(**keep)
-    elif kind == "recall":
-        from lit3d.canonical.recall import SubjectRecallNet  # imports this module
-
-        model = SubjectRecallNet(int(net.get("n_subjects", 0)), int(net.get("image_size", 128)),
-                                 net.get("recall_channels", (16, 32, 64, 128)))
-    else:
-        raise ValueError(f"unknown canonical net kind '{kind}' (canonical, unet, recall)")
-    return he_init_(model) if init == "he" else model
-
-
-def summarize(net: nn.Module, image_size: int) -> list[dict]:
-    """Per-component rows (name, params, output shape) for ``lit3d-summary``; works on the meta device."""
-    dev = next(net.parameters()).device
-    d = torch.zeros(1, 1, image_size, image_size, device=dev)
-    m = torch.zeros_like(d)
-    x = torch.cat([d, m], 1)
-    rows = []
-    feats = [x]
-
-    def count(mod):
-        return sum(p.numel() for p in mod.parameters())
-
-    if isinstance(net, CanonicalNet):
-        if net.lfe is not None:
-            y = net.lfe(x)
-            feats.append(y)
-            rows.append({"component": "LFE", "params": count(net.lfe), "output": tuple(y.shape)})
-        if net.msfe is not None:
-            inp = torch.cat(feats, 1)
-            for i, e in enumerate(net.msfe.encoders):
-                z = e(inp)
-                rows.append({"component": f"MSFE encoder d={DILATIONS[i]}", "params": count(e), "output": tuple(z.shape)})
-            rows.append({"component": "MSFE fuser", "params": count(net.msfe.fuser),
-                         "output": (1, net.msfe.fuser[-2].out_features), "input": (1, net.msfe.latent_dim)})
-            y = net.msfe(inp)
-            feats.append(y)
-            rows.append({"component": "MSFE decoder", "params": count(net.msfe.decoder), "output": tuple(y.shape)})
-        net.reconstruction(torch.cat(feats, 1))  # checks that the features fit its input channels
-        rows.append({"component": "reconstruction", "params": count(net.reconstruction) + count(net.head),
-                     "output": (1, 2, image_size, image_size)})
-    else:
-        rows.append({"component": type(net).__name__, "params": count(net), "output": (1, 2, image_size, image_size)})
-    rows.append({"component": "total", "params": count(net), "output": (1, 2, image_size, image_size)})
-    return rows

@@ -8,7 +8,7 @@ view, learned from the same data, reaches on the same protocol; it cannot canoni
 was not trained on (it always answers with one of the training subjects).
 
 Tensors (B = batch, K = subjects, S = image size):
-    depth, mask ``(B, 1, S, S)`` float32 -> :class:`~lit3d.canonical.nets.CanonicalOutput` with
+    depth, mask ``(B, 1, S, S)`` float32 -> :class:`~lit3d.canonical.outputs.CanonicalOutput` with
     ``latent`` = subject logits ``(B, K)``; depth and mask are the probability-weighted mix of the
     ``K`` canonical templates ``(K, 1, S, S)`` (depth normalised by the mixed mask, so a confident
     prediction is exactly the template).
@@ -20,7 +20,7 @@ from collections.abc import Sequence
 import torch
 import torch.nn as nn
 
-from lit3d.canonical.nets import CanonicalOutput
+from lit3d.canonical.outputs import CanonicalOutput
 
 MASK_EPS = 1e-4  # mask probabilities are clamped to [eps, 1 - eps] before the logit
 

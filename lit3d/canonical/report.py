@@ -30,7 +30,8 @@ THESIS = {
 ABLATION = {"Complete": (.91, .76, .80, .89), "without LFE": (.88, .62, .76, .84), "without MSFE": (.72, .48, .61, .73)}
 OURS = (("lit3d model (ours)", "model"), ("plain U-Net, same data and losses (ours)", "unet"),
         ("posed input depth, no canonicalisation (ours)", "input"),
-        ("true canonical depth, ceiling (ours)", "target"),
+        ("true canonical depth, one image per subject: 1.00 by construction (ours)", "target"),
+        ("true canonical depth, camera turned up to ceiling_jitter_deg per item: the ceiling (ours)", "target_jitter"),
         ("classical MDS, full mesh (ours)", "cmds"), ("SMACOF (least-squares MDS), full mesh (ours)", "smacof"),
         ("non-metric MDS, full mesh (ours)", "nmds"), ("GPS, full mesh (ours)", "gps"),
         ("posed full mesh, no canonicalisation (ours)", "posed"),

@@ -41,6 +41,17 @@ def render_depth(verts: np.ndarray, faces: np.ndarray, size: int, azimuth: float
     return depth, mask
 
 
+def project_points(verts: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where this camera sees ``(N, 3)`` world points in an ``S x S`` image: column and row
+    ``(N,)`` in pixels (pixel centres at integers, row 0 = top; the inverse of :func:`pixel_grid`)
+    and their normalised depth ``(N,)`` (as :func:`render_depth` writes it, unclipped)."""
+    v = np.asarray(verts, np.float64)
+    col = (v[:, 0] / ORTHO_MAG + 1) / 2 * size - 0.5
+    row = (1 - v[:, 1] / ORTHO_MAG) / 2 * size - 0.5
+    dist = CAMERA_DISTANCE - v[:, 2]
+    return col, row, 1 - (1 - FG_MIN) * (dist - DEPTH_NEAR) / (DEPTH_FAR - DEPTH_NEAR)
+
+
 def depth_to_distance(depth: np.ndarray) -> np.ndarray:
     """Inverse of the depth normalisation: camera distance of each foreground pixel."""
     return DEPTH_NEAR + (1 - depth) * (DEPTH_FAR - DEPTH_NEAR) / (1 - FG_MIN)

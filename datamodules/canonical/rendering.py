@@ -1,0 +1,141 @@
+"""Rendering of one subject's cache file: every pose's depth images and, for pairs whose meshes
+correspond, the flow and visibility targets of the warp head (:mod:`datamodules.canonical.flow`).
+
+Every shape is centred on its bounding-box centre and scaled so that its longest side is 1
+(``scale_mode="shape"``) or by the subject's canonical scale (``scale_mode="subject"``), turned by
+its view mode's azimuth plus each configured azimuth, and rendered by the depth camera
+(:func:`lit3d.render.depth.render_depth`).
+
+Arrays of a subject file (``S = image_size``; layout read by :mod:`datamodules.canonical.images`):
+    depth_<p>_<v>  (S, S) float16       mask_<p>_<v>  packed bits of (S, S) bool
+    flow_<p>_<v>   (2, S, S) float16    vis_<p>_<v>   packed bits of (S, S) bool   (``flow_targets``;
+                   only for poses whose mesh corresponds to the canonical one)
+    poses (str), skipped (str)
+"""
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from datamodules.cache import DataError
+from datamodules.canonical.flow import flow_targets
+from datamodules.canonical.images import depth_image_problem
+from lit3d.geometry.normalise import normalise_vertices
+from lit3d.geometry.views import base_azimuth
+from lit3d.render.depth import render_depth, rotate_y
+
+log = logging.getLogger("lit3d")
+
+
+class PairRenderer:
+    """Renders the subjects of ``source`` (:mod:`datamodules.canonical.sources`) with the DataModule's
+    hyper-parameters ``hp`` (``image_size``, ``azimuths``, ``view_mode``, ``scale_mode``, ``skip_bad``,
+    ``flow_targets``)."""
+
+    def __init__(self, source, hp):
+        self.source, self.hp = source, hp
+
+    def raw_mesh(self, subject: str, pose) -> tuple[np.ndarray, np.ndarray]:
+        """``(V, 3)``, ``(F, 3)`` of (subject, pose) as the source gives it (``pose="canonical"`` ok)."""
+        src = self.source
+        return src.mesh(subject, src.canonical_pose(subject) if pose == "canonical" else pose)
+
+    def frame(self, subject: str, v: np.ndarray) -> tuple[np.ndarray, float]:
+        """Centre ``(3,)`` and scale that normalise raw vertices ``v`` of ``subject`` (``scale_mode``)."""
+        v = np.asarray(v, np.float64)
+        lo, hi = v.min(0), v.max(0)
+        if self.hp.scale_mode == "subject":
+            scale = normalise_vertices(self.raw_mesh(subject, "canonical")[0])[1]
+        else:
+            scale = 1.0 / max(float((hi - lo).max()), 1e-12)
+        return (lo + hi) / 2, scale
+
+    def normalise(self, subject: str, v: np.ndarray) -> np.ndarray:
+        """Raw ``(V, 3)`` vertices of ``subject`` centred and scaled by ``scale_mode``."""
+        centre, scale = self.frame(subject, v)
+        return (np.asarray(v, np.float64) - centre) * scale
+
+    def normalized_mesh(self, subject: str, pose) -> tuple[np.ndarray, np.ndarray]:
+        """The mesh of (subject, pose) centred and scaled as it is rendered."""
+        v, f = self.raw_mesh(subject, pose)
+        return self.normalise(subject, v), f
+
+    def view_azimuths(self, v: np.ndarray, f: np.ndarray) -> list[float]:
+        """Azimuth of every configured view of normalised vertices ``v``: view mode's base + offset."""
+        base = base_azimuth(v, f, self.hp.view_mode)
+        return [base + float(az) for az in self.hp.azimuths]
+
+    def render_views(self, subject: str, v: np.ndarray, f: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(depth, mask) ``(S, S)`` of every azimuth of raw mesh ``v, f``; DataError for a bad image."""
+        size = self.hp.image_size
+        v = self.normalise(subject, v)
+        out = []
+        for vi, az in enumerate(self.view_azimuths(v, f)):
+            d, m = render_depth(v, f, size, az)
+            problem = depth_image_problem(d, m, size)
+            if problem:
+                raise DataError(f"view {vi}: rendered {problem} (mesh outside the view?)")
+            out.append((d, m))
+        return out
+
+    def canonical_turned(self, subject: str, view: int, turn_deg: float) -> tuple[np.ndarray, np.ndarray]:
+        """The subject's canonical depth ``(S, S)`` float32 and mask ``(S, S)`` bool seen from view ``view``
+        turned by a further ``turn_deg`` degrees about the vertical (a jittered camera)."""
+        v, f = self.normalized_mesh(subject, "canonical")
+        return render_depth(v, f, self.hp.image_size, self.view_azimuths(v, f)[int(view)] + float(turn_deg))
+
+    def _pose_arrays(self, subject: str, pose, canon: dict | None) -> dict[str, np.ndarray]:
+        """Depth (float16) and packed mask of every view of one pose, with flow and visibility when
+        ``canon`` (the canonical pose's normalised vertices, view azimuths and images) is given and
+        the source has a correspondence for this pose; DataError for a bad image."""
+        v, f = self.raw_mesh(subject, pose)
+        views = self.render_views(subject, v, f)
+        out = {}
+        for vi, (d, m) in enumerate(views):
+            out[f"depth_{pose}_{vi}"] = d.astype(np.float16)
+            out[f"mask_{pose}_{vi}"] = np.packbits(m)
+        corr = None if canon is None else self.source.correspondence(subject, pose, canon["raw"], canon["faces"], v, f)
+        if corr is None:
+            return out
+        centre, scale = self.frame(subject, v)
+        posed_az = self.view_azimuths(self.normalise(subject, v), f)
+        corr = (np.asarray(corr, np.float64) - centre) * scale
+        for vi, (d, m) in enumerate(views):
+            cd, cm = canon["views"][vi]
+            flow, vis = flow_targets(rotate_y(canon["verts"], canon["azimuths"][vi]), rotate_y(corr, posed_az[vi]),
+                                     cd, cm, d, m)
+            out[f"flow_{pose}_{vi}"] = flow.astype(np.float16)
+            out[f"vis_{pose}_{vi}"] = np.packbits(vis)
+        return out
+
+    def render_subject(self, subject: str) -> dict[str, np.ndarray]:
+        """Arrays of one subject's cache file; ``skipped`` lists the poses dropped by ``skip_bad``."""
+        hp = self.hp
+        arrays: dict[str, np.ndarray] = {}
+        canon = None
+        try:
+            cv, cf = self.raw_mesh(subject, "canonical")
+            views = self.render_views(subject, cv, cf)
+        except Exception as exc:
+            raise DataError(f"{subject} pose canonical: {exc}") from exc
+        for vi, (d, m) in enumerate(views):
+            arrays[f"depth_canonical_{vi}"] = d.astype(np.float16)
+            arrays[f"mask_canonical_{vi}"] = np.packbits(m)
+        if hp.get("flow_targets", False):
+            verts = self.normalise(subject, cv)
+            canon = {"raw": cv, "faces": cf, "verts": verts, "azimuths": self.view_azimuths(verts, cf), "views": views}
+        poses, skipped = list(self.source.poses(subject)), []
+        for p in poses:
+            try:
+                arrays.update(self._pose_arrays(subject, p, canon))
+            except Exception as exc:
+                msg = f"{subject} pose {p}: {exc}"
+                if not hp.skip_bad:
+                    raise DataError(msg) from exc
+                log.warning("skipping: %s", msg)
+                skipped.append(msg)
+        kept = [p for p in poses if f"depth_{p}_0" in arrays]
+        arrays["poses"] = np.array([str(p) for p in kept])
+        arrays["skipped"] = np.array(skipped, dtype=str)
+        return arrays

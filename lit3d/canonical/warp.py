@@ -1,0 +1,121 @@
+"""The warp head: the canonical image is the posed image's pixels moved, not redrawn (thesis 5.2.3:
+"shifting the pixels to recreate a canonical pose").
+
+From the reconstruction features the head predicts, per canonical pixel,
+    flow       (B, 2, H, W)  backward flow in normalised grid units (x, y; 2 = the image width):
+                             where in the posed image the pixel's surface point is;
+    offset     (B, 1, H, W)  the point's depth change from the posed to the canonical pose;
+    vis        (B, 1, H, W)  logits: the point is seen in the posed image (take the moved pixel);
+    fill       (B, 2, H, W)  depth and mask logits drawn for what the posed view hides.
+Output (:func:`warp_compose`): ``mask = v * warp(mask_in) + (1 - v) * fill_mask`` and
+``depth = v * (warp(depth_in) + offset) + (1 - v) * fill_depth``, ``v = sigmoid(vis)``, warps by
+bilinear :func:`torch.nn.functional.grid_sample`. The silhouette where visible is the posed one moved.
+
+The output layer starts at zero with the visibility bias at :data:`VIS_BIAS`: an untrained head
+returns (almost exactly) the posed input, and zero flow with full visibility returns it exactly.
+The flow is learned from flow targets (:mod:`datamodules.canonical.flow`) and, through the warp,
+from the image losses.
+"""
+from __future__ import annotations
+
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+
+from lit3d.canonical.outputs import CanonicalOutput
+
+VIS_BIAS = 4.0      # sigmoid(4) = .98: start by taking the moved (at first: unmoved) input pixels
+MASK_EPS = 1e-5     # mask probabilities clamped to [eps, 1 - eps] for their logits
+OUT_CHANNELS = 6    # flow 2, offset 1, vis 1, fill depth 1, fill mask 1
+
+
+def identity_grid(batch: int, height: int, width: int, device=None, dtype=None) -> torch.Tensor:
+    """``(B, H, W, 2)`` grid_sample coordinates (x, y in [-1, 1], align_corners=False) of every pixel centre."""
+    ys = (torch.arange(height, device=device, dtype=dtype) + 0.5) / height * 2 - 1
+    xs = (torch.arange(width, device=device, dtype=dtype) + 0.5) / width * 2 - 1
+    gy, gx = torch.meshgrid(ys, xs, indexing="ij")
+    return torch.stack([gx, gy], -1)[None].expand(batch, -1, -1, -1)
+
+
+def warp_image(image: torch.Tensor, flow: torch.Tensor) -> torch.Tensor:
+    """``image`` ``(B, C, H, W)`` sampled at every pixel + ``flow`` ``(B, 2, H, W)`` (normalised units),
+    bilinear, zeros outside."""
+    b, _, h, w = image.shape
+    grid = identity_grid(b, h, w, image.device, image.dtype) + flow.permute(0, 2, 3, 1)
+    return F.grid_sample(image, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+
+
+def pixels_to_grid(flow_px: torch.Tensor) -> torch.Tensor:
+    """Flow ``(B, 2, H, W)`` in pixels -> normalised grid units (x by the width, y by the height)."""
+    h, w = flow_px.shape[-2:]
+    return flow_px * torch.tensor([2.0 / w, 2.0 / h], device=flow_px.device, dtype=flow_px.dtype)[None, :, None, None]
+
+
+def warp_compose(depth: torch.Tensor, mask: torch.Tensor, flow: torch.Tensor, offset: torch.Tensor,
+                 vis: torch.Tensor, fill_depth: torch.Tensor, fill_mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Canonical (depth, mask probability) ``(B, 1, H, W)`` from the posed ``depth``/``mask``, the
+    ``flow`` ``(B, 2, H, W)``, depth ``offset``, visibility probability ``vis`` and the fills (all
+    ``(B, 1, H, W)``, fill mask a probability). Zero flow, zero offset and ``vis = 1`` give the input."""
+    moved = warp_image(torch.cat([depth, mask], 1), flow)
+    m = vis * moved[:, 1:2] + (1 - vis) * fill_mask
+    d = vis * (moved[:, 0:1] + offset) + (1 - vis) * fill_depth
+    return d.clamp(0, 1), m
+
+
+def _convs(cin: int, hidden: int) -> nn.Sequential:
+    """Two 3x3 conv + LeakyReLU(0.2) layers, ``(B, cin, H, W) -> (B, hidden, H, W)``."""
+    return nn.Sequential(nn.Conv2d(cin, hidden, 3, padding=1), nn.LeakyReLU(0.2),
+                         nn.Conv2d(hidden, hidden, 3, padding=1), nn.LeakyReLU(0.2))
+
+
+class WarpHead(nn.Module):
+    """``(B, cin, H, W)`` features and the posed ``depth``, ``mask`` -> :class:`CanonicalOutput` with
+    ``flow`` and ``vis_logits`` (module docstring), in two stages.
+
+    1. First flow: with ``latent_dim`` > 0 a linear layer maps the net's global latent
+       ``(B, latent_dim)`` to a coarse flow ``(B, 2, coarse, coarse)`` (the pose, seen whole),
+       upsampled; to it two 3x3 convs over the features and the pixel coordinates add a per-pixel
+       flow (the features are aligned with the posed image, the flow is asked at canonical pixels:
+       the coordinates say which).
+    2. Refinement: the features are moved by the first flow into the canonical frame
+       (:func:`warp_image`); two 3x3 convs over them, the unmoved features and the coordinates give
+       the residual flow, the depth offset, the visibility and the fills.
+
+    Both output layers start at zero (visibility bias :data:`VIS_BIAS`)."""
+
+    def __init__(self, cin: int, hidden: int, latent_dim: int = 0, coarse: int = 16):
+        super().__init__()
+        self.body = _convs(cin + 2, hidden)
+        self.first = nn.Conv2d(hidden, 2, 1)
+        self.refine = _convs(2 * cin + 2, hidden)
+        self.out = nn.Conv2d(hidden, OUT_CHANNELS, 1)
+        self.coarse = coarse
+        self.coarse_flow = nn.Linear(latent_dim, 2 * coarse * coarse) if latent_dim else None
+        self.reset_output_()
+
+    def reset_output_(self) -> None:
+        """Output layers to zero, visibility bias :data:`VIS_BIAS`, fill mask bias -4 (an untrained head
+        returns the posed input); called again after a whole-net initialisation."""
+        for layer in (self.first, self.out, self.coarse_flow):
+            if layer is not None:
+                nn.init.zeros_(layer.weight)
+                nn.init.zeros_(layer.bias)
+        with torch.no_grad():
+            self.out.bias[3] = VIS_BIAS
+            self.out.bias[5] = -VIS_BIAS
+
+    def forward(self, h: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor,
+                latent: torch.Tensor | None = None) -> CanonicalOutput:
+        b, _, height, width = h.shape
+        coords = identity_grid(b, height, width, h.device, h.dtype).permute(0, 3, 1, 2)
+        flow = self.first(self.body(torch.cat([h, coords], 1)))
+        if self.coarse_flow is not None and latent is not None:
+            coarse = self.coarse_flow(latent).view(b, 2, self.coarse, self.coarse)
+            flow = flow + F.interpolate(coarse, size=(height, width), mode="bilinear", align_corners=False)
+        o = self.out(self.refine(torch.cat([warp_image(h, flow), h, coords], 1)))
+        flow = flow + o[:, 0:2]
+        offset, vis_logits = o[:, 2:3], o[:, 3:4]
+        fill_depth, fill_mask = torch.sigmoid(o[:, 4:5]), torch.sigmoid(o[:, 5:6])
+        d, m = warp_compose(depth, mask, flow, offset, torch.sigmoid(vis_logits), fill_depth, fill_mask)
+        m = m.clamp(MASK_EPS, 1 - MASK_EPS)
+        return CanonicalOutput(depth=d, mask=m, mask_logits=torch.logit(m), flow=flow, vis_logits=vis_logits)
