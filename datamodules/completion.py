@@ -39,13 +39,13 @@ from lit3d.utils.shapenet_categories import (
 
 log = logging.getLogger("lit3d.data")
 
-SPLITS = ("train", "val", "test_same", "test_cross", "test_unseen", "test_unseen_cross")
+DATA_SPLITS = ("train", "val", "test_same", "test_cross", "test_unseen", "test_unseen_cross")
 TEST_SPLITS = ("test_same", "test_cross", "test_unseen", "test_unseen_cross")
 DEFAULT_SIZES = {"train": 240, "val": 40, "test_same": 40, "test_cross": 40, "test_unseen": 40}
 SYNTH_VERSION = "1"
 RECGAN_VERSION = "1"
 MESHES_VERSION = "1"
-SOURCES = ("synth", "recgan") + MESH_SOURCES
+DATA_SOURCES = ("synth", "recgan") + MESH_SOURCES
 DEFAULT_MODEL_SPLIT = {"train": 0.7, "val": 0.1, "test": 0.2}
 
 
@@ -60,8 +60,8 @@ def check_sizes(sizes: dict | None) -> dict:
     before any cache is touched (an unknown key would otherwise be dropped and change the cache hash)."""
     out = {}
     for k, v in dict(sizes or {}).items():
-        if k not in SPLITS:
-            raise DataConfigError(f"data.sizes.{k}: unknown split; known: {', '.join(SPLITS)}")
+        if k not in DATA_SPLITS:
+            raise DataConfigError(f"data.sizes.{k}: unknown split; known: {', '.join(DATA_SPLITS)}")
         n = 0 if v is None else v
         if isinstance(n, bool) or not isinstance(n, (int, float)) or n < 0 or n != int(n):
             raise DataConfigError(f"data.sizes.{k}={v!r}: expected a whole number of items >= 0")
@@ -81,7 +81,7 @@ def synth_items(sizes: dict, categories: Sequence[str], unseen_categories: Seque
     from datamodules.synth.depth_voxels import VIEW_SETS, view_index  # noqa: PLC0415
 
     items = []
-    for split in SPLITS:
+    for split in DATA_SPLITS:
         n = int(sizes.get(split, 0) or 0)
         cats = list(unseen_categories) if split.startswith("test_unseen") else list(categories)
         if n <= 0 or not cats:
@@ -171,8 +171,8 @@ class CompletionDataModule(pl.LightningDataModule):
                  progress: bool = True, sensor: str | dict = "ortho", model_split: dict | None = None,
                  min_models: int = 8, up_axis: str = "y", prepare_workers: int = 0):
         super().__init__()
-        if source not in SOURCES:
-            raise DataConfigError(f"data.source={source!r}: expected one of {', '.join(SOURCES)}")
+        if source not in DATA_SOURCES:
+            raise DataConfigError(f"data.source={source!r}: expected one of {', '.join(DATA_SOURCES)}")
         if target_res % input_factor:
             raise DataConfigError(f"data.target_res={target_res} is not divisible by data.input_factor={input_factor}")
         try:
@@ -306,7 +306,7 @@ class CompletionDataModule(pl.LightningDataModule):
         by_split: dict[str, list[dict]] = defaultdict(list)
         for it in manifest["items"]:
             by_split[it["split"]].append(it)
-        self.datasets = {s: VoxelPairDataset(self.data_dir, by_split.get(s, []), SEEN_CATEGORIES) for s in SPLITS}
+        self.datasets = {s: VoxelPairDataset(self.data_dir, by_split.get(s, []), SEEN_CATEGORIES) for s in DATA_SPLITS}
         self.test_split_names = [s for s in TEST_SPLITS if len(self.datasets[s])]
 
     def _loader(self, split: str, shuffle: bool) -> DataLoader:
@@ -367,7 +367,7 @@ class CompletionDataModule(pl.LightningDataModule):
 
         if not self.datasets:
             self.setup()
-        splits = [s for s in SPLITS if len(self.datasets[s])]
+        splits = [s for s in DATA_SPLITS if len(self.datasets[s])]
         picks = []
         for idx in range(max((len(self.datasets[s]) for s in splits), default=0)):
             picks += [(s, idx) for s in splits if idx < len(self.datasets[s])]

@@ -177,3 +177,21 @@ def test_warp_head_learns_a_flow_it_is_shown():
         opt.step()
     epe_px = float(loss.detach()) * size / 2
     assert start * size / 2 == pytest.approx(shift, abs=0.01) and epe_px < 0.5
+
+
+def test_warp_oracle_is_the_truth_where_seen_and_the_mean_body_elsewhere():
+    from lit3d.canonical.pooled import warp_oracle
+
+    rng = np.random.default_rng(0)
+    mask = (rng.random((6, 1, 16, 16)) > 0.3).astype(np.float32)
+    depth = rng.random((6, 1, 16, 16)).astype(np.float32) * mask
+    seen = {"canon_depth": depth, "canon_mask": mask, "vis": np.ones_like(mask)}  # every pixel seen: the truth
+    d, m = warp_oracle(seen)
+    np.testing.assert_allclose(d, depth)
+    np.testing.assert_array_equal(m, mask)
+    d0, m0 = warp_oracle({**seen, "vis": np.zeros_like(mask)})
+    mean_mask = (mask.mean(0) >= 0.5).astype(np.float32)
+    assert (m0 == mean_mask[None]).all() and np.allclose(d0[0], d0[5])  # one mean body for every item
+    inside = mean_mask[0] > 0
+    expected = (depth * mask).sum(0)[0] / np.maximum(mask.sum(0)[0], 1)
+    np.testing.assert_allclose(d0[0, 0][inside], expected[inside], rtol=1e-6)

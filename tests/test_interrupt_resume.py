@@ -37,8 +37,9 @@ REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 
 # canonical demo at 32^2 with tiny nets: 6 subjects x 6 poses, 3 folds -> 16 train pairs = 4 batches
+# (the old mixed validation rule, data.val_subjects=null, keeps 4 subjects for training)
 CANONICAL = [
-    "experiment=canonical_demo", "data.image_size=32", "data.n_subjects=6", "data.n_poses=6",
+    "experiment=canonical_demo", "data.image_size=32", "data.n_subjects=6", "data.n_poses=6", "data.val_subjects=null",
     "data.mesh_resolution=20", "data.kinds=[humanoid]", "data.batch_size=4", "task.net.image_size=32",
     "task.net.lfe_channels=[8,12,16]", "task.net.msfe_channels=[6,6,4]", "task.net.msfe_grid=6",
     "task.net.fuser_hidden=64", "task.net.fuser_out=48", "task.net.msfe_dec_channels=[32,16,12,8,8,8]",
@@ -118,7 +119,8 @@ def test_sigterm_saves_last_and_resume_continues_canonical(tmp_path, canonical_d
     per_epoch = 8  # batches of 2: a SIGTERM mostly lands mid-epoch (the case Lightning resumes specially)
     # task.alpha/beta are the constant weights (used without phases): set apart from every phase's,
     # so a resumed step that missed its phase's weights shows in the logged losses
-    common = [*CANONICAL, "data.batch_size=2", "task.alpha=1.0", "task.beta=1.0", "task.phase_unit=epochs",
+    # the redraw head: its loss is exactly alpha * depth + beta * mask (the warp head adds flow terms)
+    common = [*CANONICAL, "task.net.head=redraw", "data.batch_size=2", "task.alpha=1.0", "task.beta=1.0", "task.phase_unit=epochs",
               "logger=csv", "trainer.log_every_n_steps=1", "callbacks.resume_state.every_n_train_batches=1",
               f"paths.data_dir={canonical_data}", f"hydra.run.dir={run}"]
     last = run / "checkpoints" / "last.ckpt"

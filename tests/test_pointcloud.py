@@ -222,3 +222,37 @@ def test_point_order_does_not_change_the_renders():
     perm = np.random.default_rng(0).permutation(len(shell))
     f = feature_table(PointShape(shell, col), PointShape(shell[perm], col[perm]), FAST).features
     assert all(v == pytest.approx(1.0) for k, v in f.items() if k.startswith("mask_ssim/"))
+
+
+def test_cached_frames_is_thread_safe(monkeypatch):
+    """Many threads asking for a few clouds at once: each cloud's frames computed once, every
+    caller gets that one result, and the memo keeps its bound (lit3d.features.points._FRAMES)."""
+    import threading
+    import time
+
+    from lit3d.features import points as pf
+
+    calls: dict[int, int] = {}
+
+    def slow_frames(p):
+        calls[len(p)] = calls.get(len(p), 0) + 1
+        time.sleep(0.02)  # let the other threads reach the check while this one computes
+        return {"n": np.full(1, len(p))}
+
+    monkeypatch.setattr(pf, "local_frames", slow_frames)
+    monkeypatch.setattr(pf, "_FRAMES", type(pf._FRAMES)())
+    shapes = {f"k{n}": PointShape(np.zeros((n, 3))) for n in range(1, 4)}
+    got, start = [], threading.Barrier(12)
+
+    def ask(key):
+        start.wait()
+        got.append((key, pf.cached_frames(shapes[key], key)))
+
+    threads = [threading.Thread(target=ask, args=(f"k{1 + i % 3}",)) for i in range(12)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert calls == {1: 1, 2: 1, 3: 1} and len(got) == 12
+    assert all(lf is pf._FRAMES[key] and int(lf["n"][0]) == int(key[1:]) for key, lf in got)
+    assert not pf._FRAMES_PENDING and len(pf._FRAMES) <= pf._FRAMES_KEEP

@@ -60,8 +60,8 @@ from datamodules.canonical.dataset import PairDataset, mirror_views, subject_bal
 from datamodules.canonical.images import (depth_image_problem, pairs_png, read_subject, remove_legacy_subject_files,
                                           unpack_mask)
 from datamodules.canonical.rendering import PairRenderer
-from datamodules.canonical.sources import ROOTLESS, SOURCES, Shrec14Source, SynthSource, ToscaSource, make_source
-from datamodules.canonical.splits import (SPLIT_MODES, SPLITS, deal, fold_pairs, split_counts, split_pose,
+from datamodules.canonical.sources import ROOTLESS, CANONICAL_SOURCES, Shrec14Source, SynthSource, ToscaSource, make_source
+from datamodules.canonical.splits import (SPLIT_MODES, CANONICAL_SPLITS, deal, fold_pairs, split_counts, split_pose,
                                           split_subject_pose, thin_training)
 from datamodules.loaders import evaluation_loader
 from datamodules.synth import bodies
@@ -74,7 +74,7 @@ DATA_VERSION = "canonical-data-1"
 SUBJECTS_DIR = "subjects"  # the cache's item folder
 FLOW_VERSION = "flow-1"  # bump when datamodules.canonical.flow changes what it writes
 
-__all__ = ["SPLITS", "CanonicalDataModule", "DataError", "PairDataset", "Shrec14Source", "SynthSource",
+__all__ = ["CANONICAL_SPLITS", "CanonicalDataModule", "DataError", "PairDataset", "Shrec14Source", "SynthSource",
            "ToscaSource", "deal", "depth_image_problem", "read_subject", "split_pose", "split_subject_pose",
            "subject_balanced_sampler", "unpack_mask"]
 
@@ -130,8 +130,8 @@ class CanonicalDataModule(pl.LightningDataModule):
     ):
         super().__init__()
         self.save_hyperparameters()
-        if source not in SOURCES:
-            raise DataError(f"unknown canonical data source '{source}' ({', '.join(SOURCES)})")
+        if source not in CANONICAL_SOURCES:
+            raise DataError(f"unknown canonical data source '{source}' ({', '.join(CANONICAL_SOURCES)})")
         if source not in ROOTLESS and not root:
             raise DataError(f"data source '{source}' needs root=<folder with the meshes>")
         if scale_mode not in ("shape", "subject"):
@@ -277,7 +277,7 @@ class CanonicalDataModule(pl.LightningDataModule):
             added = add_blends(self.cache, pairs["train"], hp.blend_poses, hp.seed, hp.fold, self.renderer.raw_mesh,
                                self.renderer.render_views)
             self.splits["train"] += [{"subject": s, "pose": p, "view": v} for s, p in added for v in self.views("train")]
-        for k in SPLITS:
+        for k in CANONICAL_SPLITS:
             if not self.splits[k] and hp.split == "all" and k != "test":
                 continue  # evaluation only: nothing to train or validate on
             if not self.splits[k]:
@@ -364,7 +364,7 @@ class CanonicalDataModule(pl.LightningDataModule):
                "skipped_bad_files": len(self.skipped),
                "split_mode": self.hparams.split, "fold": self.hparams.fold, "n_folds": self.hparams.n_folds,
                "subjects": len(self.cache)}
-        out.update({k: split_counts(self.splits[k], cats) for k in SPLITS})
+        out.update({k: split_counts(self.splits[k], cats) for k in CANONICAL_SPLITS})
         return out
 
     def show(self, n: int, path: str | Path, split: str = "test") -> Path:

@@ -21,7 +21,7 @@ import numpy as np
 from datamodules.cache import DataError
 from datamodules.canonical.flow import skinned_canonical
 
-SOURCES = ("synth", "tosca", "shrec14", "anny", "faust", "sumner")
+CANONICAL_SOURCES = ("synth", "tosca", "shrec14", "anny", "faust", "sumner")
 ROOTLESS = ("synth", "anny")  # sources that need no root folder
 
 
@@ -251,4 +251,4 @@ def make_source(hp) -> _Source:
         return FaustSource(hp.root, hp.canonical_pose)
     if hp.source == "sumner":
         return SumnerSource(hp.root, hp.classes)
-    raise DataError(f"unknown canonical data source '{hp.source}' ({', '.join(SOURCES)})")
+    raise DataError(f"unknown canonical data source '{hp.source}' ({', '.join(CANONICAL_SOURCES)})")

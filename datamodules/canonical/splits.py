@@ -23,7 +23,7 @@ import numpy as np
 
 from datamodules.cache import DataError
 
-SPLITS = ("train", "val", "test")
+CANONICAL_SPLITS = ("train", "val", "test")
 SPLIT_MODES = ("subject_pose", "pose", "all")
 
 
@@ -46,7 +46,7 @@ def split_subject_pose(subjects, poses, n_folds: int, fold: int, seed: int,
                         f"(have {len(subjects)} subjects, {len(poses)} poses)")
     sg = deal(subjects, n_folds, seed)[fold % n_folds]
     pg = deal(poses, n_folds, seed + 1)[fold % n_folds]
-    out = {k: [] for k in SPLITS}
+    out = {k: [] for k in CANONICAL_SPLITS}
     if val_subjects is not None:
         rest = [s for s in subjects if s not in sg]
         if not 1 <= int(val_subjects) < len(rest):
@@ -73,7 +73,7 @@ def split_pose(subject_poses: dict[str, list], n_folds: int, fold: int, seed: in
                val_per_subject: int = 1) -> dict[str, list[tuple]]:
     """Per subject: poses dealt into folds; fold f -> test, ``val_per_subject`` others -> val.
     Every pose is tested by exactly one of the ``n_folds`` folds."""
-    out = {k: [] for k in SPLITS}
+    out = {k: [] for k in CANONICAL_SPLITS}
     for i, (s, poses) in enumerate(sorted(subject_poses.items())):
         if len(poses) < 2:
             out["train"] += [(s, p) for p in poses]

@@ -12,7 +12,8 @@ prediction (``model`` or ``unet``), the posed input depth and the true canonical
 mesh rows. Without run dirs the Hydra overrides after ``--`` compose the data and task config (as
 ``lit3d-train`` would) and the items are every item some fold holds out
 (:meth:`datamodules.canonical.CanonicalDataModule.held_out_records`): the posed-input and true
-canonical depth rows plus the mesh rows. Mesh rows (one per held-out subject x pose, full
+canonical depth rows plus the mesh rows, and with ``data.flow_targets=true`` the warp oracle
+(:func:`warp_oracle`: the true canonical where the posed input sees it, the mean body elsewhere). Mesh rows (one per held-out subject x pose, full
 resolution): the non-learned canonical forms ``task.mesh_baselines`` (landmark geodesics,
 :mod:`lit3d.geometry.canonical_forms`), ShapeDNA of the posed full mesh (the intrinsic ceiling,
 :func:`lit3d.geometry.spectral.shape_dna`; no codebook, so sd 0), and chance (random distances,
@@ -32,7 +33,7 @@ from lit3d.canonical.heldout import HELDOUT_FILE, pool
 
 log = logging.getLogger("lit3d")
 
-DEPTH_ROWS = ("model", "unet", "input", "target")
+DEPTH_ROWS = ("model", "unet", "input", "target", "oracle")
 SCORES = ("nn", "ft", "st", "e", "dcg")
 
 
@@ -53,7 +54,24 @@ def depth_meshes_of(pooled: dict, cfg, mask_threshold: float) -> dict[str, list]
         out[str(pooled.get("source", "model"))] = meshes(pooled["pred_depth"], pm)
     out["input"] = meshes(pooled["depth"], pooled["mask"])
     out["target"] = meshes(pooled["canon_depth"], pooled["canon_mask"])
+    if "vis" in pooled:
+        out["oracle"] = meshes(*warp_oracle(pooled))
     return out
+
+
+def warp_oracle(items: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Depth and mask ``(N, 1, S, S)`` float32 of a perfect warp head: the true canonical form where its
+    surface is seen in the posed input (``vis``, from the flow targets), the mean canonical body of the
+    items elsewhere (mask: mean canonical mask >= .5; depth: mean canonical depth over the items whose
+    mask holds the pixel). Items need ``canon_depth``, ``canon_mask`` and ``vis`` ``(N, 1, S, S)``."""
+    d = np.asarray(items["canon_depth"], np.float32)
+    m = (np.asarray(items["canon_mask"], np.float32) > 0.5).astype(np.float32)
+    vis = (np.asarray(items["vis"], np.float32) > 0.5).astype(np.float32)
+    mean_mask = (m.mean(0, keepdims=True) >= 0.5).astype(np.float32)
+    mean_depth = (d * m).sum(0, keepdims=True) / np.maximum(m.sum(0, keepdims=True), 1) * mean_mask
+    mask = vis * m + (1 - vis) * mean_mask
+    depth = vis * d + (1 - vis) * mean_depth
+    return depth * mask, mask
 
 
 def _flat(m) -> np.ndarray:
@@ -227,6 +245,8 @@ def run(run_dirs, seeds, out_dir, overrides=(), rows=None, strict: bool = True, 
         ds = PairDataset(dm.held_out_records(), dm.cache, dm.subject_index)
         its = [ds[i] for i in range(len(ds))]
         items = {k: np.stack([it[k][0].numpy() for it in its]) for k in ("depth", "mask", "canon_depth", "canon_mask")}
+        if all(it["has_flow"] for it in its):  # flow targets (data.flow_targets=true): the warp oracle row
+            items["vis"] = np.stack([it["vis"].numpy() for it in its])
         items.update(subject=np.array([it["subject"] for it in its]), pose=np.array([it["pose"] for it in its]))
         meta = {"overrides": list(overrides)}
     if mesh_baselines is not None:

@@ -123,6 +123,7 @@ def write_results(metrics: dict, out_dir: Path, dataset: str | None = None) -> P
 POOLED_ROWS = (("lit3d model (ours)", "model"), ("plain U-Net, same data and losses (ours)", "unet"),
                ("posed input depth, no canonicalisation (ours)", "input"),
                ("true canonical depth, ceiling of the depth rows (ours)", "target"),
+               ("warp oracle: true canonical where the posed view sees it, mean body elsewhere (ours)", "oracle"),
                ("classical MDS, full mesh, landmark geodesics (ours)", "cmds"),
                ("SMACOF, full mesh, landmark geodesics (ours)", "smacof"),
                ("non-metric MDS, full mesh, landmark geodesics (ours)", "nmds"), ("GPS, full mesh (ours)", "gps"),

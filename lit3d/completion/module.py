@@ -37,9 +37,9 @@ from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, select_seen_categor
 
 log = logging.getLogger("lit3d.completion")
 
-SPLITS = ("same", "cross", "unseen", "unseen_cross")
+TEST_SPLITS = ("same", "cross", "unseen", "unseen_cross")
 # predictions: the model, the partial input upsampled, the per-voxel training prior
-SOURCES = ("model", "input", "prior", "extrusion")
+PREDICTION_SOURCES = ("model", "input", "prior", "extrusion")
 
 
 def split_key(name: str) -> str:
@@ -103,9 +103,9 @@ class CompletionTask(pl.LightningModule):
         res = int(self.net_cfg["out_res"])
         self.register_buffer("prior", torch.full((1, 1, res, res, res), 0.5))
         self.register_buffer("prior_items", torch.tensor(0))
-        self.val_metrics = torch.nn.ModuleDict({s: VoxelSweepMetrics(self.eval_categories, thresholds) for s in SOURCES})
+        self.val_metrics = torch.nn.ModuleDict({s: VoxelSweepMetrics(self.eval_categories, thresholds) for s in PREDICTION_SOURCES})
         self.test_metrics = torch.nn.ModuleDict(
-            {f"{sp}_{s}": VoxelSweepMetrics(self.eval_categories, thresholds) for sp in SPLITS for s in SOURCES}
+            {f"{sp}_{s}": VoxelSweepMetrics(self.eval_categories, thresholds) for sp in TEST_SPLITS for s in PREDICTION_SOURCES}
         )
         self.test_samples = PairedSamples()
         self.generator_steps = 0
@@ -317,8 +317,8 @@ class CompletionTask(pl.LightningModule):
 
     def _split_name(self, dataloader_idx: int) -> str:
         dm = getattr(self.trainer, "datamodule", None)
-        names = list(getattr(dm, "test_split_names", SPLITS))
-        return split_key(names[dataloader_idx]) if dataloader_idx < len(names) else SPLITS[dataloader_idx]
+        names = list(getattr(dm, "test_split_names", TEST_SPLITS))
+        return split_key(names[dataloader_idx]) if dataloader_idx < len(names) else TEST_SPLITS[dataloader_idx]
 
     def test_step(self, batch: dict, batch_idx: int, dataloader_idx: int = 0) -> None:
         split = self._split_name(dataloader_idx)
@@ -326,13 +326,13 @@ class CompletionTask(pl.LightningModule):
         preds = self._predictions(batch)
         for src, p in preds.items():
             self.test_metrics[f"{split}_{src}"].update(p, batch["target"], cats)
-        self.test_samples.update(SPLITS.index(split), cats, preds, batch["target"], self._source_thresholds())
+        self.test_samples.update(TEST_SPLITS.index(split), cats, preds, batch["target"], self._source_thresholds())
 
     def on_test_epoch_end(self) -> None:
         out: dict[str, float] = {"test/threshold": float(self.threshold)}
-        out.update(self.test_samples.summary(SPLITS, self.eval_categories))
+        out.update(self.test_samples.summary(TEST_SPLITS, self.eval_categories))
         self.test_samples.reset()
-        out.update(split_values(self.test_metrics, SPLITS, SOURCES, self._source_thresholds(), self.thresholds,
+        out.update(split_values(self.test_metrics, TEST_SPLITS, PREDICTION_SOURCES, self._source_thresholds(), self.thresholds,
                                 self.eval_categories))
         self.log_dict(out, sync_dist=False)
 

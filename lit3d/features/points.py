@@ -15,25 +15,34 @@ the native splat renderer (:mod:`lit3d.render.splat`), plus:
 
 Both clouds are placed in the reference's frame. Local frames (PCA normals, spacing)
 of recently seen clouds are kept in memory, so a dataset with one reference computes
-the reference's once.
+the reference's once (:func:`cached_frames`, safe to call from several threads).
+
+The configuration, cache, worker threads and image measures are those of the mesh table,
+from :mod:`lit3d.features.common` (this module does not import :mod:`lit3d.features.table`,
+which imports it to dispatch point-cloud pairs here).
 """
 from __future__ import annotations
 
-import json
+import threading
 from collections import OrderedDict
-from pathlib import Path
+from concurrent.futures import Future
 
 import numpy as np
 import torch
 
-from lit3d.features.table import (
-    _CROP_MARGIN,
+from lit3d.features.common import (
     FeatureConfig,
     FeatureTable,
-    _crop_box,
+    cache_path,
+    chunked_measures,
     content_key,
     pair_measures,
+    read_cached_table,
+    view_crop,
+    view_workers,
+    write_cached_table,
 )
+from lit3d.metrics.image import PSNR_MAX_DB
 from lit3d.metrics.pointcloud import pointcloud_baselines
 from lit3d.render.colour_styles import apply_colour_styles
 from lit3d.render.points import PointShape, load_points, local_frames
@@ -46,19 +55,43 @@ RGB_MEASURES = ("mask_ssim", "mask_ssim_window", "mask_ssim_negative", "mask_ssi
 GREY_COLOUR_STYLES = ("albedo_luma", "lit_luma")
 ALBEDO_STYLES = ("albedo_luma", "albedo_rgb")  # unlit: independent of the normals
 RGB_COLOUR_STYLES = ("albedo_rgb", "lit_rgb")
-_FRAMES: OrderedDict[str, dict[str, np.ndarray]] = OrderedDict()
+_FRAMES: OrderedDict[str, dict[str, np.ndarray]] = OrderedDict()  # key -> frames, least recent first
 _FRAMES_KEEP = 4
+_FRAMES_LOCK = threading.Lock()  # guards _FRAMES and _FRAMES_PENDING
+_FRAMES_PENDING: dict[str, Future] = {}  # key -> the frames being computed by another thread
 
 
 def cached_frames(shape: PointShape, key: str) -> dict[str, np.ndarray]:
-    """:func:`lit3d.render.points.local_frames` of ``shape``, memoised for the last few clouds."""
-    if key in _FRAMES:
-        _FRAMES.move_to_end(key)
-        return _FRAMES[key]
-    lf = local_frames(shape.points)
-    _FRAMES[key] = lf
-    while len(_FRAMES) > _FRAMES_KEEP:
-        _FRAMES.popitem(last=False)
+    """:func:`lit3d.render.points.local_frames` of ``shape``, memoised for the last few clouds.
+
+    Thread-safe: the look-up, the insertion and the eviction of :data:`_FRAMES` run under
+    :data:`_FRAMES_LOCK`; the frames themselves are computed outside it (two clouds' frames
+    still run side by side), and a thread asking for a cloud that another thread is computing
+    waits for that result instead of computing it again.
+    """
+    with _FRAMES_LOCK:
+        if key in _FRAMES:
+            _FRAMES.move_to_end(key)
+            return _FRAMES[key]
+        pending = _FRAMES_PENDING.get(key)
+        owner = pending is None
+        if owner:
+            pending = _FRAMES_PENDING[key] = Future()
+    if not owner:
+        return pending.result()
+    try:
+        lf = local_frames(shape.points)
+    except BaseException as exc:
+        with _FRAMES_LOCK:
+            del _FRAMES_PENDING[key]
+        pending.set_exception(exc)
+        raise
+    with _FRAMES_LOCK:
+        _FRAMES[key] = lf
+        while len(_FRAMES) > _FRAMES_KEEP:
+            _FRAMES.popitem(last=False)
+        del _FRAMES_PENDING[key]
+    pending.set_result(lf)
     return lf
 
 
@@ -73,8 +106,6 @@ def _rgb_measures(a: torch.Tensor, b: torch.Tensor, ma, mb, crop, measures) -> d
                         tuple(dict.fromkeys(grey)))
     out = {k: v.view(n, 3).mean(1) for k, v in res.items()}
     if "mse" in out:
-        from lit3d.metrics.image import PSNR_MAX_DB
-
         out["rmse"] = out["mse"].sqrt()
         out["psnr"] = (10.0 * torch.log10(1.0 / out["mse"].clamp_min(1e-30))).clamp(max=PSNR_MAX_DB)
     return {k: v for k, v in out.items() if k in want}
@@ -86,14 +117,11 @@ def _view_measures(ga, gb, v: int, names: list[str], cfg: FeatureConfig, colour:
 
     ``albedo=False`` skips the unlit colour styles (they do not depend on the shading's normals,
     so one shading's values serve both)."""
-    hh, ww = ga.mask.shape[-2:]
-    y0, y1, x0, x1 = _crop_box(torch.cat([ga.mask[v:v + 1], gb.mask[v:v + 1]]), _CROP_MARGIN)
-    sl = (slice(v, v + 1), slice(None), slice(y0, y1), slice(x0, x1))
+    sl, crop = view_crop(ga, gb, v)
     ma, mb = ga.mask[sl], gb.mask[sl]
     ia = apply_styles(ga.normals[sl], ma, names, grey=True)[:, 0]  # (S, 1, h, w)
     ib = apply_styles(gb.normals[sl], mb, names, grey=True)[:, 0]
     styles = list(names)
-    crop = (y0, x0, hh, ww)
     out: dict[tuple[str, str], torch.Tensor] = {}
     if colour:
         ca = apply_colour_styles(ga.colour[sl], ga.normals[sl], ma)
@@ -108,24 +136,11 @@ def _view_measures(ga, gb, v: int, names: list[str], cfg: FeatureConfig, colour:
         for k, t in rgb.items():
             for j, s in enumerate(rgb_styles):
                 out[(k, s)] = t[j:j + 1].float().cpu()
-    step = cfg.chunk if cfg.chunk > 0 else len(styles)
-    for i in range(0, len(styles), step):
-        j = min(i + step, len(styles))
-        res = pair_measures(ia[i:j], ib[i:j], ma, mb, crop, cfg.measures, cfg.fsim_downsample)
+    for i, j, res in chunked_measures(ia, ib, ma, mb, crop, cfg):
         for k, t in res.items():
             for o, s in enumerate(styles[i:j]):
-                out[(k, s)] = t[o:o + 1].float().cpu()
+                out[(k, s)] = t[o:o + 1]
     return out
-
-
-class _Now:
-    """The result of a call made at once, with a :class:`concurrent.futures.Future`'s ``result()``."""
-
-    def __init__(self, fn, *args, **kwargs):
-        self.value = fn(*args, **kwargs)
-
-    def result(self):
-        return self.value
 
 
 def point_feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_dir=None, device=None) -> FeatureTable:
@@ -138,23 +153,12 @@ def point_feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_di
         device: torch device for the measures (default CPU).
     """
     cfg = cfg or FeatureConfig()
-    on_cpu = device is None or torch.device(device).type == "cpu"
-    workers = (cfg.workers if cfg.workers > 0 else torch.get_num_threads()) if on_cpu else 1
-    prev = torch.get_num_threads()
-    pool = None
-    if on_cpu:  # one intra-op thread, whole views per worker (see lit3d.features.table)
-        torch.set_num_threads(1)
-    if workers > 1:
-        from concurrent.futures import ThreadPoolExecutor
-
-        pool = ThreadPoolExecutor(workers, initializer=torch.set_num_threads, initargs=(1,))
-    submit = pool.submit if pool is not None else _Now
-    try:
+    with view_workers(cfg.workers, device) as submit:  # one intra-op thread, whole views per worker
         pa, pb = load_points(ref), load_points(dist)  # one after the other: parsing holds the GIL
         ha, hb = pa.content_hash(), pb.content_hash()
         key = content_key(f"points{POINT_PATH_VERSION}:{ha}", f"points{POINT_PATH_VERSION}:{hb}", cfg)
-        path = Path(cache_dir) / f"{key}.json" if cache_dir is not None else None
-        cached = _cached_table(path, key)
+        path = cache_path(cache_dir, key)
+        cached = read_cached_table(path, key)
         if cached is not None:
             return cached
         names = cfg.resolved_styles()
@@ -182,30 +186,10 @@ def point_feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_di
             for shading in cfg.render.shadings[1:]:  # unlit colour: the same images under every shading
                 per[name[: -len(first)] + shading] = per[name]
         baselines = base.result() if base is not None else {}
-    finally:
-        if pool is not None:
-            pool.shutdown(wait=True)
-        torch.set_num_threads(prev)
     feats = {k: float(np.mean(v)) for k, v in per.items()}
     feats.update(baselines)
-    if path is not None:
-        from lit3d.utils.io import write_json
-
-        write_json(path, {"key": key, "config": cfg.key_dict(), "features": feats})
+    write_cached_table(path, key, cfg, feats)
     return FeatureTable(feats, key, cached=False, per_view={k: np.asarray(v) for k, v in per.items()})
-
-
-def _cached_table(path: Path | None, key: str) -> FeatureTable | None:
-    """The table cached at ``path`` under ``key``, or None (absent, unreadable or another key)."""
-    if path is None or not path.is_file():
-        return None
-    try:
-        data = json.loads(path.read_text())
-        if data.get("key") == key:
-            return FeatureTable({k: float(v) for k, v in data["features"].items()}, key, cached=True)
-    except (OSError, ValueError, KeyError):
-        pass
-    return None
 
 
 def _baselines(pa: PointShape, pb: PointShape, fa, fb, frame, colour: bool) -> dict[str, float]:
