@@ -7,8 +7,9 @@ of the posed body, not turned away). The warp head of the canonical net learns t
 
 How they are made (no extra rendering): the canonical mesh's vertices are projected by the depth
 camera (:func:`lit3d.render.depth.project_points`) and kept where the canonical depth image shows
-them (z-test, ``tol``); the same vertices' posed positions (``corr``: Anny, TOSCA, Sumner and FAUST
-meshes share their vertex order; the procedural figures are skinned, :func:`skinned_canonical`) are
+them (z-test, ``tol``); the same vertices' posed positions (``corr``: Anny, TOSCA and Sumner meshes
+share their vertex order, as FAUST's original registrations do, not the remeshed ``faust_a``; the
+procedural figures are skinned, :func:`skinned_canonical`) are
 projected too and z-tested against the posed depth image. Each canonical foreground pixel takes the
 inverse-distance mean of the displacements of its ``k`` nearest canonical-visible vertices; it is
 visible when most of their weight is seen in the posed image and the nearest lies within ``radius``

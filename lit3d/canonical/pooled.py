@@ -63,10 +63,12 @@ def warp_oracle(items: dict) -> tuple[np.ndarray, np.ndarray]:
     """Depth and mask ``(N, 1, S, S)`` float32 of a perfect warp head: the true canonical form where its
     surface is seen in the posed input (``vis``, from the flow targets), the mean canonical body of the
     items elsewhere (mask: mean canonical mask >= .5; depth: mean canonical depth over the items whose
-    mask holds the pixel). Items need ``canon_depth``, ``canon_mask`` and ``vis`` ``(N, 1, S, S)``."""
+    mask holds the pixel). Items need ``canon_depth``, ``canon_mask`` and ``vis``, one shape: ``(N, S, S)`` or ``(N, 1, S, S)``."""
     d = np.asarray(items["canon_depth"], np.float32)
     m = (np.asarray(items["canon_mask"], np.float32) > 0.5).astype(np.float32)
     vis = (np.asarray(items["vis"], np.float32) > 0.5).astype(np.float32)
+    if not d.shape == m.shape == vis.shape:
+        raise ValueError(f"warp oracle: canon_depth {d.shape}, canon_mask {m.shape} and vis {vis.shape} differ")
     mean_mask = (m.mean(0, keepdims=True) >= 0.5).astype(np.float32)
     mean_depth = (d * m).sum(0, keepdims=True) / np.maximum(m.sum(0, keepdims=True), 1) * mean_mask
     mask = vis * m + (1 - vis) * mean_mask
@@ -219,10 +221,12 @@ def build_datamodule(data: dict):
     return CanonicalDataModule(**data)
 
 
-def run(run_dirs, seeds, out_dir, overrides=(), rows=None, strict: bool = True, mesh_baselines=None) -> Path:
-    """Pool (or, without run dirs, take every held-out item of the composed config), score, write
-    ``pooled_results.md`` and ``pooled.json`` into ``out_dir``; returns the .md path.
-    ``mesh_baselines``: the canonical-form rows (default: the task's ``mesh_baselines``)."""
+def run(run_dirs, seeds, out_dir, overrides=(), rows=None, strict: bool = True, mesh_baselines=None,
+        fold_test: bool = False) -> Path:
+    """Pool (or, without run dirs, take every held-out item of the composed config; ``fold_test``: only
+    the test split of its ``data.fold``), score, write ``pooled_results.md`` and ``pooled.json`` into
+    ``out_dir``; returns the .md path. ``mesh_baselines``: the canonical-form rows (default: the task's
+    ``mesh_baselines``)."""
     from omegaconf import OmegaConf
 
     from lit3d.canonical.report import write_pooled_results
@@ -242,11 +246,12 @@ def run(run_dirs, seeds, out_dir, overrides=(), rows=None, strict: bool = True, 
         dm.setup()
         from datamodules.canonical.dataset import PairDataset
 
-        ds = PairDataset(dm.held_out_records(), dm.cache, dm.subject_index)
+        records = dm.splits["test"] if fold_test else dm.held_out_records()
+        ds = PairDataset(records, dm.cache, dm.subject_index)
         its = [ds[i] for i in range(len(ds))]
         items = {k: np.stack([it[k][0].numpy() for it in its]) for k in ("depth", "mask", "canon_depth", "canon_mask")}
         if all(it["has_flow"] for it in its):  # flow targets (data.flow_targets=true): the warp oracle row
-            items["vis"] = np.stack([it["vis"].numpy() for it in its])
+            items["vis"] = np.stack([it["vis"][0].numpy() for it in its])
         items.update(subject=np.array([it["subject"] for it in its]), pose=np.array([it["pose"] for it in its]))
         meta = {"overrides": list(overrides)}
     if mesh_baselines is not None:
@@ -307,12 +312,14 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--mesh-baselines", nargs="*", default=None,
                         help="canonical-form rows (cmds smacof nmds gps posed; default: the task's mesh_baselines)")
     parser.add_argument("--allow-partial", action="store_true", help="score folds that do not cover every item")
+    parser.add_argument("--fold-test", action="store_true",
+                        help="without run dirs: only the test split of data.fold (not every fold's held-out items)")
     args = parser.parse_args(argv)
     if not args.runs and not overrides:
         parser.error("give run dirs, or Hydra overrides after -- for the non-learned rows")
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     print(run(args.runs, args.seeds, args.out, overrides, args.rows, strict=not args.allow_partial,
-              mesh_baselines=args.mesh_baselines).read_text())
+              mesh_baselines=args.mesh_baselines, fold_test=args.fold_test).read_text())
 
 
 if __name__ == "__main__":
