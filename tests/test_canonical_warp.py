@@ -195,3 +195,17 @@ def test_warp_oracle_is_the_truth_where_seen_and_the_mean_body_elsewhere():
     inside = mean_mask[0] > 0
     expected = (depth * mask).sum(0)[0] / np.maximum(mask.sum(0)[0], 1)
     np.testing.assert_allclose(d0[0, 0][inside], expected[inside], rtol=1e-6)
+
+
+def test_normalised_warp_keeps_the_body_depth_at_the_silhouette():
+    depth = torch.zeros(1, 1, 8, 8)
+    mask = torch.zeros(1, 1, 8, 8)
+    depth[..., :, :4], mask[..., :, :4] = 0.6, 1.0  # a body on the left half at depth .6
+    half = pixels_to_grid(torch.tensor([0.5, 0.0]).view(1, 2, 1, 1).expand(1, 2, 8, 8))  # half a pixel right
+    zero, one = torch.zeros(1, 1, 8, 8), torch.ones(1, 1, 8, 8)
+    plain, m = warp_compose(depth, mask, half, zero, one, zero, zero)
+    normal, _ = warp_compose(depth, mask, half, zero, one, zero, zero, normalise=True)
+    edge = m[0, 0, :, 3]  # the column whose sample straddles the edge: half body, half background
+    assert torch.allclose(edge, torch.full_like(edge, 0.5))
+    assert torch.allclose(plain[0, 0, :, 3], torch.full((8,), 0.3)) and torch.allclose(normal[0, 0, :, 3], torch.full((8,), 0.6))
+    assert normal[0, 0, :, 5:].abs().max() == 0  # background stays background

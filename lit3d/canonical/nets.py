@@ -170,7 +170,7 @@ class CanonicalNet(nn.Module):
     def __init__(self, image_size: int, lfe_channels: Sequence[int], lfe_out: int, msfe_channels: Sequence[int],
                  msfe_grid: int, fuser_hidden: int, fuser_out: int, msfe_dec_channels: Sequence[int], msfe_out: int,
                  rec_channels: Sequence[int], use_lfe: bool = True, use_msfe: bool = True, head: str = "redraw",
-                 warp_hidden: int = 32):
+                 warp_hidden: int = 32, warp_normalise_depth: bool = False):
         super().__init__()
         if head not in HEADS:
             raise ValueError(f"unknown canonical net head '{head}' ({', '.join(HEADS)})")
@@ -183,7 +183,8 @@ class CanonicalNet(nn.Module):
         hidden = max(rec_channels[0] // 2, 4)
         self.reconstruction = DownUp(c, hidden, rec_channels, up_act="leaky", final_act=True)
         # the input is given to the head again (skip link)
-        self.head = (WarpHead(hidden + 2, warp_hidden, fuser_out if use_msfe else 0) if head == "warp"
+        self.head = (WarpHead(hidden + 2, warp_hidden, fuser_out if use_msfe else 0,
+                              normalise_depth=warp_normalise_depth) if head == "warp"
                      else OutputHead(hidden + 2))
 
     def forward(self, depth: torch.Tensor, mask: torch.Tensor) -> CanonicalOutput:

@@ -52,13 +52,20 @@ def pixels_to_grid(flow_px: torch.Tensor) -> torch.Tensor:
 
 
 def warp_compose(depth: torch.Tensor, mask: torch.Tensor, flow: torch.Tensor, offset: torch.Tensor,
-                 vis: torch.Tensor, fill_depth: torch.Tensor, fill_mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+                 vis: torch.Tensor, fill_depth: torch.Tensor, fill_mask: torch.Tensor,
+                 normalise: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
     """Canonical (depth, mask probability) ``(B, 1, H, W)`` from the posed ``depth``/``mask``, the
     ``flow`` ``(B, 2, H, W)``, depth ``offset``, visibility probability ``vis`` and the fills (all
-    ``(B, 1, H, W)``, fill mask a probability). Zero flow, zero offset and ``vis = 1`` give the input."""
+    ``(B, 1, H, W)``, fill mask a probability). Zero flow, zero offset and ``vis = 1`` give the input.
+    ``normalise``: the moved depth is divided by the moved mask (where it exceeds 1e-3), so a sample
+    across the silhouette's edge keeps the body's depth instead of mixing in the background's 0."""
     moved = warp_image(torch.cat([depth, mask], 1), flow)
+    moved_depth = moved[:, 0:1]
+    if normalise:
+        moved_depth = torch.where(moved[:, 1:2] > 1e-3, moved_depth / moved[:, 1:2].clamp_min(1e-3),
+                                  torch.zeros_like(moved_depth))
     m = vis * moved[:, 1:2] + (1 - vis) * fill_mask
-    d = vis * (moved[:, 0:1] + offset) + (1 - vis) * fill_depth
+    d = vis * (moved_depth + offset) + (1 - vis) * fill_depth
     return d.clamp(0, 1), m
 
 
@@ -83,8 +90,9 @@ class WarpHead(nn.Module):
 
     Both output layers start at zero (visibility bias :data:`VIS_BIAS`)."""
 
-    def __init__(self, cin: int, hidden: int, latent_dim: int = 0, coarse: int = 16):
+    def __init__(self, cin: int, hidden: int, latent_dim: int = 0, coarse: int = 16, normalise_depth: bool = False):
         super().__init__()
+        self.normalise_depth = normalise_depth  # warp_compose(normalise=...): no edge mixing
         self.body = _convs(cin + 2, hidden)
         self.first = nn.Conv2d(hidden, 2, 1)
         self.refine = _convs(2 * cin + 2, hidden)
@@ -116,6 +124,7 @@ class WarpHead(nn.Module):
         flow = flow + o[:, 0:2]
         offset, vis_logits = o[:, 2:3], o[:, 3:4]
         fill_depth, fill_mask = torch.sigmoid(o[:, 4:5]), torch.sigmoid(o[:, 5:6])
-        d, m = warp_compose(depth, mask, flow, offset, torch.sigmoid(vis_logits), fill_depth, fill_mask)
+        d, m = warp_compose(depth, mask, flow, offset, torch.sigmoid(vis_logits), fill_depth, fill_mask,
+                            self.normalise_depth)
         m = m.clamp(MASK_EPS, 1 - MASK_EPS)
         return CanonicalOutput(depth=d, mask=m, mask_logits=torch.logit(m), flow=flow, vis_logits=vis_logits)
