@@ -164,3 +164,35 @@ def test_fine_tuning_starts_from_the_pretrained_net(tmp_path, tiny_net):
     other = dict(tiny_net(), lfe_out=tiny_net()["lfe_out"] + 1)
     with pytest.raises(ValueError, match=r"pre\.ckpt: not a pretrained net for this one"):
         CanonicalTask(net=other).load_initial_weights(str(tmp_path / "pre.ckpt"))
+
+
+def test_warp_terms_join_the_loss_with_their_weights(tiny_net):
+    """The warp head's terms: flow, visibility and smoothness always, the depth offset's total variation
+    only with offset_smooth_weight > 0, each times its weight."""
+    torch.manual_seed(0)
+    kw = dict(net={**tiny_net(), "head": "warp"}, use_phases=False, alpha=1.0, beta=1.0, flow_weight=2.0,
+              vis_weight=3.0, smooth_weight=4.0)
+    batch = {"depth": torch.rand(2, 1, 48, 48), "canon_depth": torch.rand(2, 1, 48, 48),
+             "flow": torch.randn(2, 2, 48, 48), "has_flow": torch.tensor([True, False])}
+    batch["mask"] = (batch["depth"] > 0.3).float()
+    batch["canon_mask"] = (batch["canon_depth"] > 0.3).float()
+    batch["vis"] = batch["canon_mask"].clone()
+    batch["subject_idx"] = torch.tensor([0, 1])
+    base = CanonicalTask(**kw)
+    torch.nn.init.normal_(base.net.head.out.weight, std=0.1)  # a non-zero flow and depth offset
+    with_offset = CanonicalTask(**kw, offset_smooth_weight=5.0)
+    with_offset.load_state_dict(base.state_dict())
+    for task in (base, with_offset):  # a direct training_step call logs nowhere
+        task.log = task.log_dict = lambda *a, **k: None
+    out = base.net(batch["depth"], batch["mask"])
+    terms = {k: v.detach() for k, v in base._warp_terms(out, batch).items()}
+    from lit3d.canonical.losses import canonical_loss, flow_smoothness
+
+    image = canonical_loss(out.depth, out.mask, batch["canon_depth"], batch["canon_mask"], 1.0, 1.0, "mse",
+                           out.mask_logits)["loss"]
+    expected = image.detach() + 2.0 * terms["flow"] + 3.0 * terms["vis"] + 4.0 * terms["smooth"]
+    assert float(base.training_step(batch, 0).detach()) == pytest.approx(float(expected), rel=1e-5)
+    offset_tv = flow_smoothness(out.depth_offset).detach()
+    assert float(offset_tv) > 0
+    got = float(with_offset.training_step(batch, 0).detach())
+    assert got == pytest.approx(float(expected + 5.0 * offset_tv), rel=1e-5)

@@ -67,6 +67,7 @@ def visibility_loss(vis_logits: torch.Tensor, vis: torch.Tensor, canon_mask: tor
 
 
 def flow_smoothness(flow: torch.Tensor) -> torch.Tensor:
-    """Mean absolute difference of neighbouring flow vectors ``(B, 2, H, W)`` (first-order total variation). Scalar."""
+    """Mean absolute difference of neighbouring flow vectors ``(B, 2, H, W)`` (first-order total variation;
+    any ``(B, C, H, W)`` map, e.g. the depth offset ``(B, 1, H, W)``). Scalar."""
     f = flow.float()
     return (f[..., 1:, :] - f[..., :-1, :]).abs().mean() + (f[..., :, 1:] - f[..., :, :-1]).abs().mean()

@@ -56,7 +56,8 @@ from lit3d.metrics.depth import MaskedDepthMSE, MaskIoU
 from lit3d.metrics.gathered import GatheredTensors
 
 METRICS = ("depth_mse", "iou", "depth_mse_input", "iou_input")
-WARP_TERMS = ("flow", "vis", "smooth")  # the warp head's loss terms (flow_weight, vis_weight, smooth_weight)
+# the warp head's loss terms (flow_weight, vis_weight, smooth_weight, offset_smooth_weight)
+WARP_TERMS = ("flow", "vis", "smooth", "offset_smooth")
 # per test item, gathered for the evaluator: prediction (depth, mask probability), posed input,
 # true canonical form ((N, 1, S, S) float32), subject index, pose and view ((N,) int64)
 # "index": the item's place in the test set, so the evaluator sees the items in one order under DDP too
@@ -100,6 +101,7 @@ class CanonicalTask(pl.LightningModule):
         flow_weight: float = 0.0,
         vis_weight: float = 0.0,
         smooth_weight: float = 0.0,
+        offset_smooth_weight: float = 0.0,
         unet_baseline: bool = False,
     ):
         super().__init__()
@@ -194,6 +196,9 @@ class CanonicalTask(pl.LightningModule):
             hp = self.hparams
             terms["loss"] = terms["loss"] + hp.flow_weight * terms["flow"] + hp.vis_weight * terms["vis"] + \
                 hp.smooth_weight * terms["smooth"]
+            if hp.offset_smooth_weight > 0 and out.depth_offset is not None:  # total variation of the depth offset
+                terms["offset_smooth"] = flow_smoothness(out.depth_offset)
+                terms["loss"] = terms["loss"] + hp.offset_smooth_weight * terms["offset_smooth"]
         where = f"step {self.global_step} (epoch {self.current_epoch}, batch {batch_idx})"
         if not guard_step(self, terms, where, self.hparams.on_nonfinite):
             return None  # no backward, no optimizer step

@@ -24,6 +24,7 @@ class CanonicalOutput:
     latent: torch.Tensor | None = None
     flow: torch.Tensor | None = None
     vis_logits: torch.Tensor | None = None
+    depth_offset: torch.Tensor | None = None  # the warp head's (B,1,H,W) depth change of the moved pixels
 
 
 class OutputHead(nn.Module):

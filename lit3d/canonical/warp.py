@@ -127,4 +127,5 @@ class WarpHead(nn.Module):
         d, m = warp_compose(depth, mask, flow, offset, torch.sigmoid(vis_logits), fill_depth, fill_mask,
                             self.normalise_depth)
         m = m.clamp(MASK_EPS, 1 - MASK_EPS)
-        return CanonicalOutput(depth=d, mask=m, mask_logits=torch.logit(m), flow=flow, vis_logits=vis_logits)
+        return CanonicalOutput(depth=d, mask=m, mask_logits=torch.logit(m), flow=flow, vis_logits=vis_logits,
+                               depth_offset=offset)
