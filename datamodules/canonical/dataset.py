@@ -70,11 +70,10 @@ class PairDataset(Dataset):
         # flow targets hold only when input and target moved together (not rolled; mirrored both or neither)
         has_flow = pk in c.get("flow", {}) and not angle and flip == flip_canon and target_view == r["view"]
         if has_flow:
-            flow, vis = c["flow"][pk].astype(np.float32), c["vis"][pk]
+            flow = c["flow"][pk].astype(np.float32)
             if flip:  # mirrored pair: the flow of the mirrored image, its x component negated
                 flow = flow[:, :, ::-1] * np.array([-1.0, 1.0], np.float32)[:, None, None]
-                vis = vis[:, ::-1]
-            flow, vis = torch.from_numpy(np.ascontiguousarray(flow)), t(vis, False)
+            flow, vis = torch.from_numpy(np.ascontiguousarray(flow)), t(c["vis"][pk], flip)
         else:
             size = depth.shape[-1]
             flow, vis = torch.zeros(2, size, size), torch.zeros(1, size, size)

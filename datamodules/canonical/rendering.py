@@ -21,7 +21,7 @@ import numpy as np
 from datamodules.cache import DataError
 from datamodules.canonical.flow import flow_targets
 from datamodules.canonical.images import depth_image_problem
-from lit3d.geometry.normalise import normalise_vertices
+from lit3d.geometry.normalise import bounding_frame
 from lit3d.geometry.views import base_azimuth
 from lit3d.render.depth import render_depth, rotate_y
 
@@ -42,14 +42,10 @@ class PairRenderer:
         return src.mesh(subject, src.canonical_pose(subject) if pose == "canonical" else pose)
 
     def frame(self, subject: str, v: np.ndarray) -> tuple[np.ndarray, float]:
-        """Centre ``(3,)`` and scale that normalise raw vertices ``v`` of ``subject`` (``scale_mode``)."""
-        v = np.asarray(v, np.float64)
-        lo, hi = v.min(0), v.max(0)
-        if self.hp.scale_mode == "subject":
-            scale = normalise_vertices(self.raw_mesh(subject, "canonical")[0])[1]
-        else:
-            scale = 1.0 / max(float((hi - lo).max()), 1e-12)
-        return (lo + hi) / 2, scale
+        """Centre ``(3,)`` and scale that normalise raw vertices ``v`` of ``subject`` (``scale_mode``:
+        ``subject`` takes the scale of the subject's canonical mesh)."""
+        scale = bounding_frame(self.raw_mesh(subject, "canonical")[0])[1] if self.hp.scale_mode == "subject" else None
+        return bounding_frame(v, scale)
 
     def normalise(self, subject: str, v: np.ndarray) -> np.ndarray:
         """Raw ``(V, 3)`` vertices of ``subject`` centred and scaled by ``scale_mode``."""
@@ -68,16 +64,19 @@ class PairRenderer:
 
     def render_views(self, subject: str, v: np.ndarray, f: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
         """(depth, mask) ``(S, S)`` of every azimuth of raw mesh ``v, f``; DataError for a bad image."""
-        size = self.hp.image_size
-        v = self.normalise(subject, v)
-        out = []
-        for vi, az in enumerate(self.view_azimuths(v, f)):
+        return self._render_normalised(self.normalise(subject, v), f)[0]
+
+    def _render_normalised(self, v: np.ndarray, f: np.ndarray) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[float]]:
+        """(depth, mask) ``(S, S)`` of every view of normalised vertices ``v``, and the views' azimuths;
+        DataError for a bad image."""
+        size, azimuths, out = self.hp.image_size, self.view_azimuths(v, f), []
+        for vi, az in enumerate(azimuths):
             d, m = render_depth(v, f, size, az)
             problem = depth_image_problem(d, m, size)
             if problem:
                 raise DataError(f"view {vi}: rendered {problem} (mesh outside the view?)")
             out.append((d, m))
-        return out
+        return out, azimuths
 
     def canonical_turned(self, subject: str, view: int, turn_deg: float) -> tuple[np.ndarray, np.ndarray]:
         """The subject's canonical depth ``(S, S)`` float32 and mask ``(S, S)`` bool seen from view ``view``
@@ -90,7 +89,8 @@ class PairRenderer:
         ``canon`` (the canonical pose's normalised vertices, view azimuths and images) is given and
         the source has a correspondence for this pose; DataError for a bad image."""
         v, f = self.raw_mesh(subject, pose)
-        views = self.render_views(subject, v, f)
+        centre, scale = self.frame(subject, v)
+        views, posed_az = self._render_normalised((np.asarray(v, np.float64) - centre) * scale, f)
         out = {}
         for vi, (d, m) in enumerate(views):
             out[f"depth_{pose}_{vi}"] = d.astype(np.float16)
@@ -98,9 +98,7 @@ class PairRenderer:
         corr = None if canon is None else self.source.correspondence(subject, pose, canon["raw"], canon["faces"], v, f)
         if corr is None:
             return out
-        centre, scale = self.frame(subject, v)
-        posed_az = self.view_azimuths(self.normalise(subject, v), f)
-        corr = (np.asarray(corr, np.float64) - centre) * scale
+        corr = (np.asarray(corr, np.float64) - centre) * scale  # the posed mesh's own frame
         for vi, (d, m) in enumerate(views):
             cd, cm = canon["views"][vi]
             flow, vis = flow_targets(rotate_y(canon["verts"], canon["azimuths"][vi]), rotate_y(corr, posed_az[vi]),
@@ -116,15 +114,15 @@ class PairRenderer:
         canon = None
         try:
             cv, cf = self.raw_mesh(subject, "canonical")
-            views = self.render_views(subject, cv, cf)
+            verts = self.normalise(subject, cv)
+            views, azimuths = self._render_normalised(verts, cf)
         except Exception as exc:
             raise DataError(f"{subject} pose canonical: {exc}") from exc
         for vi, (d, m) in enumerate(views):
             arrays[f"depth_canonical_{vi}"] = d.astype(np.float16)
             arrays[f"mask_canonical_{vi}"] = np.packbits(m)
         if hp.get("flow_targets", False):
-            verts = self.normalise(subject, cv)
-            canon = {"raw": cv, "faces": cf, "verts": verts, "azimuths": self.view_azimuths(verts, cf), "views": views}
+            canon = {"raw": cv, "faces": cf, "verts": verts, "azimuths": azimuths, "views": views}
         poses, skipped = list(self.source.poses(subject)), []
         for p in poses:
             try:

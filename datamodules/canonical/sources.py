@@ -77,7 +77,8 @@ class SynthSource(_Source):
         return self._subjects[subject][0]
 
     def _posing(self, subject, pose) -> tuple:
-        """(figure, joint rotations or None, turn in degrees as figure_mesh applies it) of one pose."""
+        """(figure, joint rotations or None, the pose's yaw, its whole turn in degrees as figure_mesh applies
+        it: the yaw plus 90 for quadrupeds) of one pose."""
         kind, sseed = self._subjects[subject]
         subj = self.f.make_subject(kind, sseed)
         turn = 90.0 if kind == "quadruped" else 0.0  # figure_mesh shows quadrupeds from the side
@@ -94,8 +95,8 @@ class SynthSource(_Source):
     def correspondence(self, subject, pose, canon_verts, canon_faces, posed_verts, posed_faces):
         """The canonical mesh skinned to the pose (:func:`datamodules.canonical.flow.skinned_canonical`):
         each figure is remeshed per pose, so vertices move with their nearest bone."""
-        subj, rotations, _, turn = self._posing(subject, pose)
-        return skinned_canonical(subj, canon_verts, rotations, self._posing(subject, "canonical")[3], turn)
+        subj, rotations, yaw, turn = self._posing(subject, pose)
+        return skinned_canonical(subj, canon_verts, rotations, turn - yaw, turn)
 
 
 class _MeshFileSource(_Source):

@@ -56,11 +56,10 @@ def split_subject_pose(subjects, poses, n_folds: int, fold: int, seed: int,
         vg = set(rest[:int(val_subjects)])
         for s in subjects:
             for p in poses:
-                if s in sg or p in pg:
-                    if s in sg and p in pg:
-                        out["test"].append((s, p))
-                    continue
-                out["val" if s in vg else "train"].append((s, p))
+                if s in sg and p in pg:
+                    out["test"].append((s, p))
+                elif s not in sg and p not in pg:  # the rest (a test subject or a test pose alone) is unused
+                    out["val" if s in vg else "train"].append((s, p))
         return out
     for s in subjects:
         for p in poses:

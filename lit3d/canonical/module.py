@@ -49,9 +49,9 @@ import torch
 from lit3d.callbacks.nonfinite import guard_step, validate_mode
 from lit3d.canonical.figures import validation_panel
 from lit3d.canonical.loss_phases import THESIS_FRACTIONS, LossPhases
-from lit3d.canonical.warp import pixels_to_grid
-from lit3d.canonical.losses import canonical_loss, flow_loss, flow_smoothness, visibility_loss
 from lit3d.canonical.factory import build_canonical_net, summarize
+from lit3d.canonical.losses import canonical_loss, flow_loss, flow_smoothness, visibility_loss
+from lit3d.canonical.warp import pixels_to_grid
 from lit3d.metrics.depth import MaskedDepthMSE, MaskIoU
 from lit3d.metrics.gathered import GatheredTensors
 
@@ -191,14 +191,10 @@ class CanonicalTask(pl.LightningModule):
         if self.hparams.identity_weight > 0:  # the MSFE's identity head, or the recall net's own logits
             terms["identity"] = self._identity_loss(out.latent, batch["subject_idx"])
             terms["loss"] = terms["loss"] + self.hparams.identity_weight * terms["identity"]
-        if out.flow is not None:  # the warp head: flow, visibility and smoothness terms
-            terms.update(self._warp_terms(out, batch))
-            hp = self.hparams
-            terms["loss"] = terms["loss"] + hp.flow_weight * terms["flow"] + hp.vis_weight * terms["vis"] + \
-                hp.smooth_weight * terms["smooth"]
-            if hp.offset_smooth_weight > 0 and out.depth_offset is not None:  # total variation of the depth offset
-                terms["offset_smooth"] = flow_smoothness(out.depth_offset)
-                terms["loss"] = terms["loss"] + hp.offset_smooth_weight * terms["offset_smooth"]
+        if out.flow is not None:  # the warp head: each of its terms times its weight
+            warp = self._warp_terms(out, batch)
+            terms.update(warp)
+            terms["loss"] = terms["loss"] + sum(self.hparams[f"{k}_weight"] * v for k, v in warp.items())
         where = f"step {self.global_step} (epoch {self.current_epoch}, batch {batch_idx})"
         if not guard_step(self, terms, where, self.hparams.on_nonfinite):
             return None  # no backward, no optimizer step
@@ -216,18 +212,26 @@ class CanonicalTask(pl.LightningModule):
         return terms["loss"]
 
     @staticmethod
-    def _warp_terms(out, batch: dict) -> dict[str, torch.Tensor]:
-        """The warp head's ``flow`` (end-point distance, grid units), ``vis`` (BCE) and ``smooth`` terms;
-        items without flow targets (``has_flow`` false or absent) add to the smoothness only."""
-        has = batch.get("has_flow")
-        if has is None or "flow" not in batch:
+    def _flow_targets(out, batch: dict) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The batch's target flow (grid units) ``(B, 2, H, W)``, visibility ``(B, 1, H, W)`` and
+        ``has_flow`` ``(B,)``; zeros and False when the batch has no flow targets."""
+        if batch.get("has_flow") is None or "flow" not in batch:
             has = torch.zeros(out.flow.shape[0], dtype=torch.bool, device=out.flow.device)
-            target, vis = torch.zeros_like(out.flow), torch.zeros_like(out.mask)
-        else:
-            target, vis = pixels_to_grid(batch["flow"].float()), batch["vis"]
-        return {"flow": flow_loss(out.flow, target, vis, has),
-                "vis": visibility_loss(out.vis_logits, vis, batch["canon_mask"], has),
-                "smooth": flow_smoothness(out.flow)}
+            return torch.zeros_like(out.flow), torch.zeros_like(out.mask), has
+        return pixels_to_grid(batch["flow"].float()), batch["vis"], batch["has_flow"]
+
+    def _warp_terms(self, out, batch: dict) -> dict[str, torch.Tensor]:
+        """The warp head's :data:`WARP_TERMS` that are on: ``flow`` (end-point distance, grid units),
+        ``vis`` (BCE), ``smooth`` (flow total variation) and, with ``offset_smooth_weight`` > 0,
+        ``offset_smooth`` (the depth offset's total variation); items without flow targets
+        (``has_flow`` false or absent) add to the smoothness terms only."""
+        target, vis, has = self._flow_targets(out, batch)
+        terms = {"flow": flow_loss(out.flow, target, vis, has),
+                 "vis": visibility_loss(out.vis_logits, vis, batch["canon_mask"], has),
+                 "smooth": flow_smoothness(out.flow)}
+        if self.hparams.offset_smooth_weight > 0 and out.depth_offset is not None:
+            terms["offset_smooth"] = flow_smoothness(out.depth_offset)
+        return terms
 
     def _identity_loss(self, latent: torch.Tensor, subject_idx) -> torch.Tensor:
         """Cross-entropy of the subject classifier on the MSFE latent ``(B, fuser_out)`` (``arch=recall``: of
@@ -258,7 +262,8 @@ class CanonicalTask(pl.LightningModule):
         self.log_dict({"val/depth_loss": loss["depth"], "val/mask_loss": loss["mask"]}, on_epoch=True, batch_size=bs)
         if out.flow is not None and "has_flow" in batch and bool(batch["has_flow"].any()):
             # end-point error in pixels on the visible pixels of the items with targets
-            epe = self._warp_terms(out, batch)["flow"] * batch["depth"].shape[-1] / 2
+            target, vis, has = self._flow_targets(out, batch)
+            epe = flow_loss(out.flow, target, vis, has) * batch["depth"].shape[-1] / 2
             self.log("val/flow_epe", epe, on_epoch=True, batch_size=bs)
         if batch_idx == 0 and self.hparams.image_every_n_epochs and \
                 self.current_epoch % self.hparams.image_every_n_epochs == 0:

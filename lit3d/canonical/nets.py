@@ -20,6 +20,7 @@ transposed convolutions with kernels 3, 3, 6, 2, 2, 2, 3 (stride 2) and resized 
 from __future__ import annotations
 
 from collections.abc import Sequence
+
 import torch
 import torch.nn as nn
 import torch.nn.functional as F
