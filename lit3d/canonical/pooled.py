@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from lit3d.canonical.heldout import HELDOUT_FILE, pool
+from lit3d.utils.config_dir import config_dir
 
 log = logging.getLogger("lit3d")
 
@@ -203,8 +204,7 @@ def compose(overrides: list[str]):
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
 
-    conf = str(Path(__file__).resolve().parents[2] / "conf")
-    with initialize_config_dir(config_dir=conf, version_base="1.3"):
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
         return hydra_compose(config_name="train", overrides=["task=canonical", *overrides])
 
 

@@ -32,22 +32,12 @@ from omegaconf import DictConfig, OmegaConf
 
 from lit3d.utils import quiet
 from lit3d.utils.checkpoints import first_line
+from lit3d.utils.config_dir import config_dir
 
 log = logging.getLogger("lit3d")
 
 
-def _conf_dir() -> Path:
-    """The Hydra config dir: the repository's top-level ``conf/`` in a checkout (editable install),
-    else the copy a wheel ships as ``lit3d/conf/`` (package data; in the repository ``lit3d/conf``
-    is a symlink to ``../conf``)."""
-    package = Path(__file__).resolve().parents[1]
-    repo = package.parent
-    if (repo / "pyproject.toml").is_file() and (repo / "conf").is_dir():
-        return repo / "conf"
-    return package / "conf"
-
-
-CONF_DIR = str(_conf_dir())
+CONF_DIR = str(config_dir())
 # keys of a task config read by the CLI and not passed to the LightningModule
 EXIT_USER = 2        # a problem with the command line, a config or an input file
 EXIT_DIVERGED = 1    # training stopped on a NaN/Inf loss
