@@ -8,8 +8,14 @@
   version, config hash of the item files in the folder) is written first and kept,
   items are written atomically one by one, ``manifest.json`` is written last
   (atomically). Re-running skips items already on disk (also when the manifest was
-  deleted); a marker or manifest from another config/version, or item files of
-  unknown origin, wipe the stale items first, so a cache never mixes two configs.
+  deleted). A folder holding a marker or manifest of another config/version, or item
+  files of unknown origin, is refused with one line naming what differs (:class:`DataError`);
+  nothing is deleted unless this process asked for it (:func:`request_rebuild`, i.e.
+  ``lit3d-data ... --rebuild``), so a cache never mixes two configs and no evaluation or
+  training wipes another config's data. A manifest is checked when it is read (its hash
+  against its items, each item's size against ``item_bytes``: a hand edit or a truncated item
+  is named, and ``prepare_data()`` repairs it); :func:`check_unchanged` tells a running
+  training that another process re-prepared its folder (:mod:`datamodules.cache_guard`).
   :meth:`CacheBuilder.locked` holds an inter-process lock (``flock`` on ``<root>/.lock``)
   around a preparation: processes preparing one folder at once (the jobs of a multirun)
   take turns, and the later ones find the cache complete.
@@ -18,7 +24,7 @@ Manifest layout (``manifest.json``)::
 
     {"generator": str, "version": str, "config": {...}, "config_hash": sha256,
      "items": [{"file": "items/...npz", "sha256": of the file's bytes, "split": ..., ...}, ...],
-     "manifest_hash": sha256 of the canonical JSON of "items", ...extra}
+     "manifest_hash": sha256 of the canonical JSON of "items", "item_bytes": {file: size}, ...extra}
 
 Because every item carries the hash of its bytes, two preparations have the same
 ``manifest_hash`` exactly when they wrote the same files (same seed -> same hash).
@@ -40,6 +46,7 @@ from typing import Any
 
 import numpy as np
 
+from datamodules.cache_guard import changed, config_difference, manifest_problem, watch
 from lit3d.utils.io import TMP_SUFFIX, atomic_write_bytes, file_mode, file_sha256, remove_temp_files, write_json
 
 log = logging.getLogger("lit3d.data")
@@ -50,12 +57,36 @@ LOCK = ".lock"
 
 __all__ = [
     "LOCK", "MANIFEST", "MARKER", "CacheBuilder", "DataError", "atomic_save_npz", "atomic_write_bytes",
-    "clean_temp_files", "file_sha256", "read_manifest", "stable_hash", "stable_int_seed", "stable_seed", "write_json",
+    "check_unchanged", "clean_temp_files", "file_sha256", "read_manifest", "request_rebuild", "stable_hash",
+    "stable_int_seed", "stable_seed", "write_json",
 ]
+
+# ``lit3d-data --rebuild``: every cache this process prepares is deleted and made again, once
+_REBUILD: dict = {"on": False, "done": set()}
 
 
 class DataError(ValueError):
     """A bad data file or data setting; the message names the file (or setting) and the problem."""
+
+
+def request_rebuild(on: bool = True) -> None:
+    """Let this process delete and prepare again every cache folder it prepares (once each), also
+    one of another config (``lit3d-data ... --rebuild``); without it such a folder is refused."""
+    _REBUILD["on"] = bool(on)
+    _REBUILD["done"].clear()
+
+
+def _rebuild_pending(root: Path) -> bool:
+    return _REBUILD["on"] and str(root.resolve()) not in _REBUILD["done"]
+
+
+def check_unchanged(since: float = 0.0, items: bool = True) -> None:
+    """Raise :class:`DataError` when a cache this process read (at or after ``since``, a
+    ``time.monotonic()``) changed on disk since: its manifest was replaced by another one or
+    removed, or (``items``) an item file changed size. One ``stat`` per cache (+ one per item)."""
+    problem = changed(since, items)
+    if problem:
+        raise DataError(f"{problem}; start the run again")
 
 
 def canonical_json(obj: Any) -> str:
@@ -150,7 +181,16 @@ class CacheBuilder:
             str(info.get("version")) == self.version and info.get("config_hash") == self.config_hash
 
     def manifest(self) -> dict | None:
-        return read_manifest(self.root)
+        """The manifest (None when there is none). One of this config is checked against its items
+        (:func:`datamodules.cache_guard.manifest_problem`): a mismatch raises :class:`DataError`."""
+        m = read_manifest(self.root)
+        if m is None or not self._matches(m):
+            return m
+        problem, _ = manifest_problem(self.root, m, stable_hash(m.get("items", [])))
+        if problem:
+            raise DataError(f"{self.root}: {problem}; run lit3d-data with this run's overrides to repair it")
+        watch(self.root, m)
+        return m
 
     def _safe_manifest(self) -> dict | None:
         try:
@@ -159,7 +199,10 @@ class CacheBuilder:
             return None
 
     def is_complete(self) -> bool:
-        """True when a manifest of this generator/version/config exists and all its files are there."""
+        """True when a manifest of this generator/version/config exists, matches its items and all
+        its files are there (and no rebuild of the folder is pending)."""
+        if _rebuild_pending(self.root):
+            return False
         m = self._safe_manifest()
         return self._matches(m) and all((self.root / it["file"]).is_file() for it in m["items"])
 
@@ -207,31 +250,60 @@ class CacheBuilder:
                 _funlock(f)
 
     def begin(self) -> None:
-        """Start or resume: clean temp files, wipe items of another config, write the marker."""
+        """Start or resume: clean temp files, refuse a folder of another config (or wipe it after
+        :func:`request_rebuild`), remove the items a checked manifest names as bad, write the marker."""
         self.root.mkdir(parents=True, exist_ok=True)
         n_tmp = clean_temp_files(self.root)
         if n_tmp:
             log.info("%s: removed %d unfinished temp file(s) of an interrupted preparation", self.root, n_tmp)
         marker_path = self.root / MARKER
-        marker = None
-        if marker_path.is_file():
-            try:
-                marker = json.loads(marker_path.read_text("utf-8"))
-            except (OSError, json.JSONDecodeError):
-                marker = None
-        manifest = self._safe_manifest()
-        stale = (manifest is not None and not self._matches(manifest)) or \
-                (marker is not None and not self._matches(marker)) or \
-                (marker_path.is_file() and marker is None)
-        if manifest is None and marker is None and (self.root / self.items_dir).exists():
-            stale = True  # items of unknown origin
-        if stale:
-            log.warning("%s: cached data is from another config or generator version: regenerating", self.root)
+        marker = _read_json(marker_path)
+        try:
+            manifest = read_manifest(self.root)
+        except DataError:
+            manifest = None  # unreadable: rewritten below
+        if _rebuild_pending(self.root):
+            log.warning("%s: --rebuild: deleting the prepared items and preparing them again", self.root)
+            (self.root / MANIFEST).unlink(missing_ok=True)  # first: a run reading the folder then says why
             shutil.rmtree(self.root / self.items_dir, ignore_errors=True)
+            marker = None
+        elif manifest is not None and "generator" not in manifest and marker is None:
+            log.warning("%s: cached data of an older lit3d layout: preparing it again", self.root)
+            shutil.rmtree(self.root / self.items_dir, ignore_errors=True)
+        else:
+            self._refuse_other_config(manifest, marker)
+            if manifest is not None:
+                problem, bad = manifest_problem(self.root, manifest, stable_hash(manifest.get("items", [])))
+                if problem:
+                    log.warning("%s: %s: repairing (%d item(s) made again)", self.root, problem, len(bad))
+                for rel in bad:
+                    (self.root / rel).unlink(missing_ok=True)
         (self.root / MANIFEST).unlink(missing_ok=True)
-        if stale or not self._matches(marker):
+        if not self._matches(marker):
             write_json(marker_path, {"generator": self.generator, "version": self.version,
                                      "config_hash": self.config_hash, "config": self.config})
+
+    def _refuse_other_config(self, manifest: dict | None, marker: dict | bool | None) -> None:
+        """Raise :class:`DataError` (nothing deleted) when the folder holds data of another config."""
+        if marker is False:
+            differs = f"{MARKER} is unreadable"
+        elif manifest is not None and not self._matches(manifest):
+            differs = config_difference(manifest, self.generator, self.version, self.config)
+        elif not self._has_items():  # only another config's marker (its preparation made nothing): replaced
+            return
+        elif marker is not None and not self._matches(marker):
+            differs = config_difference(marker, self.generator, self.version, self.config)
+        elif manifest is None and marker is None:
+            differs = config_difference(None, self.generator, self.version, self.config)
+        else:
+            return
+        raise DataError(f"{self.root}: holds data prepared with another config ({differs or 'config hash'}); "
+                        "nothing was deleted: to replace it run lit3d-data with this run's overrides plus --rebuild, "
+                        "or set data.data_dir to another folder")
+
+    def _has_items(self) -> bool:
+        d = self.root / self.items_dir
+        return d.is_dir() and any(p.is_file() for p in d.rglob("*"))
 
     def finish(self, items: list[dict], extra: dict | None = None) -> dict:
         """Check every item file exists, record its sha256, then write the manifest atomically
@@ -243,10 +315,24 @@ class CacheBuilder:
         manifest = {
             "generator": self.generator, "version": self.version, "config": self.config,
             "config_hash": self.config_hash, "items": items, "manifest_hash": stable_hash(items),
+            "item_bytes": {it["file"]: (self.root / it["file"]).stat().st_size for it in items},
             **(extra or {}),
         }
         write_json(self.root / MANIFEST, manifest)
+        _REBUILD["done"].add(str(self.root.resolve()))
+        watch(self.root, manifest)
         return manifest
+
+
+def _read_json(path: Path) -> dict | bool | None:
+    """The JSON object in ``path``; None when there is no file, False when it is unreadable."""
+    if not path.is_file():
+        return None
+    try:
+        obj = json.loads(path.read_text("utf-8"))
+    except (OSError, json.JSONDecodeError):
+        return False
+    return obj if isinstance(obj, dict) else False
 
 
 def _flock_waiting(f, path: Path) -> None:

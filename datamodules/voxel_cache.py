@@ -18,7 +18,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from datamodules.cache import DataError, atomic_save_npz
+from datamodules.cache import DataError, atomic_save_npz, check_unchanged
 from lit3d.utils.shapenet_categories import SEEN_CATEGORIES
 
 
@@ -48,6 +48,7 @@ def load_pair(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         tgt = np.unpackbits(bits[split:], count=n_tg).reshape(shapes[1])
         return inp, tgt
     except (OSError, KeyError, ValueError, zipfile.BadZipFile) as exc:
+        check_unchanged(items=False)  # another process re-preparing the folder: say that instead
         raise DataError(f"{path}: unreadable cached voxel pair ({type(exc).__name__}: {exc}); "
                         "delete the file and run prepare_data() again") from exc
 

@@ -47,6 +47,9 @@ fi
 echo "bootstrap: installing $TORCH_SPEC and lit3d[dev]"
 "$VENV/bin/pip" install -q "$TORCH_SPEC"
 "$VENV/bin/pip" install -q -e ".[dev]"
+# piq: test-only reference of tests/test_fsim_piq.py. --no-deps: piq requires torchvision, whose PyPI wheels are CUDA
+# builds that replace the CPU torch (or fail to load beside it); piq's FSIM needs only torch. Not in [dev] for that reason.
+"$VENV/bin/pip" install -q --no-deps "piq==0.8.0" || echo "bootstrap: piq not installed: tests/test_fsim_piq.py will be skipped"
 # The Anny body model builds its cache (about 790 MB, about 2.5 min on 2 cores) on its first start:
 # once here, not inside a test or a training run. ANNY_CACHE_DIR moves it (default ~/.cache/anny).
 echo "bootstrap: warming the Anny body-model cache (first time: about 2.5 min)"

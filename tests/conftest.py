@@ -1,6 +1,7 @@
 """Shared fixtures: Hydra config composition with per-test output dirs."""
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 
@@ -116,3 +117,15 @@ def square_subjects(n: int = 8, size: int = 32, classes: int = 4):
         x, y = torch.randint(0, size - s, (2,), generator=g).tolist()
         depth[i, 0, y:y + s, x:x + s] = 0.5
     return depth, (depth > 0).float(), idx
+
+
+@pytest.fixture(autouse=True)
+def _restore_logging():
+    """A Hydra main run in-process (``--help``, ``--version``) configures the root logger with handlers
+    on that test's captured streams; put the handlers back so later tests do not write to closed ones."""
+    loggers = [logging.getLogger(), logging.getLogger("lit3d")]
+    saved = [(lg, lg.handlers[:], lg.level) for lg in loggers]
+    yield
+    for lg, handlers, level in saved:
+        lg.handlers[:] = handlers
+        lg.setLevel(level)

@@ -43,6 +43,10 @@ def test_fast_dev_run(compose_cfg, data_dir):
     assert {"test/same/iou_pooled", "test/same/iou_extrusion", "test/same/paired/margin_input_lo"} <= set(metrics)
     results = (Path(cfg.paths.output_dir) / "results.md").read_text()
     assert "Paired comparison, same view" in results and "silhouette extrusion (ours)" in results
+    # surface metrics (task.surface) for the model and every baseline, beside IoU in results.md
+    assert {f"test/same/{k}{s}" for k in ("chamfer_l1", "fscore_1pct", "fscore_2pct", "normal_consistency")
+            for s in ("", "_input", "_extrusion", "_prior")} <= set(metrics)
+    assert "## Surface metrics, same view" in results
 
 
 def test_critic_and_generator_steps_per_batch(compose_cfg, data_dir):
@@ -133,6 +137,7 @@ def test_summary_paper_scale_shapes():
     assert "generator stage 3" in res.stdout and "critic" in res.stdout and "classifier" in res.stdout
 
 
+@pytest.mark.slow  # default suite under 10 min; runs in make test-all
 def test_multirun_sweep_collects_table(data_dir, tmp_path):
     sweep_dir = tmp_path / "sweep"
     res = _run([bin_path("lit3d-train"), "-m", *TINY, "+sweep=completion_classifier", "debug=fdr",

@@ -201,11 +201,25 @@ def test_interrupted_preparation_resumes_identically(prepared, tmp_path, monkeyp
     assert counter["n"] == 1 and contents(dm) == ref
 
 
-def test_config_change_regenerates_instead_of_mixing(prepared, tmp_path):
+def test_config_change_is_refused_and_rebuild_replaces_without_mixing(prepared, tmp_path):
+    """Issue 35, fault 2: another config's folder is refused with one line naming what differs and
+    nothing is deleted; only request_rebuild() (``lit3d-data --rebuild``) replaces it."""
     dm = small_dm(tmp_path / "m", seed=1)
     dm.prepare_data()
+    before = contents(dm)
     dm0 = small_dm(tmp_path / "m", seed=0)  # same folder, other config
-    dm0.prepare_data()
+    with pytest.raises(DataError, match=r"m: holds data prepared with another config \(seed: 0 here, 1 there\); "
+                                        r"nothing was deleted.*--rebuild"):
+        dm0.prepare_data()
+    dm.setup()
+    assert contents(dm) == before  # the other config's items are untouched
+    from datamodules.cache import request_rebuild
+
+    request_rebuild()
+    try:
+        dm0.prepare_data()
+    finally:
+        request_rebuild(False)
     dm0.setup()
     assert contents(dm0) == contents(prepared)
     assert dm0.describe()["manifest_hash"] == prepared.describe()["manifest_hash"]

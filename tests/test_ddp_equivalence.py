@@ -68,6 +68,7 @@ def test_two_processes_give_the_test_metrics_of_one(task, compose_cfg, tmp_path)
     assert not differ, differ
 
 
+@pytest.mark.slow  # default suite under 10 min; runs in make test-all
 def test_gan_trains_under_ddp_cpu_with_adversarial_steps(compose_cfg, tmp_path):
     """``trainer=ddp_cpu`` trains the GAN (critic and generator steps from the first batch): the
     shared DDP strategy lets the critic's backward leave the generator unreduced and vice versa.

@@ -231,6 +231,7 @@ def test_sigkill_then_resume_continues_completion_gan(tmp_path):
 
 
 # ----------------------------------------------------------------------------- data preparation killed
+@pytest.mark.slow  # default suite under 10 min; runs in make test-all
 def test_killed_data_generation_keeps_finished_items_and_resumes_identically(tmp_path, compose_cfg, monkeypatch):
     import datamodules.completion as completion_mod
     from datamodules.voxel_cache import load_pair

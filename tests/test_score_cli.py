@@ -248,3 +248,17 @@ def test_console_entry_point_subprocess(tmp_path):
     p = subprocess.run([sys.executable, "-m", "lit3d.cli.score", str(tmp_path / "e.obj"), str(tmp_path / "e.obj")],
                        capture_output=True, text=True, timeout=60)
     assert p.returncode == 2 and p.stderr.count("\n") == 1 and "e.obj: empty file" in p.stderr
+
+
+def test_pairs_with_ckpt_predict_each_pair(pair, quality_ckpt, capsys, tmp_path):
+    """--pairs --ckpt: the model's options and prediction for every pair, as for the pair alone."""
+    ref, dist = pair
+    (tmp_path / "pairs.tsv").write_text(f"{ref.name}\t{dist.name}\n{ref.name}\t{ref.name}\n")
+    assert main(["--pairs", str(tmp_path / "pairs.tsv"), "--ckpt", str(quality_ckpt), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["config"]["render"]["size"] == 32 and len(doc["pairs"]) == 2
+    assert main([str(ref), str(dist), "--ckpt", str(quality_ckpt), "--json"]) == 0
+    alone = json.loads(capsys.readouterr().out)
+    assert doc["pairs"][0]["predicted_score"] == pytest.approx(alone["predicted_score"], abs=1e-6)
+    assert main(["--pairs", str(tmp_path / "pairs.tsv"), "--ckpt", str(quality_ckpt)]) == 0
+    assert "| mean Mask-SSIM | predicted |" in capsys.readouterr().out

@@ -12,6 +12,7 @@ import shutil
 import subprocess
 import sys
 import sysconfig
+import tomllib
 import zipfile
 from pathlib import Path
 
@@ -107,4 +108,7 @@ def test_installed_wheel_trains_outside_the_checkout(wheel, tmp_path):
          WANDB_MODE="offline", WANDB_SILENT="true", HYDRA_FULL_ERROR="1")
     metrics = json.loads((out / "metrics.json").read_text())
     assert "test/same/iou" in metrics
+    # provenance (lit3d.utils.provenance): the wheel's version; no git commit outside a checkout
+    assert metrics["provenance"]["lit3d_version"] == tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["version"]
+    assert metrics["provenance"]["git_commit"] is None and metrics["provenance"]["manifest_hash"]
     assert (work / "data" / "completion_demo").is_dir(), "paths.root_dir '.': the data next to the run"

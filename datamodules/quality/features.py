@@ -16,6 +16,7 @@ from typing import Any
 
 from datamodules.cache import DataError
 from lit3d.utils.io import atomic_write_text
+from lit3d.utils.progress import progress
 
 FeatureFn = Callable[[Path, Path], Mapping[str, float]]
 
@@ -78,9 +79,9 @@ def write_feature_tables(root: Path, pairs: Sequence[dict], spec: str | None, op
             for p in pairs if not (root / feature_file(p["item"])).is_file()]
     if jobs and workers > 1:
         with ProcessPoolExecutor(workers) as ex:
-            results = list(ex.map(_feature_job, jobs))
+            results = list(progress(ex.map(_feature_job, jobs), "quality feature tables", total=len(jobs)))
     else:
-        results = [_feature_job(j) for j in jobs]
+        results = [_feature_job(j) for j in progress(jobs, "quality feature tables")]
     errors = {i: f"{i}: {e}" for i, e in results if e}
     if errors and not skip_bad:
         raise DataError(f"feature extraction failed for {len(errors)} pair(s); first: {next(iter(errors.values()))}")

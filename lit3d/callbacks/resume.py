@@ -3,7 +3,13 @@
 :class:`ResumeState` (in ``conf/callbacks/default.yaml``):
 
 - saves ``<dirpath>/last.ckpt`` every ``every_n_train_batches`` training batches, mid-epoch,
-  so a hard kill (SIGKILL, OOM killer, power loss) loses at most that many batches;
+  so a hard kill (SIGKILL, OOM killer, power loss) loses at most that many batches, and at the
+  end of every training epoch and of the training (Lightning's ``ModelCheckpoint(save_last=True)``
+  writes ``last`` only when a top-k checkpoint is saved: with a flat validation metric it lagged
+  epochs behind), so ``last.ckpt`` always holds the newest state;
+- after a run dir was moved (or copied), points the checkpoint callbacks' saved paths (best,
+  last, top-k) at the new ``checkpoints/`` when resuming, so the resumed run goes on writing
+  ``last.ckpt`` (not ``last-v1.ckpt`` beside a stale one) and keeps its best checkpoint;
 - saves ``last.ckpt`` when the run is stopped by SIGTERM (Lightning finishes the current
   batch, then raises ``SIGTERMException``) or Ctrl-C (``lit3d.cli.train.fit`` turns the first
   SIGINT into the same flag, so Ctrl-C also ends with exit 143 and the resume line);
@@ -25,6 +31,7 @@ atomic) when ``/tmp`` is another file system.
 from __future__ import annotations
 
 import io
+import os
 import random
 from pathlib import Path
 from typing import Any
@@ -77,6 +84,36 @@ class AtomicCheckpointIO(TorchCheckpointIO):
         atomic_write_bytes(path, buf.getvalue())
 
 
+# ------------------------------------------------------------------ moved run dirs
+def _same_file(a, b) -> bool:
+    """One path, however written (relative, ``./``, symlinked folders)."""
+    return bool(a) and bool(b) and os.path.realpath(a) == os.path.realpath(b)
+
+
+PATH_KEYS = ("best_model_path", "kth_best_model_path", "last_model_path")
+
+
+def moved_paths(state: dict[str, Any], new_dir: str) -> dict[str, Any]:
+    """Rewrite a ModelCheckpoint state (``dirpath``, best/kth/last paths, ``best_k_models`` keys)
+    from its recorded ``dirpath`` to ``new_dir``, in place; unchanged when the folder is the same."""
+    old = state.get("dirpath")
+    if not old or str(old) == new_dir:
+        return state
+
+    def move(p):
+        if isinstance(p, str) and p.startswith(str(old).rstrip("/") + "/"):
+            return str(Path(new_dir) / Path(p).relative_to(old))
+        return p
+
+    for key in PATH_KEYS:
+        if key in state:
+            state[key] = move(state[key])
+    if isinstance(state.get("best_k_models"), dict):
+        state["best_k_models"] = {move(k): v for k, v in state["best_k_models"].items()}
+    state["dirpath"] = new_dir
+    return state
+
+
 # ------------------------------------------------------------------ callback
 class ResumeState(pl.Callback):
     """Keeps ``<dirpath>/<filename>`` current (every N batches, on SIGTERM/Ctrl-C) and carries the RNG state.
@@ -95,6 +132,7 @@ class ResumeState(pl.Callback):
         self.filename = filename
         self.saves = 0
         self._batches_seen = 0  # training batches since this process started
+        self._saved_step: int | None = None  # global step of this process's last save
 
     @property
     def path(self) -> Path:
@@ -108,6 +146,15 @@ class ResumeState(pl.Callback):
         # explicitly, else Lightning logs "`weights_only` was not set" at every save
         trainer.save_checkpoint(self.path, weights_only=False)
         self.saves += 1
+        self._saved_step = getattr(trainer, "global_step", None)
+
+    def _current(self, trainer: pl.Trainer) -> bool:
+        """``last.ckpt`` already holds this step: saved here, or by a ModelCheckpoint writing it."""
+        if self._saved_step == trainer.global_step:
+            return True
+        return any(getattr(cb, "_last_global_step_saved", None) == trainer.global_step and
+                   _same_file(getattr(cb, "last_model_path", ""), self.path)
+                   for cb in getattr(trainer, "checkpoint_callbacks", []))
 
     def _adopt_last(self, trainer: pl.Trainer) -> None:
         """Tell a ``ModelCheckpoint(save_last=True)`` writing to the same file that it is its own,
@@ -116,8 +163,8 @@ class ResumeState(pl.Callback):
 
         for cb in getattr(trainer, "checkpoint_callbacks", []):
             if isinstance(cb, ModelCheckpoint) and cb.save_last and cb.dirpath is not None and \
-                    Path(cb.dirpath) / f"{cb.CHECKPOINT_NAME_LAST}{cb.FILE_EXTENSION}" == self.path:
-                cb.last_model_path = str(self.path)
+                    _same_file(Path(cb.dirpath) / f"{cb.CHECKPOINT_NAME_LAST}{cb.FILE_EXTENSION}", self.path):
+                cb.last_model_path = os.path.join(cb.dirpath, f"{cb.CHECKPOINT_NAME_LAST}{cb.FILE_EXTENSION}")
 
     def setup(self, trainer, pl_module, stage: str) -> None:
         if stage == "fit" and trainer.is_global_zero:
@@ -129,6 +176,28 @@ class ResumeState(pl.Callback):
         n = self.every_n_train_batches
         if n and self._batches_seen % n == 0:
             self._save(trainer)
+
+    def on_train_epoch_end(self, trainer, pl_module) -> None:
+        if not self._current(trainer):
+            self._save(trainer)
+
+    def on_train_end(self, trainer, pl_module) -> None:
+        if not self._current(trainer):  # e.g. max_steps reached mid-epoch
+            self._save(trainer)
+
+    def on_train_start(self, trainer, pl_module) -> None:
+        self._adopt_last(trainer)  # a resumed run overwrites its last.ckpt, never writes last-v1.ckpt
+
+    def on_load_checkpoint(self, trainer, pl_module, checkpoint: dict[str, Any]) -> None:
+        """Before the callbacks' states are loaded: where the run dir moved since the checkpoint was
+        written, rewrite the ModelCheckpoint states' paths to the new folder (see the module doc)."""
+        from lightning.pytorch.callbacks import ModelCheckpoint
+
+        states = checkpoint.get("callbacks") or {}
+        for cb in getattr(trainer, "checkpoint_callbacks", []):
+            state = states.get(cb.state_key) if isinstance(cb, ModelCheckpoint) and cb.dirpath else None
+            if isinstance(state, dict):
+                moved_paths(state, str(cb.dirpath))
 
     def on_exception(self, trainer, pl_module, exception: BaseException) -> None:
         if isinstance(exception, (SIGTERMException, KeyboardInterrupt)) and trainer.state.fn == TrainerFn.FITTING:

@@ -9,6 +9,7 @@ import numpy as np
 from lit3d.geometry.canonical_forms import canonical_forms_multi
 from lit3d.metrics.retrieval import retrieval_scores
 from lit3d.retrieval.descriptor import DescriptorConfig, distance_matrix_from_features, mesh_features
+from lit3d.utils.progress import progress
 
 SHAPEDNA = "shapedna"
 
@@ -53,6 +54,6 @@ def mesh_rows(meshes, methods, cfg: DescriptorConfig, max_vertices: int | None =
             secs[m] = t_forms + time.perf_counter() - t1
     if SHAPEDNA in methods:
         t0 = time.perf_counter()
-        dists[SHAPEDNA] = shape_dna_distances(np.stack([shape_dna(v, f) for v, f in meshes]))
+        dists[SHAPEDNA] = shape_dna_distances(np.stack([shape_dna(v, f) for v, f in progress(meshes, SHAPEDNA)]))
         secs[SHAPEDNA] = time.perf_counter() - t0
     return feats, dists, secs

@@ -54,6 +54,7 @@ from lit3d.canonical.losses import canonical_loss, flow_loss, flow_smoothness, v
 from lit3d.canonical.warp import pixels_to_grid
 from lit3d.metrics.depth import MaskedDepthMSE, MaskIoU
 from lit3d.metrics.gathered import GatheredTensors
+from lit3d.utils.log_images import log_image, media_loggers
 
 METRICS = ("depth_mse", "iou", "depth_mse_input", "iou_input")
 # the warp head's loss terms (flow_weight, vis_weight, smooth_weight, offset_smooth_weight)
@@ -295,13 +296,11 @@ class CanonicalTask(pl.LightningModule):
 
     # ------------------------------------------------------------------ images
     def _log_panels(self, batch: dict, out) -> None:
-        loggers = [lg for lg in self.loggers if type(lg).__name__ == "WandbLogger"]
+        loggers = media_loggers(self.loggers)  # W&B and TensorBoard (lit3d.utils.log_images)
         if not loggers or self.trainer.sanity_checking:
             return
         image = validation_panel(batch, out, self.hparams.n_panel, self.hparams.mask_threshold)
-        for lg in loggers:
-            lg.log_image(key="val/panels", images=[image], caption=["input | predicted | true canonical | error"],
-                         step=self.global_step)
+        log_image(loggers, "val/panels", image, self.global_step, caption="input | predicted | true canonical | error")
 
     # ------------------------------------------------------------------ state
     def on_save_checkpoint(self, checkpoint: dict) -> None:

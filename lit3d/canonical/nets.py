@@ -165,13 +165,15 @@ class CanonicalNet(nn.Module):
     ``use_msfe=False`` drops the MSFE. Reconstruction input = [depth, mask, Y_LFE, Y_MSFE].
     ``head``: ``redraw`` (the thesis: a 1x1 conv draws depth and mask) or ``warp``
     (:class:`~lit3d.canonical.warp.WarpHead`: moves the posed pixels, ``warp_hidden`` channels; its
-    coarse flow comes from the MSFE's fused latent).
+    coarse flow comes from the MSFE's fused latent; ``warp_depth``/``warp_affine_cell``: how the moved
+    depth becomes the canonical depth).
     """
 
     def __init__(self, image_size: int, lfe_channels: Sequence[int], lfe_out: int, msfe_channels: Sequence[int],
                  msfe_grid: int, fuser_hidden: int, fuser_out: int, msfe_dec_channels: Sequence[int], msfe_out: int,
                  rec_channels: Sequence[int], use_lfe: bool = True, use_msfe: bool = True, head: str = "redraw",
-                 warp_hidden: int = 32, warp_normalise_depth: bool = False):
+                 warp_hidden: int = 32, warp_normalise_depth: bool = False, warp_depth: str = "offset",
+                 warp_affine_cell: int = 8):
         super().__init__()
         if head not in HEADS:
             raise ValueError(f"unknown canonical net head '{head}' ({', '.join(HEADS)})")
@@ -185,7 +187,8 @@ class CanonicalNet(nn.Module):
         self.reconstruction = DownUp(c, hidden, rec_channels, up_act="leaky", final_act=True)
         # the input is given to the head again (skip link)
         self.head = (WarpHead(hidden + 2, warp_hidden, fuser_out if use_msfe else 0,
-                              normalise_depth=warp_normalise_depth) if head == "warp"
+                              normalise_depth=warp_normalise_depth, depth_model=warp_depth,
+                              affine_cell=warp_affine_cell) if head == "warp"
                      else OutputHead(hidden + 2))
 
     def forward(self, depth: torch.Tensor, mask: torch.Tensor) -> CanonicalOutput:

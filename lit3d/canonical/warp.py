@@ -4,11 +4,15 @@
 From the reconstruction features the head predicts, per canonical pixel,
     flow       (B, 2, H, W)  backward flow in normalised grid units (x, y; 2 = the image width):
                              where in the posed image the pixel's surface point is;
-    offset     (B, 1, H, W)  the point's depth change from the posed to the canonical pose;
+    depth map  (B, K, H, W)  how the moved depth becomes the canonical depth (:data:`DEPTH_MODELS`):
+                             ``offset`` (K = 1): ``D + c0``; ``affine`` (K = 4, on a coarse grid of
+                             ``affine_cell`` pixels, bilinear): ``c0 + c1 x + c2 y + (1 + c3) D``, the
+                             depth of a rigidly moved part under the orthographic camera, (x, y) the
+                             sampled posed position in grid units, D its posed depth;
     vis        (B, 1, H, W)  logits: the point is seen in the posed image (take the moved pixel);
     fill       (B, 2, H, W)  depth and mask logits drawn for what the posed view hides.
 Output (:func:`warp_compose`): ``mask = v * warp(mask_in) + (1 - v) * fill_mask`` and
-``depth = v * (warp(depth_in) + offset) + (1 - v) * fill_depth``, ``v = sigmoid(vis)``, warps by
+``depth = v * map(warp(depth_in)) + (1 - v) * fill_depth``, ``v = sigmoid(vis)``, warps by
 bilinear :func:`torch.nn.functional.grid_sample`. The silhouette where visible is the posed one moved.
 
 The output layer starts at zero with the visibility bias at :data:`VIS_BIAS`: an untrained head
@@ -26,7 +30,7 @@ from lit3d.canonical.outputs import CanonicalOutput
 
 VIS_BIAS = 4.0      # sigmoid(4) = .98: start by taking the moved (at first: unmoved) input pixels
 MASK_EPS = 1e-5     # mask probabilities clamped to [eps, 1 - eps] for their logits
-OUT_CHANNELS = 6    # flow 2, offset 1, vis 1, fill depth 1, fill mask 1
+DEPTH_MODELS = {"offset": 1, "affine": 4}  # depth-map coefficient channels per model
 
 
 def identity_grid(batch: int, height: int, width: int, device=None, dtype=None) -> torch.Tensor:
@@ -51,21 +55,28 @@ def pixels_to_grid(flow_px: torch.Tensor) -> torch.Tensor:
     return flow_px * torch.tensor([2.0 / w, 2.0 / h], device=flow_px.device, dtype=flow_px.dtype)[None, :, None, None]
 
 
-def warp_compose(depth: torch.Tensor, mask: torch.Tensor, flow: torch.Tensor, offset: torch.Tensor,
+def warp_compose(depth: torch.Tensor, mask: torch.Tensor, flow: torch.Tensor, coeffs: torch.Tensor,
                  vis: torch.Tensor, fill_depth: torch.Tensor, fill_mask: torch.Tensor,
                  normalise: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
     """Canonical (depth, mask probability) ``(B, 1, H, W)`` from the posed ``depth``/``mask``, the
-    ``flow`` ``(B, 2, H, W)``, depth ``offset``, visibility probability ``vis`` and the fills (all
-    ``(B, 1, H, W)``, fill mask a probability). Zero flow, zero offset and ``vis = 1`` give the input.
-    ``normalise``: the moved depth is divided by the moved mask (where it exceeds 1e-3), so a sample
-    across the silhouette's edge keeps the body's depth instead of mixing in the background's 0."""
+    ``flow`` ``(B, 2, H, W)``, the depth map's ``coeffs`` ``(B, K, H, W)`` (K = 1: an offset ``c0``;
+    K = 4: ``c0 + c1 x + c2 y + (1 + c3) D``, module docstring), visibility probability ``vis`` and
+    the fills (all ``(B, 1, H, W)``, fill mask a probability). Zero flow, zero coefficients and
+    ``vis = 1`` give the input. ``normalise``: the moved depth is divided by the moved mask (where it
+    exceeds 1e-3), so a sample across the silhouette's edge keeps the body's depth instead of mixing
+    in the background's 0."""
     moved = warp_image(torch.cat([depth, mask], 1), flow)
     moved_depth = moved[:, 0:1]
     if normalise:
         moved_depth = torch.where(moved[:, 1:2] > 1e-3, moved_depth / moved[:, 1:2].clamp_min(1e-3),
                                   torch.zeros_like(moved_depth))
+    mapped = moved_depth + coeffs[:, 0:1]
+    if coeffs.shape[1] == 4:
+        b, _, h, w = flow.shape
+        src = (identity_grid(b, h, w, flow.device, flow.dtype) + flow.permute(0, 2, 3, 1)).permute(0, 3, 1, 2)
+        mapped = mapped + coeffs[:, 1:2] * src[:, 0:1] + coeffs[:, 2:3] * src[:, 1:2] + coeffs[:, 3:4] * moved_depth
     m = vis * moved[:, 1:2] + (1 - vis) * fill_mask
-    d = vis * (moved_depth + offset) + (1 - vis) * fill_depth
+    d = vis * mapped + (1 - vis) * fill_depth
     return d.clamp(0, 1), m
 
 
@@ -90,13 +101,18 @@ class WarpHead(nn.Module):
 
     Both output layers start at zero (visibility bias :data:`VIS_BIAS`)."""
 
-    def __init__(self, cin: int, hidden: int, latent_dim: int = 0, coarse: int = 16, normalise_depth: bool = False):
+    def __init__(self, cin: int, hidden: int, latent_dim: int = 0, coarse: int = 16, normalise_depth: bool = False,
+                 depth_model: str = "offset", affine_cell: int = 8):
         super().__init__()
+        if depth_model not in DEPTH_MODELS:
+            raise ValueError(f"unknown warp depth model '{depth_model}' ({', '.join(DEPTH_MODELS)})")
         self.normalise_depth = normalise_depth  # warp_compose(normalise=...): no edge mixing
+        self.n_coeffs = DEPTH_MODELS[depth_model]
+        self.affine_cell = affine_cell if depth_model == "affine" else 1
         self.body = _convs(cin + 2, hidden)
         self.first = nn.Conv2d(hidden, 2, 1)
         self.refine = _convs(2 * cin + 2, hidden)
-        self.out = nn.Conv2d(hidden, OUT_CHANNELS, 1)
+        self.out = nn.Conv2d(hidden, 2 + self.n_coeffs + 3, 1)  # flow, depth map, vis, fill depth, fill mask
         self.coarse = coarse
         self.coarse_flow = nn.Linear(latent_dim, 2 * coarse * coarse) if latent_dim else None
         self.reset_output_()
@@ -109,8 +125,8 @@ class WarpHead(nn.Module):
                 nn.init.zeros_(layer.weight)
                 nn.init.zeros_(layer.bias)
         with torch.no_grad():
-            self.out.bias[3] = VIS_BIAS
-            self.out.bias[5] = -VIS_BIAS
+            self.out.bias[-3] = VIS_BIAS
+            self.out.bias[-1] = -VIS_BIAS
 
     def forward(self, h: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor,
                 latent: torch.Tensor | None = None) -> CanonicalOutput:
@@ -122,10 +138,19 @@ class WarpHead(nn.Module):
             flow = flow + F.interpolate(coarse, size=(height, width), mode="bilinear", align_corners=False)
         o = self.out(self.refine(torch.cat([warp_image(h, flow), h, coords], 1)))
         flow = flow + o[:, 0:2]
-        offset, vis_logits = o[:, 2:3], o[:, 3:4]
-        fill_depth, fill_mask = torch.sigmoid(o[:, 4:5]), torch.sigmoid(o[:, 5:6])
-        d, m = warp_compose(depth, mask, flow, offset, torch.sigmoid(vis_logits), fill_depth, fill_mask,
+        coeffs = self._coarse(o[:, 2:2 + self.n_coeffs])
+        vis_logits = o[:, -3:-2]
+        fill_depth, fill_mask = torch.sigmoid(o[:, -2:-1]), torch.sigmoid(o[:, -1:])
+        d, m = warp_compose(depth, mask, flow, coeffs, torch.sigmoid(vis_logits), fill_depth, fill_mask,
                             self.normalise_depth)
         m = m.clamp(MASK_EPS, 1 - MASK_EPS)
         return CanonicalOutput(depth=d, mask=m, mask_logits=torch.logit(m), flow=flow, vis_logits=vis_logits,
-                               depth_offset=offset)
+                               depth_offset=coeffs)
+
+    def _coarse(self, coeffs: torch.Tensor) -> torch.Tensor:
+        """The depth map's coefficients ``(B, K, H, W)`` averaged over cells of ``affine_cell`` pixels and
+        upsampled bilinearly: smooth by construction (a rigid part has constant coefficients)."""
+        if self.affine_cell <= 1:
+            return coeffs
+        size = coeffs.shape[-2:]
+        return F.interpolate(F.avg_pool2d(coeffs, self.affine_cell), size=size, mode="bilinear", align_corners=False)

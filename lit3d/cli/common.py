@@ -30,9 +30,12 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from lit3d.cli.about import about_flags
+from lit3d.cli.rundir import claim_run_dir, hold_output_dir
 from lit3d.utils import quiet
 from lit3d.utils.checkpoints import first_line
 from lit3d.utils.config_dir import config_dir
+from lit3d.utils.io import OutputError
 
 log = logging.getLogger("lit3d")
 
@@ -233,25 +236,29 @@ def check_output_paths(cfg: DictConfig | None) -> None:
 def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None, config_name: str = "train") -> Any:
     """Console-script wrapper of a ``@hydra.main`` function (whose config is ``config_name``).
 
+    ``--version`` prints the version; ``--help`` shows the command's page (:mod:`lit3d.cli.about`).
     ``--debug`` is taken off the command line and turns on ``HYDRA_FULL_ERROR=1``
     (tracebacks); unknown config-group options (``experiment=``, ``task=``, ``data=`` ...)
     and overrides that do not compose (a misspelt key) stop with one line and exit 2 before
     Hydra runs anything.
     """
     quiet.install()
-    args = list(sys.argv[1:] if argv is None else argv)
+    args = about_flags(sys.argv[1:] if argv is None else argv, hydra_main)  # --version; --help: the command's page
     if "--debug" in args:
         args = [a for a in args if a != "--debug"]
         os.environ["HYDRA_FULL_ERROR"] = "1"
     try:
         check_group_overrides(args)
-        check_output_paths(check_composes(args, config_name))
-    except UserError as exc:
+        composed = check_composes(args, config_name)
+        check_output_paths(composed)
+        args, run_dir_lock = claim_run_dir(composed, args)  # one process per run dir (lit3d.cli.rundir)
+    except (UserError, OutputError) as exc:
         if _debug_requested():
             raise
         fail(exc, EXIT_USER)
     sys.argv = [sys.argv[0], *args]
-    return hydra_main()
+    with run_dir_lock:
+        return hydra_main()
 
 
 def exit_code_for(exc: BaseException) -> int | None:
@@ -322,7 +329,8 @@ def run_cli(fn: Callable[[DictConfig], Any], cfg: DictConfig) -> Any:
         if missing:  # before any work or logging: the one line is all the user sees
             raise UserError(f"missing value for {missing[0]}: set {missing[0]}=... on the command line")
         log_once_through_hydra()  # imports Lightning: only once the command line is known to be whole
-        return fn(cfg)
+        with hold_output_dir(cfg):  # a multirun job's dir; a no-op where cli_main holds the run dir
+            return fn(cfg)
     except Exception as exc:
         code = exit_code_for(exc)
         if code is None or _debug_requested():

@@ -2,7 +2,9 @@
 
 Generates the synthetic set (or indexes and converts a real one) into
 ``paths.data_dir``, prints counts per split and category, sizes and the
-manifest hash; ``--show N`` writes a PNG of N samples into the run dir.
+manifest hash; ``--show N`` writes a PNG of N samples into the run dir. A ``data_dir`` holding
+data of another config is refused (nothing deleted); ``--rebuild`` deletes it and prepares it
+again (the only command that deletes prepared data; see docs/resuming.md).
 """
 from __future__ import annotations
 
@@ -52,8 +54,15 @@ def _hydra_main(cfg: DictConfig) -> None:
 
 
 def main() -> None:
-    """Console script ``lit3d-data`` (``--debug``: tracebacks instead of one-line errors)."""
-    cli_main(_hydra_main, _argv_show_to_override(sys.argv[1:]))
+    """Console script ``lit3d-data`` (``--debug``: tracebacks instead of one-line errors; ``--rebuild``:
+    delete the prepared data of ``data.data_dir`` and prepare it again, also when it is of another config)."""
+    argv = sys.argv[1:]
+    if "--rebuild" in argv:
+        from datamodules.cache import request_rebuild
+
+        argv = [a for a in argv if a != "--rebuild"]
+        request_rebuild()
+    cli_main(_hydra_main, _argv_show_to_override(argv))
 
 
 if __name__ == "__main__":

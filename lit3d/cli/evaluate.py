@@ -26,6 +26,7 @@ from lit3d.cli.common import (
     run_evaluation,
     to_plain,
 )
+from lit3d.utils.provenance import add_to_metrics, provenance
 
 
 def checkpoint_meta_for(cfg: DictConfig) -> dict:
@@ -59,7 +60,8 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
     metrics = run_evaluation(trainer, task, datamodule, task_cfg["name"], out_dir,
                              validate=getattr(task, "validate_before_test", False), n_figures=cfg.n_figures,
                              extra={"ckpt_path": str(cfg.ckpt_path)})
-    if trainer.is_global_zero:
+    if trainer.is_global_zero:  # this code and the data evaluated; the checkpoint's own: its training run's
+        add_to_metrics(out_dir / "metrics.json", {**provenance(datamodule), "checkpoint": meta.get("provenance")})
         OmegaConf.save(OmegaConf.create({"task": task_cfg, "data": data_cfg}), out_dir / "config.yaml")
     return metrics
 

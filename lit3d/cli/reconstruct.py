@@ -29,8 +29,7 @@ import sys
 import time
 from pathlib import Path
 
-from lit3d.cli.common import EXIT_USER  # light: no torch or Lightning
-from lit3d.utils import quiet
+from lit3d.cli.about import report_error, run_argparse_cli, version_line
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -61,8 +60,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--quality-ckpt", metavar="Q", help="quality model checkpoint for the score (with --reference)")
     p.add_argument("--size", type=int, default=256, help="picture panel size in pixels (default 256)")
     p.add_argument("--no-figure", action="store_true", help="skip the picture")
+    p.add_argument("--overwrite", action="store_true",
+                   help="redo inputs whose outputs in --out are whole and from the same input and options "
+                        "(skipped otherwise)")
     p.add_argument("--device", default="cpu", help="torch device (cpu, cuda, cuda:1 ...)")
     p.add_argument("--debug", action="store_true", help="show full tracebacks")
+    p.add_argument("--version", action="version", version=version_line("lit3d-reconstruct"))
     return p
 
 
@@ -160,7 +163,7 @@ class _Scorer:
 def _one(args, path: Path, name: str, completer, mapper, scorer, protected) -> dict:
     from lit3d.reconstruct.depth_io import read_depth_info
     from lit3d.reconstruct.figure import figure_png
-    from lit3d.reconstruct.outputs import mesh_bytes, occupancy_npz, write_outputs
+    from lit3d.reconstruct.outputs import mesh_bytes, occupancy_npz, request_key, write_outputs
     from lit3d.reconstruct.pipeline import Options, reconstruct
 
     t_all = time.perf_counter()
@@ -193,7 +196,7 @@ def _one(args, path: Path, name: str, completer, mapper, scorer, protected) -> d
         "geometry": completer.geometry.as_dict(), "placement": res.placement.as_dict(),
         "grids": {"input": [completer.geometry.input_res] * 3, "output": [completer.geometry.target_res] * 3},
         "fuse_input": opts.fuse_input, "counts": res.info, "mesh_frame": "camera (x right, y down, z forward), metres",
-        "notes": notes, "output_name": name,
+        "notes": notes, "output_name": name, "request": request_key(args, path),
     }
     if mapper is not None:
         summary["mesh_frame"] += "; canonical pose placed at the posed subject's position and size"
@@ -208,27 +211,11 @@ def _one(args, path: Path, name: str, completer, mapper, scorer, protected) -> d
 
 
 def main(argv: list[str] | None = None) -> int:
-    quiet.install()
-    args = _parser().parse_args(argv)
-    try:
-        return _run(args)
-    except KeyboardInterrupt:
-        _say("interrupted")
-        return 130
-    except Exception as exc:
-        if args.debug:
-            raise
-        return _report(exc)
+    return run_argparse_cli("lit3d-reconstruct", _parser(), _run, argv)
 
 
 def _report(exc: Exception, prefix: str = "") -> int:
-    from lit3d.render.convert import ShapeError
-    from lit3d.utils.checkpoints import first_line
-
-    user = isinstance(exc, (ShapeError, ValueError, FileNotFoundError, NotImplementedError))
-    kind = "error" if user else f"internal error ({type(exc).__name__}; rerun with --debug)"
-    _say(f"{kind}: {prefix}{first_line(exc, type(exc).__name__)}")
-    return EXIT_USER if user else 1
+    return report_error("lit3d-reconstruct", exc, prefix)
 
 
 def _protected(args, inputs: list[Path]) -> list[Path]:
@@ -279,6 +266,11 @@ def _run(args) -> int:
     _check_args(args)
     inputs = _dedupe(list_inputs(args.depth))  # a missing folder or file list is answered before the imports
     names, protected = _plan_outputs(args, inputs)
+    todo = _to_do(args, inputs, names)
+    if not todo:
+        _say(f"{len(inputs)} of {len(inputs)} image(s) already reconstructed into {args.out} with the same input "
+             "and options: nothing to do (--overwrite redoes them)")
+        return 0
     from tqdm import tqdm
 
     from lit3d.reconstruct.pipeline import load_completer
@@ -294,6 +286,8 @@ def _run(args) -> int:
     scorer = _Scorer(args) if args.reference else None
     failed = 0
     status = 0
+    skipped = len(inputs) - len(todo)
+    inputs, names = [p for p, _ in todo], [n for _, n in todo]
     bar = tqdm(inputs, desc="reconstruct", unit="image", disable=len(inputs) < 2, file=sys.stderr)
     done = 0
     for path, name in zip(bar, names):
@@ -316,10 +310,25 @@ def _run(args) -> int:
             if out_fault:  # the output folder takes no more files (full, gone read-only): stop here
                 failed = len(inputs) - done
                 break
-    if len(inputs) > 1:
+    if len(inputs) > 1 or skipped:
         _say(f"{len(inputs) - failed} of {len(inputs)} images reconstructed into {args.out}"
-             + (f"; {failed} failed (see above)" if failed else ""))
+             + (f"; {failed} failed (see above)" if failed else "")
+             + (f"; {skipped} already there skipped (--overwrite redoes them)" if skipped else ""))
     return status
+
+
+def _to_do(args, inputs: list[Path], names: list[str]) -> list[tuple[Path, str]]:
+    """Settle the sets an interrupted run left in --out, then the (input, name) pairs whose set is
+    not already whole with the same input and options (all of them with --overwrite)."""
+    from lit3d.reconstruct.outputs import finished_set, request_key
+    from lit3d.utils.io import repair_sets
+
+    for note in repair_sets(args.out):
+        _say(f"note: {note}")
+    if args.overwrite:
+        return list(zip(inputs, names))
+    return [(p, n) for p, n in zip(inputs, names)
+            if not finished_set(args.out, n, args.format, not args.no_figure, request_key(args, p))]
 
 
 if __name__ == "__main__":

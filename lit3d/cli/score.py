@@ -1,4 +1,4 @@
-"""``lit3d-score REF DIST``: rendering-based quality features and score of a shape pair.
+"""``lit3d-score REF DIST``: rendering-based quality features and score of a shape pair (or many: --pairs).
 
 Examples::
 
@@ -6,6 +6,8 @@ Examples::
     lit3d-score target.npz prediction.npz --json          # every feature as JSON
     lit3d-score a.obj b.obj --styles jade,toon --size 128 --save-views out/
     lit3d-score ref.obj dist.ply --ckpt logs/quality/runs/X/checkpoints/best-059.ckpt
+    lit3d-score --pairs pairs.tsv                         # many pairs, one process, one table
+    lit3d-score --pairs targets/ predictions/ --json      # files with the same name stem in both folders
 
 The overall score is the mean Mask-SSIM over styles, shadings and the 12 views
 (1 = identical renders). Two point clouds (.xyz, a .ply without faces, a .zip holding one
@@ -22,6 +24,9 @@ model was trained on (``--size``/``--styles`` are then ignored, with a note), it
 SFS-selected features feed the MLP, and the [0, 1] output is mapped back to the
 training dataset's score range and direction (e.g. MOS 0-10 for LIRIS/EPFL; the
 built-in synthetic set gives an ordinal severity in [0, 1], not an opinion score).
+``--pairs FILE.tsv`` (reference<TAB>distorted a line) or ``--pairs REF_DIR DIST_DIR`` (same
+name stems) scores many pairs in one process (one start-up, one renderer): a line per pair on
+stderr, one table on stdout (``--json``: one document per pair).
 Bad inputs end with one line naming the file and exit status 2.
 """
 from __future__ import annotations
@@ -32,8 +37,7 @@ import sys
 import time
 from pathlib import Path
 
-from lit3d.cli.common import EXIT_USER  # light: no torch or Lightning
-from lit3d.utils import quiet
+from lit3d.cli.about import run_argparse_cli, version_line
 
 DEFAULT_SIZE = 256
 
@@ -42,8 +46,12 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="lit3d-score", description=__doc__.split("\n\n")[0],
                                 epilog="\n\n".join(__doc__.split("\n\n")[1:]).replace("``", "'"),
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("ref", help="reference shape (.obj .off .ply .stl .glb, points .xyz/.ply/.zip, voxel/SDF .npz)")
-    p.add_argument("dist", help="distorted / predicted shape (same formats)")
+    p.add_argument("ref", nargs="?", help="reference shape (.obj .off .ply .stl .glb, points .xyz/.ply/.zip, "
+                                          "voxel/SDF .npz)")
+    p.add_argument("dist", nargs="?", help="distorted / predicted shape (same formats)")
+    p.add_argument("--pairs", nargs="+", metavar="PATH",
+                   help="many pairs in one process, one table out: FILE.tsv (reference<TAB>distorted a line, "
+                        "paths relative to the file) or REF_DIR DIST_DIR (files with the same name stem)")
     p.add_argument("--size", type=int, default=None,
                    help=f"render size in pixels (default {DEFAULT_SIZE}; with --ckpt: the model's)")
     p.add_argument("--styles", default=None,
@@ -55,6 +63,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--no-cache", action="store_true", help="do not read or write the feature cache")
     p.add_argument("--device", default=None, help="torch device for the measures (default cpu)")
     p.add_argument("--debug", action="store_true", help="show full tracebacks")
+    p.add_argument("--version", action="version", version=version_line("lit3d-score"))
     return p
 
 
@@ -138,73 +147,112 @@ def save_contact_sheets(ref, dist, cfg, out_dir: str | Path, thumb: int = 96,
 
 
 def main(argv: list[str] | None = None) -> int:
-    quiet.install()
-    args = _parser().parse_args(argv)
-    try:
-        return _run(args)
-    except KeyboardInterrupt:
-        print("lit3d-score: interrupted", file=sys.stderr)
-        return 130
-    except Exception as exc:
-        if args.debug:
-            raise
-        from lit3d.render.convert import ShapeError
-
-        from lit3d.utils.checkpoints import first_line
-
-        msg = first_line(exc, type(exc).__name__)
-        user = isinstance(exc, (ShapeError, ValueError, FileNotFoundError, NotImplementedError))
-        kind = "error" if user else f"internal error ({type(exc).__name__}; rerun with --debug)"
-        print(f"lit3d-score: {kind}: {msg}", file=sys.stderr)
-        return EXIT_USER if user else 1
+    return run_argparse_cli("lit3d-score", _parser(), _run, argv)
 
 
 def _run(args) -> int:
-    from lit3d.render.convert import to_mesh
-    from lit3d.render.points import is_point_source, load_points
-
     if args.size is not None and not 16 <= args.size <= 4096:
         raise ValueError(f"--size {args.size}: expected 16..4096 pixels")
+    if args.pairs:
+        return _run_pairs(args)
+    if not (args.ref and args.dist):
+        raise ValueError("give two shapes (REF DIST), or --pairs FILE.tsv, or --pairs REF_DIR DIST_DIR")
     if args.save_views:  # before any shape is read or rendered
         from lit3d.utils.io import check_output_dir, check_targets
 
         check_targets([Path(args.save_views) / f"contact_{sh}.png" for sh in ("flat", "smooth")], _inputs(args))
         check_output_dir(args.save_views, "--save-views")
     # shapes first: a bad file is reported before torch and the renderer are imported (about 1 s, not 10)
-    if is_point_source(args.ref) and is_point_source(args.dist):  # two point clouds: rendered as points
-        ref, dist = load_points(args.ref), load_points(args.dist)
+    ref, dist = _load_pair(args.ref, args.dist)
+    cfg, predictor, notes = _feature_setup(args)
+    table, seconds, prediction = _score(args, cfg, predictor, ref, dist)
+    if args.save_views:
+        for p in save_contact_sheets(ref, dist, cfg, args.save_views, names=(args.ref, args.dist),
+                                     protected=_inputs(args)):
+            print(f"wrote {p}", file=sys.stderr)
+    if args.json:
+        doc = {**_doc(args.ref, args.dist, table, seconds, prediction), "config": cfg.key_dict()}
+        if prediction is not None:
+            doc["notes"] = notes
+        print(json.dumps(doc, indent=2, sort_keys=True))
     else:
-        ref, dist = to_mesh(args.ref), to_mesh(args.dist)
-    from lit3d.features.table import FeatureConfig, default_cache_dir, feature_table
+        print(_summary(table, args.ref, args.dist, seconds, prediction, notes))
+    return 0
+
+
+def _run_pairs(args) -> int:
+    """``--pairs``: every pair in this one process (one start-up, one renderer), one table on stdout
+    (``--json``: ``{"config", "notes", "pairs": [one document per pair]}``), a line per pair on stderr."""
+    from lit3d.cli.score_pairs import pairs_table, read_pairs
+
+    if args.ref or args.dist:
+        raise ValueError("--pairs names the pairs itself: give no REF DIST with it")
+    if args.save_views:
+        raise ValueError("--save-views draws one pair: give REF DIST instead of --pairs")
+    pairs, notes = read_pairs(args.pairs)  # every file is checked before anything is loaded
+    for note in notes:
+        print(f"note: {note}", file=sys.stderr)
+    cfg, predictor, model_notes = _feature_setup(args)
+    docs = []
+    for i, (ref_path, dist_path) in enumerate(pairs, 1):
+        table, seconds, prediction = _score(args, cfg, predictor, *_load_pair(ref_path, dist_path))
+        docs.append(_doc(ref_path, dist_path, table, seconds, prediction))
+        took = "cached" if table.cached else f"{seconds:.1f} s"
+        print(f"[{i}/{len(pairs)}] {ref_path} vs {dist_path}: {table.overall_score():.4f} ({took})", file=sys.stderr)
+    if args.json:
+        print(json.dumps({"config": cfg.key_dict(), "notes": notes + model_notes, "pairs": docs}, indent=2,
+                         sort_keys=True))
+    else:
+        print("\n".join([pairs_table(docs)] + [f"note: {n}" for n in model_notes]))
+    return 0
+
+
+def _load_pair(ref: str | Path, dist: str | Path):
+    """Two point clouds are rendered as points; anything else as meshes (:func:`to_mesh`)."""
+    from lit3d.render.convert import to_mesh
+    from lit3d.render.points import is_point_source, load_points
+
+    if is_point_source(ref) and is_point_source(dist):
+        return load_points(ref), load_points(dist)
+    return to_mesh(ref), to_mesh(dist)
+
+
+def _feature_setup(args):
+    """``(FeatureConfig, predictor or None, notes)`` from ``--size``/``--styles`` or ``--ckpt``."""
+    from lit3d.features.table import FeatureConfig
     from lit3d.render.gbuffer import RenderConfig
     from lit3d.render.styles import resolve_styles
 
     cfg = FeatureConfig(render=RenderConfig(size=args.size or DEFAULT_SIZE),
                         styles=tuple(resolve_styles(args.styles or "all")))
-    predictor, notes = None, []
     if args.ckpt:
         predictor, cfg, notes = _model_features(args, cfg)
+        return cfg, predictor, notes
+    return cfg, None, []
+
+
+def _score(args, cfg, predictor, ref, dist):
+    """``(feature table, seconds, prediction or None)`` of one loaded pair."""
+    from lit3d.features.table import default_cache_dir, feature_table
+
     t0 = time.perf_counter()
     table = feature_table(ref, dist, cfg, cache_dir=None if args.no_cache else default_cache_dir(),
                           device=args.device)
     seconds = time.perf_counter() - t0
-    if args.save_views:
-        for p in save_contact_sheets(ref, dist, cfg, args.save_views, names=(args.ref, args.dist),
-                                     protected=_inputs(args)):
-            print(f"wrote {p}", file=sys.stderr)
     prediction = None
     if predictor is not None:
         out = predictor.predict(table.features)
         prediction = {"score": out.pop("score"), "source": {"model": str(args.ckpt), **out}}
-    if args.json:
-        doc = {"ref": str(args.ref), "dist": str(args.dist), "overall_score": table.overall_score(),
-               "cached": table.cached, "seconds": seconds, "config": cfg.key_dict(), "features": table.features}
-        if prediction is not None:
-            doc.update(predicted_score=prediction["score"], score_source=prediction["source"], notes=notes)
-        print(json.dumps(doc, indent=2, sort_keys=True))
-    else:
-        print(_summary(table, args.ref, args.dist, seconds, prediction, notes))
-    return 0
+    return table, seconds, prediction
+
+
+def _doc(ref, dist, table, seconds: float, prediction: dict | None) -> dict:
+    """One pair's JSON document (the ``--json`` output of a single pair, less ``config``)."""
+    doc = {"ref": str(ref), "dist": str(dist), "overall_score": table.overall_score(), "cached": table.cached,
+           "seconds": seconds, "features": table.features}
+    if prediction is not None:
+        doc.update(predicted_score=prediction["score"], score_source=prediction["source"])
+    return doc
 
 
 def _inputs(args) -> list[Path]:

@@ -32,7 +32,10 @@ from lit3d.cli.common import (
     task_meta,
     to_plain,
 )
+from lit3d.cli.run_log import with_csv_logger, write_run_curves
 from lit3d.utils.io import atomic_write_text, write_json
+from lit3d.utils.log_images import WANDB, logger_kind
+from lit3d.utils.provenance import provenance
 
 # torch and Lightning are imported inside train(): a bad command line is answered in about a second
 
@@ -75,7 +78,7 @@ def build_loggers(cfg: DictConfig, wandb_id: str) -> list:
 def finish_wandb(loggers: list) -> None:
     """Close W&B runs (also on errors) so multirun jobs do not share a run."""
     for lg in loggers:
-        if type(lg).__name__ == "WandbLogger":
+        if logger_kind(lg) == WANDB:
             try:
                 import wandb
 
@@ -163,7 +166,7 @@ def train(cfg: DictConfig) -> float | None:
     atomic_write_text(output_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
     datamodule = build_datamodule(cfg.data)
     task = build_task(cfg.task)
-    loggers = build_loggers(cfg, wandb_id)
+    loggers = with_csv_logger(build_loggers(cfg, wandb_id), output_dir)  # the CSV log is always on (curves.png)
     callbacks = [instantiate(c) for c in (cfg.get("callbacks") or {}).values() if c is not None]
     callbacks.append(MetadataCallback(task_meta(cfg), to_plain(cfg.data), wandb_id))
     trainer: pl.Trainer = instantiate(cfg.trainer, callbacks=callbacks, logger=loggers or False,
@@ -174,13 +177,17 @@ def train(cfg: DictConfig) -> float | None:
         fit(trainer, task, datamodule, ckpt_path, output_dir)
         fit_metrics = scalar_metrics(trainer.callback_metrics)
         monitored = _monitored_value(trainer, cfg.task_info.monitor, fit_metrics)
+        run_info = {"monitor": cfg.task_info.monitor, "monitored_value": monitored,
+                    "provenance": provenance(datamodule)}  # lit3d version, git commit, data manifest hash
         if cfg.get("test_after_fit", True):
             best = trainer.checkpoint_callback.best_model_path if trainer.checkpoint_callback else ""
             run_evaluation(trainer, task, datamodule, cfg.task_info.name, output_dir, ckpt_path=best or None,
                            n_figures=int(cfg.get("n_figures", 0)),
-                           extra={"monitor": cfg.task_info.monitor, "monitored_value": monitored})
+                           extra=run_info)
         elif trainer.is_global_zero:
-            write_json(output_dir / "metrics.json", {"monitor": cfg.task_info.monitor, "monitored_value": monitored})
+            write_json(output_dir / "metrics.json", run_info)
+        if trainer.is_global_zero:
+            write_run_curves(loggers, output_dir, f"{cfg.task_info.name} learning curves: {output_dir}")
         return monitored
     finally:
         finish_wandb(loggers)

@@ -29,8 +29,10 @@ from lit3d.completion.losses import (critic_loss, generator_adv_loss, gradient_p
 from lit3d.metrics.voxel import VoxelSweepMetrics, best_threshold, default_thresholds
 from lit3d.completion.nets import build_completion_nets, validate_net_config
 from lit3d.completion.paired import PairedSamples, extrude_silhouette
+from lit3d.completion.previews import log_validation_previews
 from lit3d.completion.prior import mean_training_target
 from lit3d.completion.split_metrics import split_values, threshold_index
+from lit3d.completion.surface_eval import SurfaceTestMetrics
 from lit3d.metrics.gathered import compute_if_updated
 from lit3d.callbacks.nonfinite import NonFiniteLossError, guard_step, validate_mode  # noqa: F401 (re-exported)
 from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, select_seen_categories, select_unseen_categories
@@ -73,8 +75,10 @@ class CompletionTask(pl.LightningModule):
         unseen_categories: Sequence[str] | None = None,
         prior_samples: int = 256,
         image_every_n_epochs: int = 1,
+        mesh_every_n_epochs: int = 0,
         channels_last: bool = False,
         on_nonfinite: str = "raise",
+        surface: dict | None = None,
     ):
         super().__init__()
         self.save_hyperparameters()
@@ -108,6 +112,8 @@ class CompletionTask(pl.LightningModule):
             {f"{sp}_{s}": VoxelSweepMetrics(self.eval_categories, thresholds) for sp in TEST_SPLITS for s in PREDICTION_SOURCES}
         )
         self.test_samples = PairedSamples()
+        # test-time surface metrics (task.surface: points, fscore_at, seed); None = off (checkpoints before issue 36)
+        self.test_surface = SurfaceTestMetrics(TEST_SPLITS, PREDICTION_SOURCES, self.eval_categories, **surface) if surface else None
         self.generator_steps = 0
         self.skipped_steps = 0
         self.loss_scale = resolve_loss_scale(loss_scale, res)
@@ -289,7 +295,7 @@ class CompletionTask(pl.LightningModule):
         for src, p in preds.items():
             self.val_metrics[src].update(p, batch["target"], cats)
         if batch_idx == 0:
-            self._log_panels(batch)
+            log_validation_previews(self, batch)  # panels and meshes to W&B / TensorBoard when due
 
     def on_validation_epoch_end(self) -> None:
         # updated together; skipped alike on every process when none saw a batch (an empty val split)
@@ -327,6 +333,8 @@ class CompletionTask(pl.LightningModule):
         for src, p in preds.items():
             self.test_metrics[f"{split}_{src}"].update(p, batch["target"], cats)
         self.test_samples.update(TEST_SPLITS.index(split), cats, preds, batch["target"], self._source_thresholds())
+        if self.test_surface is not None:
+            self.test_surface.update(split, preds, batch["target"], cats, self._source_thresholds())
 
     def on_test_epoch_end(self) -> None:
         out: dict[str, float] = {"test/threshold": float(self.threshold)}
@@ -334,24 +342,8 @@ class CompletionTask(pl.LightningModule):
         self.test_samples.reset()
         out.update(split_values(self.test_metrics, TEST_SPLITS, PREDICTION_SOURCES, self._source_thresholds(), self.thresholds,
                                 self.eval_categories))
+        out.update(self.test_surface.values() if self.test_surface is not None else {})
         self.log_dict(out, sync_dist=False)
-
-    # ------------------------------------------------------------------ images
-    def _log_panels(self, batch: dict) -> None:
-        """Rendered figure of the batch's first sample (input | stages | prediction | target) to
-        W&B loggers every ``image_every_n_epochs`` epochs (:mod:`lit3d.completion.figures`)."""
-        every = max(int(self.hparams.image_every_n_epochs), 1)
-        if self.current_epoch % every or not self.trainer.is_global_zero:
-            return
-        loggers = [lg for lg in self.loggers if type(lg).__name__ == "WandbLogger"]
-        if not loggers:
-            return
-        from lit3d.completion.figures import split_figure
-
-        sample = {"input": batch["input"][0].cpu(), "target": batch["target"][0].cpu(), "category": batch["category"][0]}
-        image = split_figure(self, [sample], f"validation, epoch {self.current_epoch}")
-        for lg in loggers:
-            lg.log_image(key="val/panels", images=[image], step=self.global_step)
 
     # ------------------------------------------------------------------ state
     def on_save_checkpoint(self, checkpoint: dict) -> None:

@@ -12,7 +12,9 @@ import numpy as np
 import torch
 
 from lit3d.completion.module import split_key
+from lit3d.completion.surface_report import surface_section
 from lit3d.utils.io import atomic_write_bytes, atomic_write_text
+from lit3d.utils.log_images import log_image
 from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, UNSEEN_CATEGORIES
 from lit3d.utils.tables import fmt, markdown_table
 
@@ -38,10 +40,11 @@ SPLIT_TITLES = {"same": "same view", "cross": "cross view", "unseen": "unseen ca
                 "unseen_cross": "unseen categories, cross view"}
 
 
-def category_rows(metrics: dict, split: str, categories, kind: str = "iou") -> list[list[str]]:
-    """Our rows (model and baselines) for one split: per category + mean."""
+def category_rows(metrics: dict, split: str, categories, kind: str = "iou", methods=OURS) -> list[list[str]]:
+    """Our rows (``methods``: ``(label, key suffix)``, default the model and baselines) for one split:
+    per category + mean."""
     rows = []
-    for label, suffix in OURS:
+    for label, suffix in methods:
         vals = [metrics.get(f"test/{split}/{kind}{suffix}/{c}") for c in categories]
         total = metrics.get(f"test/{split}/{kind}{suffix}")
         if all(v is None for v in vals) and total is None:
@@ -50,32 +53,36 @@ def category_rows(metrics: dict, split: str, categories, kind: str = "iou") -> l
     return rows
 
 
-def write_results(metrics: dict, out_dir: Path) -> Path:
-    """Write results.md: one table per thesis table, thesis rows beside ours."""
+def write_results(metrics: dict, out_dir: Path, methods=OURS, intro: str | None = None) -> Path:
+    """Write results.md: one table per thesis table, thesis rows beside ours, then the surface
+    metrics per split. ``methods``: our rows as ``(label, key suffix)`` (default the model and its
+    baselines); ``intro``: replaces the threshold line (e.g. for another method's predictions)."""
+    threshold_line = (f"Threshold chosen on validation: {fmt(metrics.get('test/threshold'), 2)} "
+                      f"(validation IoU {fmt(metrics.get('val/iou'))}).")
     parts = [
         "# Shape completion results",
         "",
-        f"Threshold chosen on validation: {fmt(metrics.get('test/threshold'), 2)} "
-        f"(validation IoU {fmt(metrics.get('val/iou'))}). IoU per category, last column = mean over test samples.",
+        f"{intro or threshold_line} IoU per category, last column = mean over test samples.",
         "Rows marked *(thesis)* are the thesis's published figures on the full 3D-RecGAN++ ShapeNet data; "
         "rows marked *(ours)* are measured in this run on this run's data. Compare them only when the data is the same.",
     ]
     for title, split, cats, thesis in THESIS:
-        ours = category_rows(metrics, split, cats)
+        ours = category_rows(metrics, split, cats, methods=methods)
         if not ours:
             continue
         rows = [[name] + [fmt(v) for v in vals] + ["–"] for name, vals in thesis.items()] + ours
         parts += ["", f"## {title}", "", markdown_table(["method", *cats, "mean"], rows)]
-        pooled = category_rows(metrics, split, cats, kind="iou_pooled")
+        pooled = category_rows(metrics, split, cats, kind="iou_pooled", methods=methods)
         if pooled:
             parts += ["", "Pooled IoU (summed intersections / summed unions; the rows above are per-sample means):",
                       "", markdown_table(["method", *cats, "all"], pooled)]
     for split, cats in (("same", SEEN_CATEGORIES), ("cross", SEEN_CATEGORIES), ("unseen", UNSEEN_CATEGORIES),
                         ("unseen_cross", UNSEEN_CATEGORIES)):
-        ce = category_rows(metrics, split, cats, kind="ce")
+        ce = category_rows(metrics, split, cats, kind="ce", methods=methods)
         if ce:
             parts += ["", f"## Cross-entropy, {split} split (lower is better)", "",
                       markdown_table(["method", *cats, "mean"], ce)]
+    parts += surface_section(metrics, SPLIT_TITLES, methods)
     parts += paired_section(metrics)
     path = Path(out_dir) / "results.md"
     atomic_write_text(path, "\n".join(parts) + "\n")
@@ -144,19 +151,17 @@ def write_figures(task, datamodule, out_dir: Path, n: int = 4, evaluation=None) 
         image.save(buf, format="PNG")
         atomic_write_bytes(path, buf.getvalue())
         paths.append(path)
-        _log_wandb(task, f"eval/{split_key(name)}", image)
+        _log_image(task, f"eval/{split_key(name)}", image)
     return paths
 
 
-def _log_wandb(task, key: str, image) -> None:
-    """Log a PIL image to the task's W&B loggers (none outside a trainer)."""
+def _log_image(task, key: str, image) -> None:
+    """Log a PIL image to the task's W&B / TensorBoard loggers (none outside a trainer)."""
     try:
         loggers = task.loggers
     except RuntimeError:
         return
-    for lg in loggers:
-        if type(lg).__name__ == "WandbLogger":
-            lg.log_image(key=key, images=[image], step=task.global_step)
+    log_image(loggers, key, image, task.global_step)
 
 
 def _save_voxels(path: Path, occupancy: torch.Tensor) -> None:

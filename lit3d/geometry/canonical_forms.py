@@ -22,6 +22,7 @@ from lit3d.geometry.geodesics import geodesic_matrix, landmark_geodesics
 from lit3d.geometry.mds import landmark_mds, landmark_nmds, landmark_smacof
 from lit3d.geometry.simplify import simplify_to_vertices
 from lit3d.geometry.spectral import gps_embedding
+from lit3d.utils.progress import progress
 
 METHODS = ("cmds", "smacof", "nmds", "gps", "posed")
 GEODESIC_METHODS = ("cmds", "smacof", "nmds")
@@ -69,7 +70,7 @@ def canonical_forms_multi(meshes, methods, max_vertices: int | None = None, max_
         raise ValueError(f"unknown canonical baseline(s) {bad} ({', '.join(METHODS)})")
     out: dict[str, list] = {m: [] for m in methods}
     needs_geo = any(m in GEODESIC_METHODS for m in methods)
-    for v, f in meshes:
+    for v, f in progress(meshes, f"canonical forms ({', '.join(methods)})"):  # a line every 10 s
         v, f = np.asarray(v, float), np.asarray(f, np.int64)
         if max_vertices:
             v, f = simplify_to_vertices(v, f, max_vertices)

@@ -53,22 +53,27 @@ class CanonicalMapper:
         depth = np.where(depth > 0, depth, np.where(mask, filled, 0.0))
         return depth.astype(np.float32), mask & (depth > 0)
 
-    def map_points(self, points: np.ndarray, label: str) -> tuple[np.ndarray, dict]:
-        """``(N, 3)`` camera-frame visible points -> ``(M, 3)`` canonical-pose points (same frame), info."""
+    def predict(self, depth: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The net on one image: ``(S, S)`` normalised depth and mask -> canonical ``(S, S) float32``
+        depth and ``(S, S) bool`` mask (probability above 0.5 and depth above 0)."""
         import torch
 
+        d = torch.from_numpy(np.asarray(depth, np.float32))[None, None].to(self.device)
+        m = torch.from_numpy(np.asarray(mask, np.float32))[None, None].to(self.device)
+        with torch.inference_mode():
+            out = self.task(d, m)
+        cd = out.depth[0, 0].float().cpu().numpy()
+        return cd, (out.mask[0, 0].float().cpu().numpy() > 0.5) & (cd > 0)
+
+    def map_points(self, points: np.ndarray, label: str) -> tuple[np.ndarray, dict]:
+        """``(N, 3)`` camera-frame visible points -> ``(M, 3)`` canonical-pose points (same frame), info."""
         from lit3d.render.depth import depth_to_points
 
         gl = points * FLIP
         lo, hi = gl.min(0), gl.max(0)
         centre, scale = (lo + hi) / 2, 1.0 / max(float((hi - lo).max()), 1e-9)
         depth, mask = self.depth_image((gl - centre) * scale)
-        d = torch.from_numpy(depth)[None, None].to(self.device)
-        m = torch.from_numpy(mask.astype(np.float32))[None, None].to(self.device)
-        with torch.inference_mode():
-            out = self.task(d, m)
-        cd = out.depth[0, 0].float().cpu().numpy()
-        cm = (out.mask[0, 0].float().cpu().numpy() > 0.5) & (cd > 0)
+        cd, cm = self.predict(depth, mask)
         canon = depth_to_points(cd, cm)
         if len(canon) < 10:
             raise InputError(f"{label}: the canonical network predicts an empty canonical form "

@@ -11,11 +11,16 @@ For input ``NAME.*`` in ``out_dir``:
 
 Nothing is written until every file's bytes exist; the set is written into a temp folder inside
 ``out_dir`` and renamed into place only when complete (:func:`lit3d.utils.io.write_file_set`),
-so a failure leaves no half-written output and no part of a set. An output that would replace
-an input file, or that exists as a folder, is refused before anything is written.
+so a failure leaves no half-written output and no part of a set; a set a killed run left half
+renamed is finished by the next run (:func:`lit3d.utils.io.repair_sets`). An output that would
+replace an input file, or that exists as a folder, is refused before anything is written.
+The JSON records a ``request`` key (:func:`request_key`: the input, the files read and every
+option); a rerun skips the inputs whose set is whole with the same key
+(:func:`finished_set`), unless ``--overwrite``.
 """
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 from pathlib import Path
@@ -48,6 +53,42 @@ OUTPUT_SUFFIXES = ("_occupancy.npz", ".png", ".json")  # besides the mesh's ".<f
 def output_files(name: str, fmt: str, figure: bool = True) -> list[str]:
     """The file names one input ``name`` gives (see the module doc)."""
     return [f"{name}.{fmt}", f"{name}_occupancy.npz"] + ([f"{name}.png"] if figure else []) + [f"{name}.json"]
+
+
+REQUEST_FILES = ("ckpt", "canonical", "reference", "quality_ckpt", "mask")  # options naming files the run reads
+REQUEST_IGNORED = ("depth", "out", "debug", "device", "overwrite")  # options that do not change a set
+
+
+def _stamp(path) -> list | None:
+    if not path:
+        return None
+    p = Path(path)
+    try:
+        st = p.stat()
+    except OSError:
+        return [str(p), None, None]
+    return [str(p.resolve()), st.st_size, st.st_mtime_ns]
+
+
+def request_key(args, path: Path) -> str:
+    """sha256 of what decides the set of input ``path``: the input file and every file the run
+    reads (path, size, mtime) and every option of the command line ``args`` (an argparse
+    Namespace) but the output folder, the device and the switches of this kind."""
+    options = {k: v for k, v in sorted(vars(args).items()) if k not in REQUEST_IGNORED and k not in REQUEST_FILES}
+    files = {k: _stamp(getattr(args, k, None)) for k in REQUEST_FILES}
+    text = json.dumps({"input": _stamp(path), "files": files, "options": options}, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def finished_set(out_dir: str | Path, name: str, fmt: str, figure: bool, key: str) -> bool:
+    """True when every file of ``name``'s set is in ``out_dir`` and its JSON records ``key``."""
+    out = Path(out_dir)
+    if not all((out / f).is_file() for f in output_files(name, fmt, figure)):
+        return False
+    try:
+        return json.loads((out / f"{name}.json").read_text("utf-8")).get("request") == key
+    except (OSError, ValueError, AttributeError):
+        return False
 
 
 def write_outputs(out_dir: str | Path, name: str, files: dict[str, bytes], summary: dict,

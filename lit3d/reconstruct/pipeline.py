@@ -45,7 +45,8 @@ class Completer:
             return self.task(x)[0, 0].float().cpu().numpy()
 
 
-def _task_name(meta: dict) -> str:
+def task_name(meta: dict) -> str:
+    """The task a checkpoint's lit3d metadata names (``completion``, ``canonical``, ``quality``, ...)."""
     task = meta.get("task") or {}
     return str(task.get("name") or task.get("_target_", "?").rsplit(".", 1)[-1])
 
@@ -61,7 +62,7 @@ def load_task(path: str | Path, device: str, want: str):
     meta = ckpt.get(META_KEY) if isinstance(ckpt, dict) else None
     if not isinstance(meta, dict) or "hyper_parameters" not in ckpt:
         raise InputError(f"{path}: not a lit3d checkpoint (no '{META_KEY}' metadata)")
-    name = _task_name(meta)
+    name = task_name(meta)
     if want not in name.lower():
         raise InputError(f"{path}: checkpoint is for task '{name}', not '{want}'")
     if want == "completion":

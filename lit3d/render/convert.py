@@ -158,6 +158,8 @@ def _load_path(path: Path, label: str, point_resolution: int):
         raise ShapeError(f"{label}: unsupported content {type(loaded).__name__}")
     if len(loaded.faces) == 0 and len(loaded.vertices) == 0:
         raise ShapeError(f"{label}: no geometry in file (unreadable or empty {suffix[1:]})")
+    if suffix == ".stl":  # a triangle soup (3 own vertices per face): shared like OBJ's, so smooth shading is smooth
+        loaded.merge_vertices()
     return loaded
 
 
@@ -171,6 +173,22 @@ def _scene_to_mesh(scene, label: str):
     if clouds:
         return trimesh.PointCloud(np.concatenate([c.vertices for c in clouds]))
     raise ShapeError(f"{label}: no geometry in file (unreadable or empty)")
+
+
+def load_array(path: str | os.PathLike, label: str | None = None) -> np.ndarray:
+    """The array of a ``.npy``/``.npz`` shape file, read as :func:`to_mesh` reads it (npz keys
+    ``bits``/``packed`` + ``shape`` unpacked, ``sdf``, ``voxels``, ``occupancy``, ``points``,
+    ``arr_0``, else the first); an SDF grid comes back marked (:func:`is_sdf`). Raises
+    :class:`ShapeError` naming ``label`` (default the path): missing, empty, unreadable."""
+    p = Path(path)
+    label = label or str(p)
+    check_shape_file(p, label)
+    return _load_array(p, label)
+
+
+def is_sdf(arr: np.ndarray) -> bool:
+    """True for a grid :func:`load_array` read from an npz key ``sdf`` (negative inside)."""
+    return isinstance(arr, _SDF)
 
 
 def _load_array(path: Path, label: str) -> np.ndarray:

@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from lit3d.render.camera import OrthoCamera, look_at, render_ortho_depth
+from lit3d.utils.progress import progress
 
 
 @dataclass
@@ -203,7 +204,7 @@ def mesh_features(meshes: list[tuple[np.ndarray, np.ndarray]], cfg: DescriptorCo
     """Per mesh, per view: the SIFT descriptors ``(n, 128) float32`` (the expensive part: rendering
     and SIFT; independent of the codebook seed)."""
     dirs = octahedron_views(cfg.level)
-    return [view_features(v, f, cfg, dirs) for v, f in meshes]
+    return [view_features(v, f, cfg, dirs) for v, f in progress(meshes, "view descriptors")]
 
 
 def distance_matrix_from_features(feats: list[list[np.ndarray]], cfg: DescriptorConfig, seed: int | None = None,

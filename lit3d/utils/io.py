@@ -1,6 +1,6 @@
 """Small file helpers: atomic writes, JSON that never leaves half a file behind, and the one
 output writer of the command-line tools (:func:`check_output_dir`, :func:`unique_names`,
-:func:`write_file_set`).
+:func:`write_file_set`, :func:`repair_sets`).
 
 Every file written here gets the mode an ordinary ``open()`` would give under the user's umask
 (``0644`` under umask ``022``), not the ``0600`` of :func:`tempfile.mkstemp`. File-system
@@ -211,45 +211,121 @@ def check_targets(targets: Iterable[str | os.PathLike], protected: Iterable[str 
             raise OutputError(f"{t}: an output file of this name exists as a folder")
 
 
+SET_JOURNAL = ".set.json"  # in a staging folder: the set is committed (every file staged)
+
+
 def write_file_set(out_dir: str | os.PathLike, files: dict[str, bytes],
                    protected: Iterable[str | os.PathLike] = ()) -> list[Path]:
     """Write ``files`` (file name -> bytes) into ``out_dir`` as one set.
 
-    Every file is written into a temp folder inside ``out_dir`` first; only when all of them are
-    there are they renamed into place (in the given order: put the summary last). A failure
-    before the renames leaves nothing; a failure during them (another process in the folder)
-    removes the files already renamed. Files get the umask's mode. ``protected``: input files
-    the set must not replace (:func:`check_targets`). Raises :class:`OutputError`.
+    Every file is written into a staging folder ``out_dir/.<first name>.<pid>.<random>.tmp/``;
+    when all are there a journal (``.set.json``, the names in order) is written into it, and only
+    then are the files renamed into place (in the given order: put the summary last). A failure
+    before the journal leaves the earlier set untouched; Ctrl-C during the renames finishes them
+    (the new set is whole); any other failure during them removes the whole set (never a mix of
+    two sets). A SIGKILL during the renames leaves the journal: :func:`repair_sets` (run by the
+    next ``lit3d-reconstruct`` on the folder) finishes the renames. Files get the umask's mode.
+    ``protected``: input files the set must not replace (:func:`check_targets`). Raises
+    :class:`OutputError`.
     """
     out = Path(out_dir)
-    targets = [out / name for name in files]
-    check_targets(targets, protected)
+    names = list(files)
+    if SET_JOURNAL in names:
+        raise ValueError(f"{out / SET_JOURNAL}: reserved name")
+    check_targets([out / name for name in names], protected)
     try:
         out.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(dir=out, prefix=f".{next(iter(files), 'set')}.", suffix=TMP_SUFFIX))
+        tmp = Path(tempfile.mkdtemp(dir=out, prefix=f".{next(iter(files), 'set')}.{os.getpid()}.", suffix=TMP_SUFFIX))
     except OSError as exc:
         raise output_error(out, exc) from None
-    done: list[Path] = []
+    committed = False
     try:
-        staged = []
         for name, data in files.items():
-            src = tmp / name
             try:
-                with open(src, "wb") as f:  # an ordinary open(): the umask's mode
+                with open(tmp / name, "wb") as f:  # an ordinary open(): the umask's mode
                     f.write(data)
             except OSError as exc:
                 raise output_error(out / name, exc) from None
-            staged.append((src, out / name))
-        for src, dst in staged:
-            try:
-                os.replace(src, dst)
-            except OSError as exc:
-                raise output_error(dst, exc) from None
-            done.append(dst)
+        try:
+            atomic_write_bytes(tmp / SET_JOURNAL, json.dumps({"files": names, "pid": os.getpid()}).encode("utf-8"))
+        except OSError as exc:
+            raise output_error(out / names[0], exc) from None
+        committed = True
+        _move_set(tmp, out, names)
+    except KeyboardInterrupt:
+        if committed:  # the staged set is whole: finish it rather than leave a mix
+            _settle(tmp, out, names)
+        raise
     except BaseException:
-        for p in done:
-            p.unlink(missing_ok=True)
+        if committed:
+            _remove_set(out, names)
         raise
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return done
+    return [out / name for name in names]
+
+
+def _move_set(staging: Path, out: Path, names: Sequence[str]) -> None:
+    """Rename the staged files that are still there into ``out`` (in order), then drop the journal."""
+    for name in names:
+        src = staging / name
+        if src.exists():
+            try:
+                os.replace(src, out / name)
+            except OSError as exc:
+                raise output_error(out / name, exc) from None
+    (staging / SET_JOURNAL).unlink(missing_ok=True)
+
+
+def _settle(staging: Path, out: Path, names: Sequence[str]) -> None:
+    try:
+        _move_set(staging, out, names)
+    except OutputError:
+        _remove_set(out, names)
+
+
+def _remove_set(out: Path, names: Sequence[str]) -> None:
+    for name in names:
+        (out / name).unlink(missing_ok=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _staging_pid(folder: Path) -> int | None:
+    """The pid in a staging folder's name (``.<name>.<pid>.<random>.tmp``); None for other names."""
+    parts = folder.name[: -len(TMP_SUFFIX)].rsplit(".", 2)
+    return int(parts[1]) if len(parts) == 3 and parts[1].isdigit() else None
+
+
+def repair_sets(out_dir: str | os.PathLike) -> list[str]:
+    """Settle what writers that are gone left in ``out_dir``: a staging folder with its journal (the
+    process died during the renames) has its renames finished; one without (it died while
+    staging) is removed. Staging folders of running processes are left alone. Returns one note
+    per folder handled."""
+    out, notes = Path(out_dir), []
+    if not out.is_dir():
+        return notes
+    for folder in sorted(out.glob(f".*{TMP_SUFFIX}")):
+        pid = _staging_pid(folder)
+        if not folder.is_dir() or (pid is not None and pid != os.getpid() and _alive(pid)):
+            continue
+        try:
+            journal = json.loads((folder / SET_JOURNAL).read_text("utf-8"))
+        except (OSError, ValueError):
+            journal = None
+        if isinstance(journal, dict) and isinstance(journal.get("files"), list):
+            _settle(folder, out, [str(n) for n in journal["files"]])
+            notes.append(f"{out}: finished the set {', '.join(map(str, journal['files']))} "
+                         "that an interrupted run had left half renamed")
+        else:
+            notes.append(f"{folder}: removed the staging folder of an interrupted run")
+        shutil.rmtree(folder, ignore_errors=True)
+    return notes

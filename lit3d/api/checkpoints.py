@@ -1,0 +1,102 @@
+"""Load a lit3d checkpoint of any task; write the checkpoint of an untrained model.
+
+    model = load("best.ckpt")        # Completer | CanonicalMapper | QualityPredictor, by the checkpoint's task
+    untrained_checkpoint("completion_demo", "tiny.ckpt", ["task.nets.k=10"])   # no training, random weights
+
+Every failure is one :class:`lit3d.reconstruct.depth_io.InputError` (a ``ValueError``) naming the
+file: missing, not a checkpoint, not a lit3d checkpoint, a task lit3d does not know. A quality
+checkpoint that cannot be used raises :class:`lit3d.quality.predict.QualityCheckpointError` (also a
+``ValueError``), as ``lit3d-score --ckpt`` does.
+"""
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+from pathlib import Path
+
+import lightning.pytorch as pl
+import torch
+from hydra import compose, initialize_config_dir
+from hydra.core.global_hydra import GlobalHydra
+from omegaconf import DictConfig, open_dict
+
+from lit3d.callbacks.metadata import MetadataCallback
+from lit3d.cli.common import CONF_DIR, build_task, task_meta, to_plain
+from lit3d.quality.predict import QualityPredictor, load_predictor
+from lit3d.reconstruct.canonical import CanonicalMapper, load_canonical
+from lit3d.reconstruct.depth_io import InputError
+from lit3d.reconstruct.pipeline import Completer, load_completer, task_name
+from lit3d.utils.checkpoints import META_KEY, load_checkpoint
+from lit3d.utils.io import atomic_write_bytes, output_error
+
+TASKS = ("completion", "canonical", "quality")
+Model = Completer | CanonicalMapper | QualityPredictor
+
+
+def checkpoint_task(path: str | Path) -> str:
+    """Which task (one of :data:`TASKS`) the lit3d checkpoint at ``path`` holds."""
+    ckpt = load_checkpoint(path, InputError)
+    meta = ckpt.get(META_KEY) if isinstance(ckpt, dict) else None
+    if not isinstance(meta, dict):
+        raise InputError(f"{path}: not a lit3d checkpoint (no '{META_KEY}' metadata)")
+    name = task_name(meta)
+    for task in TASKS:
+        if task in name.lower():
+            return task
+    raise InputError(f"{path}: checkpoint of task '{name}', which lit3d.load does not know (expected one of {TASKS})")
+
+
+def load(path: str | Path, device: str = "cpu") -> Model:
+    """A lit3d checkpoint, in eval mode, as the object its task runs with (``weights_only=True``):
+
+    - completion: :class:`lit3d.reconstruct.pipeline.Completer` (generator, validation-chosen
+      threshold, training grid geometry), for :func:`lit3d.complete` / :func:`lit3d.complete_grid`;
+    - canonical: :class:`lit3d.reconstruct.canonical.CanonicalMapper`, for
+      :func:`lit3d.canonical_form` / :func:`lit3d.canonical_points`;
+    - quality: :class:`lit3d.quality.predict.QualityPredictor` (CPU; ``device`` is not used), for
+      :func:`lit3d.score`.
+
+    The completion and canonical nets go to :func:`lit3d.export`.
+    """
+    task = checkpoint_task(path)
+    if task == "completion":
+        return load_completer(path, device)
+    if task == "canonical":
+        return load_canonical(str(path), device)
+    return load_predictor(path)
+
+
+def train_config(overrides: Sequence[str]) -> DictConfig:
+    """``conf/train.yaml`` composed with Hydra ``overrides`` (as ``lit3d-train`` would, without running)."""
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+            cfg = compose(config_name="train", overrides=list(overrides))
+    finally:
+        GlobalHydra.instance().clear()
+    with open_dict(cfg):
+        cfg.paths.output_dir = "."  # Hydra's run dir: no run here
+    return cfg
+
+
+def untrained_checkpoint(experiment: str, path: str | Path, overrides: Sequence[str] = ()) -> Path:
+    """Write the checkpoint of an untrained model of ``experiment=NAME`` (``conf/experiment/NAME.yaml``
+    plus Hydra ``overrides``, e.g. ``["task.nets.k=10"]``) to ``path``, with the metadata that
+    ``lit3d-train`` stores (task and data config, provenance): for trying the API and
+    :func:`lit3d.export` without training. Its predictions are those of random weights.
+
+    A quality model needs its features named (``task.features=[...]``): training selects them.
+    Returns ``path``.
+    """
+    cfg = train_config([f"experiment={experiment}", *overrides])
+    module = build_task(cfg.task)
+    ckpt = {"pytorch-lightning_version": pl.__version__, "epoch": 0, "global_step": 0,
+            "state_dict": module.state_dict(), "hyper_parameters": dict(module.hparams)}
+    module.on_save_checkpoint(ckpt)
+    MetadataCallback(task_meta(cfg), to_plain(cfg.data), None).on_save_checkpoint(None, module, ckpt)
+    buf = io.BytesIO()
+    torch.save(ckpt, buf)
+    try:
+        return atomic_write_bytes(path, buf.getvalue())
+    except OSError as exc:
+        raise output_error(path, exc) from None

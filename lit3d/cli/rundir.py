@@ -1,0 +1,113 @@
+"""One process per run dir (``lit3d-train``, ``lit3d-eval``, ``lit3d-data``).
+
+Before Hydra writes anything into the run dir (``.hydra/``, ``train.log``), :func:`claim_run_dir`
+
+- gives a timestamped run dir (the default ``hydra.run.dir``, ``.../runs/<time>``) that another
+  run started in the same second already made a suffix: ``<time>_2``, ``<time>_3`` ... (an atomic
+  ``mkdir``; the claimed dir is handed to Hydra as ``hydra.run.dir=...``);
+- takes the run dir's lock (``flock`` on ``<run dir>/.lit3d.lock``) for the whole process. A
+  second run into a busy dir is refused with one line naming the holder (pid, host, start
+  time), or waits for it with ``wait_for_run_dir=true``. The system frees the lock when the
+  holder exits, SIGKILL included.
+
+:func:`hold_output_dir` takes the same lock inside a Hydra job (the jobs of a multirun, where
+the command line names no single run dir); it is a no-op where :func:`claim_run_dir` holds it.
+The other processes of one distributed run (ranks > 0, which Lightning starts with the run
+dir on their command line) share the dir of rank 0 and take no lock.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import sys
+from pathlib import Path
+
+from omegaconf import DictConfig, OmegaConf
+
+from lit3d.utils.locks import HeldLock, hold
+
+LOCK_FILE = ".lit3d.lock"
+RUN_DIR_KEY = "hydra.run.dir"
+WAIT_KEY = "wait_for_run_dir"
+_PLAIN = re.compile(r"[\w./:+@%~-]+")
+RANK_VARS = ("LOCAL_RANK", "NODE_RANK", "RANK", "SLURM_PROCID")  # set by Lightning / torchrun / SLURM
+
+
+def _other_rank() -> bool:
+    """A process of a distributed run other than its first (it shares rank 0's run dir)."""
+    return any(os.environ.get(v, "0").strip() not in ("", "0") for v in RANK_VARS)
+
+
+def _busy(run_dir: Path):
+    def message(holder: str) -> str:
+        return (f"{run_dir}: run dir in use by {holder}; wait for that run to end, choose another "
+                f"hydra.run.dir, or add {WAIT_KEY}=true to wait for it")
+    return message
+
+
+def _say_waiting(run_dir: Path):
+    def say(holder: str) -> None:
+        print(f"{run_dir}: run dir in use by {holder}; waiting for it ({WAIT_KEY}=true)", file=sys.stderr, flush=True)
+    return say
+
+
+def lock_run_dir(run_dir: str | os.PathLike, wait: bool = False) -> HeldLock:
+    """Create ``run_dir`` and take its lock (see the module doc); raises
+    :class:`~lit3d.utils.locks.LockBusy` (one line naming the holder) unless ``wait``."""
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    return hold(run_dir / LOCK_FILE, _busy(run_dir), wait=wait, on_wait=_say_waiting(run_dir))
+
+
+def new_dir(path: Path) -> Path:
+    """``path`` or, when it exists already, ``path_2``, ``path_3`` ...: made here, atomically, so
+    two processes never get the same one."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    candidate, k = path, 1
+    while True:
+        try:
+            os.mkdir(candidate)
+            return candidate
+        except FileExistsError:
+            k += 1
+            candidate = path.with_name(f"{path.name}_{k}")
+
+
+def _override_value(path: Path) -> str:
+    text = str(path)
+    if _PLAIN.fullmatch(text):
+        return text
+    return "'" + text.replace("\\", "\\\\").replace("'", "\\'") + "'"
+
+
+def claim_run_dir(cfg: DictConfig | None, args: list[str]) -> tuple[list[str], contextlib.AbstractContextManager]:
+    """``(args, lock)``: the command line to hand to Hydra (plus ``hydra.run.dir=<claimed dir>``
+    where the run dir is a fresh timestamped one) and the held lock of the run dir (release it by
+    leaving ``with lock:``). ``cfg``: the composed config with its ``hydra`` node, or None
+    (multirun, ``--cfg`` ...: nothing claimed here; :func:`hold_output_dir` locks each job's dir)."""
+    if cfg is None or _other_rank():
+        return args, contextlib.nullcontext()
+    try:
+        raw = str(OmegaConf.to_container(cfg.hydra.run, resolve=False).get("dir", ""))
+        run_dir = Path(str(OmegaConf.select(cfg, RUN_DIR_KEY)))
+    except Exception:  # an interpolation only Hydra's runtime can resolve: Hydra handles the dir
+        return args, contextlib.nullcontext()
+    given = any(a.split("=", 1)[0].lstrip("+~") == RUN_DIR_KEY for a in args)
+    if "${now:" in raw and not given:
+        run_dir = new_dir(run_dir)
+        args = [*args, f"{RUN_DIR_KEY}={_override_value(run_dir)}"]
+    return args, lock_run_dir(run_dir, wait=bool(cfg.get(WAIT_KEY, False)))
+
+
+def hold_output_dir(cfg: DictConfig) -> contextlib.AbstractContextManager:
+    """The lock of ``cfg.paths.output_dir`` (this Hydra job's dir, which Hydra made) for a ``with``
+    block; a no-op when this process holds it already, or the config names no output dir or one
+    that does not exist (a config composed outside Hydra's runtime: nothing is created here)."""
+    try:
+        out = OmegaConf.select(cfg, "paths.output_dir", default=None)
+    except Exception:  # no Hydra runtime (a config composed in a test): nothing to lock
+        return contextlib.nullcontext()
+    if not out or _other_rank() or not Path(out).is_dir():
+        return contextlib.nullcontext()
+    return lock_run_dir(out, wait=bool(cfg.get(WAIT_KEY, False)))

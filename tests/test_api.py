@@ -1,0 +1,148 @@
+"""The Python API (lit3d.api): a cheap ``import lit3d``, loading any task, one-line errors, and the
+TorchScript export giving the eager outputs. The worked examples are docs/api.md's doctests
+(tests/test_api_docs.py)."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+
+import lit3d
+from lit3d.api import InputError, checkpoint_task, export, load, untrained_checkpoint
+from lit3d.api.__main__ import main as api_main
+from lit3d.api.export import exportable
+from lit3d.reconstruct.canonical import CanonicalMapper
+from lit3d.reconstruct.pipeline import Completer
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+QUALITY_FEATURES = ["task.features=[mask_ssim/ceramic_lightbulb/flat,chamfer]"]
+CHECKPOINTS = {  # name -> (experiment, overrides): untrained models at the tiny configs' sizes
+    "completion": ("completion_demo", []),
+    "canonical": ("canonical_tiny", []),
+    "canonical_redraw": ("canonical_tiny", ["task.net.head=redraw"]),
+    "quality": ("quality_demo", QUALITY_FEATURES),
+}
+
+
+@pytest.fixture(scope="module")
+def ckpts(tmp_path_factory) -> dict:
+    root = tmp_path_factory.mktemp("api_ckpts")
+    torch.manual_seed(0)  # the same random weights every run
+    return {name: untrained_checkpoint(exp, root / f"{name}.ckpt", ov) for name, (exp, ov) in CHECKPOINTS.items()}
+
+
+def test_import_lit3d_is_cheap_and_has_a_version():
+    code = ("import sys, lit3d; v = lit3d.__version__; "
+            "print(v, sorted(m for m in ('torch', 'lightning', 'hydra') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    version, heavy = out.stdout.split(" ", 1)
+    from importlib.metadata import version as dist_version
+
+    assert version == dist_version("lit3d") and heavy.strip() == "[]"
+
+
+def test_lazy_names_are_the_api():
+    import lit3d.api
+
+    assert sorted(lit3d.API) == sorted(lit3d.api.__all__)
+    assert lit3d.load is lit3d.api.load and "complete" in dir(lit3d)
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        lit3d.nope  # noqa: B018
+
+
+def test_load_gives_each_task_its_model(ckpts):
+    assert isinstance(load(ckpts["completion"]), Completer)
+    mapper = load(ckpts["canonical"])
+    assert isinstance(mapper, CanonicalMapper) and mapper.image_size == 48
+    quality = load(ckpts["quality"])
+    assert quality.features == ["mask_ssim/ceramic_lightbulb/flat", "chamfer"]
+    assert [checkpoint_task(ckpts[k]) for k in ("completion", "canonical", "quality")] == [
+        "completion", "canonical", "quality"]
+
+
+def test_bad_checkpoints_are_one_line(ckpts, tmp_path):
+    torch.save({"state_dict": {}}, tmp_path / "plain.ckpt")
+    torch.save({"state_dict": {}, "lit3d": {"task": {"name": "segmentation"}}}, tmp_path / "other.ckpt")
+    (tmp_path / "notes.ckpt").write_text("not a checkpoint\n")
+    cases = {tmp_path / "missing.ckpt": "checkpoint not found", tmp_path / "notes.ckpt": "not a readable checkpoint",
+             tmp_path / "plain.ckpt": "not a lit3d checkpoint",
+             tmp_path / "other.ckpt": "checkpoint of task 'segmentation', which lit3d.load does not know"}
+    for path, message in cases.items():
+        with pytest.raises(InputError) as info:
+            load(path)
+        text = str(info.value)
+        assert text.startswith(str(path)) and message in text and "\n" not in text, text
+
+
+def test_wrong_model_or_array_is_one_line(ckpts):
+    completer, mapper = load(ckpts["completion"]), load(ckpts["canonical"])
+    cases = [
+        (lambda: lit3d.complete(np.zeros((4, 4, 4)), completer), "depth: expected an array of shape (N x N), got (4, 4, 4)"),
+        (lambda: lit3d.complete(np.full((8, 8), np.nan), completer), "depth: 64 non-finite values"),
+        (lambda: lit3d.complete_grid(np.zeros((16, 16)), completer), "partial: expected an array of shape (16 x 16 x 16)"),
+        (lambda: lit3d.complete(np.ones((8, 8)), mapper), "complete: needs a completion model"),
+        (lambda: lit3d.canonical_form(np.ones((32, 32)), mapper), "depth: expected an array of shape (48 x 48), got (32, 32)"),
+        (lambda: lit3d.canonical_points(np.zeros((8, 8)), mapper), "depth: 0 foreground pixels"),
+        (lambda: lit3d.score("a.obj", "b.obj", completer), "score: needs a quality model"),
+        (lambda: export(load(ckpts["quality"]), "x.pt"), "export: needs a completion or canonical model"),
+    ]
+    for call, message in cases:
+        with pytest.raises(InputError) as info:
+            call()
+        assert message in str(info.value) and "\n" not in str(info.value), str(info.value)
+
+
+def test_canonical_points_sit_where_the_subject_was(ckpts):
+    """A camera depth image -> canonical-pose points in the camera frame, placed at the visible
+    points' bounding box (lit3d-reconstruct --canonical's first step)."""
+    import trimesh
+
+    from lit3d.reconstruct.backproject import backproject
+    from lit3d.reconstruct.synthetic import pose_in_front, render_depth_pinhole
+
+    camera = lit3d.Intrinsics.from_fov(lit3d.RECGAN_FOV_DEG, 160, 120)
+    depth = render_depth_pinhole(pose_in_front(trimesh.creation.capsule(), distance=1.5), camera, 160, 120)
+    visible = backproject(depth, camera)
+    points = lit3d.canonical_points(depth, load(ckpts["canonical"]), camera)
+    assert points.ndim == 2 and points.shape[1] == 3 and len(points) >= 10
+    lo, hi = visible.min(0), visible.max(0)
+    margin = 0.1 * float((hi - lo).max())  # the canonical image may reach the ortho frame's edge (0.55 of 0.5)
+    assert np.all(points[:, :2] >= lo[:2] - margin) and np.all(points[:, :2] <= hi[:2] + margin)
+    assert 1.0 < float(points[:, 2].mean()) < 2.0  # metres in front of the camera, near the subject
+
+
+@pytest.mark.parametrize("name", ["completion", "canonical", "canonical_redraw"])
+def test_exported_net_gives_the_eager_outputs(name, ckpts, tmp_path):
+    """TorchScript of the generator / canonical net against the eager module, within 1e-5, on random
+    inputs other than those it was traced on and at other batch sizes."""
+    model = load(ckpts[name])
+    path = export(model, tmp_path / "net.pt")
+    traced = torch.jit.load(path)
+    eager, _ = exportable(model)
+    for batch, seed in ((1, 11), (3, 12)):
+        _, inputs = exportable(model, batch=batch, seed=seed)
+        with torch.no_grad():
+            want, got = eager(*inputs), traced(*inputs)
+        want, got = (want, got) if isinstance(want, tuple) else ((want,), (got,))
+        for w, g in zip(want, got, strict=True):
+            assert g.shape == w.shape and g.shape[0] == batch
+            assert float((g - w).abs().max()) <= 1e-5
+    if isinstance(model, Completer):  # and the eager path the API itself runs
+        grid = inputs[0][0, 0].numpy() > 0
+        with torch.no_grad():
+            ts = traced(torch.from_numpy(grid).float()[None, None])[0, 0].numpy()
+        assert np.abs(ts - lit3d.complete_grid(grid, model)).max() <= 1e-5
+
+
+def test_export_command_line(ckpts, tmp_path, capsys):
+    assert api_main(["export", str(ckpts["canonical"]), str(tmp_path / "canonical.pt")]) == 0
+    assert capsys.readouterr().out.strip() == str(tmp_path / "canonical.pt")
+    assert (tmp_path / "canonical.pt").is_file()
+    assert api_main(["export", str(tmp_path / "missing.ckpt"), str(tmp_path / "x.pt")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"python -m lit3d.api export: error: {tmp_path / 'missing.ckpt'}: checkpoint not found"

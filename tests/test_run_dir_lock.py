@@ -1,0 +1,116 @@
+"""Issue 35, fault 1: one process per run dir (``lit3d.cli.rundir``), checked with real processes.
+
+- a second ``lit3d-train`` into a busy run dir is refused with one line naming the holder, and
+  writes nothing there (``.hydra/config.yaml`` stays the first run's);
+- ``wait_for_run_dir=true`` waits for the holder instead; a lock left by a killed process
+  (SIGKILL) is no lock at all;
+- timestamped run dirs never collide: runs started while ``<time>`` exists get ``<time>_2``,
+  ``<time>_3`` ... and never write into another run's dir.
+"""
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from datetime import datetime, timedelta
+from pathlib import Path
+
+from test_interrupt_resume import BIN, CANONICAL, REPO, _env, _start
+
+# a few tiny completion items: lit3d-data runs in seconds
+TINY_DATA = ["experiment=completion_demo", "data.sizes={train:2,val:1,test_same:1,test_cross:1,test_unseen:1}",
+             "data.progress=false"]
+
+
+def _run(args: list[str], timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run([str(BIN / args[0]), *args[1:]], cwd=REPO, env=_env(), capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def _errors(stderr: str) -> list[str]:
+    return [ln for ln in stderr.splitlines() if ln.startswith("error:")]
+
+
+def _wait_for(cond, proc: subprocess.Popen, log: Path, timeout: float = 120) -> None:
+    t0 = time.monotonic()
+    while not cond():
+        assert proc.poll() is None, log.with_suffix(".err").read_text()[-3000:]
+        assert time.monotonic() - t0 < timeout, "timed out"
+        time.sleep(0.1)
+
+
+def _holder(run: Path) -> subprocess.Popen:
+    """A process that holds ``run``'s lock (it prints ``held`` once it does) until its stdin closes."""
+    code = ("import sys; from lit3d.cli.rundir import lock_run_dir; lock_run_dir(sys.argv[1]); "
+            "print('held', flush=True); sys.stdin.read()")
+    proc = subprocess.Popen([sys.executable, "-c", code, str(run)], cwd=REPO, env=_env(),
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "held"
+    return proc
+
+
+def test_second_training_into_a_busy_run_dir_is_refused(tmp_path):
+    run = tmp_path / "run"
+    common = [*CANONICAL, "logger=none", f"paths.data_dir={tmp_path}/data", f"hydra.run.dir={run}"]
+    first = _start(["lit3d-train", *common, "trainer.max_epochs=500", "task.lr=0.001"], tmp_path / "first")
+    try:
+        _wait_for(lambda: (run / ".hydra" / "config.yaml").is_file(), first, tmp_path / "first")
+        hydra_cfg = (run / ".hydra" / "config.yaml").read_bytes()
+        res = _run(["lit3d-train", *common, "trainer.max_epochs=1", "task.lr=0.05"])
+        assert res.returncode == 2, res.stderr[-3000:]
+        assert "Traceback" not in res.stderr
+        assert _errors(res.stderr) == [ln for ln in res.stderr.splitlines() if ln.strip()][-1:]
+        line = _errors(res.stderr)[0]
+        assert line.startswith(f"error: {run}: run dir in use by pid {first.pid} on "), line
+        assert " since 20" in line and "wait_for_run_dir=true" in line
+        assert (run / ".hydra" / "config.yaml").read_bytes() == hydra_cfg  # the second run wrote nothing there
+        assert first.poll() is None  # the first run goes on
+    finally:
+        first.kill()
+        first.wait(timeout=60)
+
+
+def test_wait_for_run_dir_waits_and_a_killed_holder_leaves_no_lock(tmp_path):
+    from lit3d.cli.rundir import LOCK_FILE
+
+    run = tmp_path / "run"
+    args = ["lit3d-data", *TINY_DATA, f"paths.data_dir={tmp_path}/data", f"hydra.run.dir={run}"]
+    holder = _holder(run)
+    waiting = _start([*args, "wait_for_run_dir=true"], tmp_path / "waiting")
+    err = tmp_path / "waiting.err"
+    _wait_for(lambda: "waiting for it" in err.read_text(), waiting, tmp_path / "waiting")
+    assert f"{run}: run dir in use by pid {holder.pid} on " in err.read_text()
+    time.sleep(1)
+    assert waiting.poll() is None  # still waiting
+    holder.stdin.close()  # the holder exits
+    assert holder.wait(timeout=30) == 0
+    assert waiting.wait(timeout=180) == 0, err.read_text()[-3000:]
+    # a holder killed with SIGKILL: the system released its lock; the next run needs no waiting
+    holder = _holder(run)
+    holder.kill()
+    holder.wait(timeout=30)
+    res = _run(args)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "in use" not in res.stderr
+    assert (run / LOCK_FILE).read_text() == ""  # released at exit: no holder named any more
+
+
+def test_timestamped_run_dirs_never_collide(tmp_path):
+    runs = tmp_path / "logs" / "completion" / "runs"
+    now = datetime.now()
+    taken = [runs / (now + timedelta(seconds=s)).strftime("%Y-%m-%d_%H-%M-%S") for s in range(-2, 120)]
+    for d in taken:  # every second of the next two minutes already has a run
+        d.mkdir(parents=True)
+        (d / "other_run.txt").write_text("x")
+    args = ["lit3d-data", *TINY_DATA, f"paths.data_dir={tmp_path}/data", f"paths.log_dir={tmp_path}/logs"]
+    procs = [_start(args, tmp_path / f"p{i}") for i in range(2)]  # two runs started at the same time
+    for i, p in enumerate(procs):
+        assert p.wait(timeout=180) == 0, (tmp_path / f"p{i}.err").read_text()[-3000:]
+    for d in taken:
+        assert sorted(q.name for q in d.iterdir()) == ["other_run.txt"], f"a run wrote into {d}"
+    new = sorted(set(runs.iterdir()) - set(taken))
+    assert len(new) == 2, new
+    for d in new:
+        stamp, _, k = d.name.rpartition("_")
+        assert runs / stamp in taken and int(k) >= 2, d.name
+        assert (d / ".hydra" / "config.yaml").is_file()
