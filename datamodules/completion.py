@@ -30,7 +30,7 @@ from datamodules.cache import CacheBuilder, DataError, bytes_on_disk, stable_see
 from datamodules.completion_meshes import MESH_SOURCES
 from datamodules.loaders import evaluation_loader
 from datamodules.synth.sensor import SENSORS, make_sensor
-from datamodules.voxel_cache import VoxelPairDataset, load_pair, save_pair
+from datamodules.voxel_cache import DATA_SPLITS, TEST_SPLITS, VoxelPairDataset, load_pair, save_pair
 from lit3d.utils.shapenet_categories import (
     SEEN_CATEGORIES,
     select_seen_categories,
@@ -39,8 +39,6 @@ from lit3d.utils.shapenet_categories import (
 
 log = logging.getLogger("lit3d.data")
 
-DATA_SPLITS = ("train", "val", "test_same", "test_cross", "test_unseen", "test_unseen_cross")
-TEST_SPLITS = ("test_same", "test_cross", "test_unseen", "test_unseen_cross")
 DEFAULT_SIZES = {"train": 240, "val": 40, "test_same": 40, "test_cross": 40, "test_unseen": 40}
 SYNTH_VERSION = "1"
 RECGAN_VERSION = "1"

@@ -21,6 +21,10 @@ from torch.utils.data import Dataset
 from datamodules.cache import DataError, atomic_save_npz, check_unchanged
 from lit3d.utils.shapenet_categories import SEEN_CATEGORIES
 
+# the completion cache's splits (items/<split>/ and the manifest's "split"); the test ones in test order
+DATA_SPLITS = ("train", "val", "test_same", "test_cross", "test_unseen", "test_unseen_cross")
+TEST_SPLITS = DATA_SPLITS[2:]
+
 
 def save_pair(path: str | os.PathLike, input: np.ndarray, target: np.ndarray, compress: bool = True) -> Path:
     """Write one (input, target) pair of 3D boolean grids as packed bits, atomically."""

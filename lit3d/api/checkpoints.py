@@ -16,12 +16,10 @@ from pathlib import Path
 
 import lightning.pytorch as pl
 import torch
-from hydra import compose, initialize_config_dir
-from hydra.core.global_hydra import GlobalHydra
 from omegaconf import DictConfig, open_dict
 
 from lit3d.callbacks.metadata import MetadataCallback
-from lit3d.cli.common import CONF_DIR, build_task, task_meta, to_plain
+from lit3d.cli.common import build_task, compose_config, task_meta, to_plain
 from lit3d.quality.predict import QualityPredictor, load_predictor
 from lit3d.reconstruct.canonical import CanonicalMapper, load_canonical
 from lit3d.reconstruct.depth_io import InputError
@@ -68,12 +66,7 @@ def load(path: str | Path, device: str = "cpu") -> Model:
 
 def train_config(overrides: Sequence[str]) -> DictConfig:
     """``conf/train.yaml`` composed with Hydra ``overrides`` (as ``lit3d-train`` would, without running)."""
-    GlobalHydra.instance().clear()
-    try:
-        with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
-            cfg = compose(config_name="train", overrides=list(overrides))
-    finally:
-        GlobalHydra.instance().clear()
+    cfg = compose_config("train", overrides)
     with open_dict(cfg):
         cfg.paths.output_dir = "."  # Hydra's run dir: no run here
     return cfg

@@ -25,8 +25,6 @@ from lit3d.reconstruct.depth_io import InputError
 from lit3d.reconstruct.pipeline import Completer, Options, Result, reconstruct
 from lit3d.render.convert import to_mesh
 from lit3d.render.depth import render_depth
-from lit3d.render.gbuffer import RenderConfig
-from lit3d.render.styles import resolve_styles
 
 
 def _model(model, kind: type, fn: str, task: str):
@@ -130,8 +128,7 @@ def canonical_points(depth, model: CanonicalMapper, intrinsics: Intrinsics | Non
 
 def _feature_config(model: QualityPredictor | None, size: int | None, styles) -> FeatureConfig:
     if model is None or model.feature_options is None:
-        names = styles if isinstance(styles, str) or styles is None else ",".join(styles)
-        return FeatureConfig(render=RenderConfig(size=size or DEFAULT_SIZE), styles=tuple(resolve_styles(names or "all")))
+        return FeatureConfig.rendered(size or DEFAULT_SIZE, styles)
     if model.feature_fn:
         raise InputError(f"{model.path}: the model was trained on features of data.feature_fn={model.feature_fn}, "
                          "not the renderer's feature table")

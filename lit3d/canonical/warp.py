@@ -41,11 +41,17 @@ def identity_grid(batch: int, height: int, width: int, device=None, dtype=None) 
     return torch.stack([gx, gy], -1)[None].expand(batch, -1, -1, -1)
 
 
-def warp_image(image: torch.Tensor, flow: torch.Tensor) -> torch.Tensor:
+def sample_grid(flow: torch.Tensor) -> torch.Tensor:
+    """``(B, H, W, 2)`` grid_sample coordinates of every pixel + ``flow`` ``(B, 2, H, W)`` (normalised
+    units): where each pixel samples."""
+    b, _, h, w = flow.shape
+    return identity_grid(b, h, w, flow.device, flow.dtype) + flow.permute(0, 2, 3, 1)
+
+
+def warp_image(image: torch.Tensor, flow: torch.Tensor, grid: torch.Tensor | None = None) -> torch.Tensor:
     """``image`` ``(B, C, H, W)`` sampled at every pixel + ``flow`` ``(B, 2, H, W)`` (normalised units),
-    bilinear, zeros outside."""
-    b, _, h, w = image.shape
-    grid = identity_grid(b, h, w, image.device, image.dtype) + flow.permute(0, 2, 3, 1)
+    bilinear, zeros outside; ``grid``: :func:`sample_grid` of ``flow`` when the caller has it."""
+    grid = sample_grid(flow) if grid is None else grid
     return F.grid_sample(image, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
 
 
@@ -65,16 +71,16 @@ def warp_compose(depth: torch.Tensor, mask: torch.Tensor, flow: torch.Tensor, co
     ``vis = 1`` give the input. ``normalise``: the moved depth is divided by the moved mask (where it
     exceeds 1e-3), so a sample across the silhouette's edge keeps the body's depth instead of mixing
     in the background's 0."""
-    moved = warp_image(torch.cat([depth, mask], 1), flow)
+    grid = sample_grid(flow)
+    moved = warp_image(torch.cat([depth, mask], 1), flow, grid)
     moved_depth = moved[:, 0:1]
     if normalise:
         moved_depth = torch.where(moved[:, 1:2] > 1e-3, moved_depth / moved[:, 1:2].clamp_min(1e-3),
                                   torch.zeros_like(moved_depth))
     mapped = moved_depth + coeffs[:, 0:1]
-    if coeffs.shape[1] == 4:
-        b, _, h, w = flow.shape
-        src = (identity_grid(b, h, w, flow.device, flow.dtype) + flow.permute(0, 2, 3, 1)).permute(0, 3, 1, 2)
-        mapped = mapped + coeffs[:, 1:2] * src[:, 0:1] + coeffs[:, 2:3] * src[:, 1:2] + coeffs[:, 3:4] * moved_depth
+    if coeffs.shape[1] == 4:  # (x, y): the sampled posed position
+        x, y = grid[..., 0].unsqueeze(1), grid[..., 1].unsqueeze(1)
+        mapped = mapped + coeffs[:, 1:2] * x + coeffs[:, 2:3] * y + coeffs[:, 3:4] * moved_depth
     m = vis * moved[:, 1:2] + (1 - vis) * fill_mask
     d = vis * mapped + (1 - vis) * fill_depth
     return d.clamp(0, 1), m

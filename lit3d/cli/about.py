@@ -11,8 +11,9 @@ from __future__ import annotations
 import inspect
 import sys
 from collections.abc import Callable, Sequence
-from importlib import metadata
 from pathlib import Path
+
+from lit3d.utils.provenance import lit3d_version
 
 # entry-point module -> (command, help page in conf/hydra/help/)
 COMMANDS = {
@@ -22,19 +23,6 @@ COMMANDS = {
     "summary": ("lit3d-summary", "summary"),
 }
 HELP_FLAGS = ("--help", "-h")
-
-
-def lit3d_version() -> str:
-    """``lit3d.__version__`` where the package defines it, else the installed distribution's version."""
-    import lit3d
-
-    version = getattr(lit3d, "__version__", None)
-    if version:
-        return str(version)
-    try:
-        return metadata.version("lit3d")
-    except metadata.PackageNotFoundError:
-        return "unknown (not installed)"
 
 
 def version_line(command: str) -> str:

@@ -187,6 +187,21 @@ def fail(exc: BaseException, code: int) -> None:
     sys.exit(code)
 
 
+def compose_config(config_name: str, overrides=(), return_hydra_config: bool = False, conf_dir=None):
+    """``conf/<config_name>.yaml`` composed with Hydra ``overrides`` outside a Hydra run (a fresh
+    global Hydra, cleared again after), from :data:`CONF_DIR` unless ``conf_dir`` is given.
+    Hydra's errors (a key not in the config ...) propagate."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=str(conf_dir or CONF_DIR), version_base="1.3"):
+            return compose(config_name, overrides=list(overrides), return_hydra_config=return_hydra_config)
+    finally:
+        GlobalHydra.instance().clear()
+
+
 def check_composes(args: Sequence[str], config_name: str, conf_dir: str = CONF_DIR) -> DictConfig | None:
     """Raise :class:`UserError` when the overrides do not compose (e.g. a key that is not in the
     config: ``trainer.max_epoch=3``), with Hydra's first two lines as the message; else return
@@ -196,19 +211,13 @@ def check_composes(args: Sequence[str], config_name: str, conf_dir: str = CONF_D
     """
     if any(a.startswith("-") for a in args):
         return None
-    from hydra import compose, initialize_config_dir
-    from hydra.core.global_hydra import GlobalHydra
     from hydra.errors import HydraException
 
-    GlobalHydra.instance().clear()
     try:
-        with initialize_config_dir(config_dir=conf_dir, version_base="1.3"):
-            return compose(config_name, overrides=list(args), return_hydra_config=True)
+        return compose_config(config_name, args, return_hydra_config=True, conf_dir=conf_dir)
     except HydraException as exc:
         lines = [ln.strip() for ln in str(exc).strip().splitlines() if ln.strip()]
         raise UserError("; ".join(ln.rstrip(".") for ln in lines[:2]) or type(exc).__name__) from exc
-    finally:
-        GlobalHydra.instance().clear()
 
 
 def check_output_paths(cfg: DictConfig | None) -> None:

@@ -45,8 +45,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("pred_dir", type=Path, help="folder of predictions (grids .npz/.npy or meshes .obj/.ply/.off)")
     p.add_argument("data_dir", type=Path, help="prepared completion data (lit3d-data; holds manifest.json)")
     p.add_argument("--out", type=Path, required=True, help="folder for metrics.json and results.md")
-    p.add_argument("--split", action="append", choices=("test_same", "test_cross", "test_unseen", "test_unseen_cross"),
-                   help="score only this split (repeatable; default: every split with predictions)")
+    p.add_argument("--split", action="append",  # checked against the data's test splits by score_folder
+                   help="score only this test split: test_same, test_cross, test_unseen or test_unseen_cross "
+                        "(repeatable; default: every split with predictions)")
     p.add_argument("--name", default=None, help="the method's row label in results.md (default: PRED_DIR's name)")
     p.add_argument("--threshold", type=float, default=0.5, help="grid probabilities >= this are occupied (0.5)")
     p.add_argument("--mesh-frame", choices=("unit", "voxel"), default="unit",

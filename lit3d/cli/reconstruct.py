@@ -135,11 +135,9 @@ class _Scorer:
         from lit3d.cli.score import DEFAULT_SIZE, _model_features
         from lit3d.features.table import FeatureConfig
         from lit3d.render.convert import to_mesh
-        from lit3d.render.gbuffer import RenderConfig
-        from lit3d.render.styles import resolve_styles
 
         self.ref = to_mesh(args.reference)
-        self.cfg = FeatureConfig(render=RenderConfig(size=DEFAULT_SIZE), styles=tuple(resolve_styles("all")))
+        self.cfg = FeatureConfig.rendered(DEFAULT_SIZE)
         self.predictor, self.notes = None, []
         if args.quality_ckpt:
             ns = argparse.Namespace(ckpt=args.quality_ckpt, size=None, styles=None)

@@ -220,11 +220,8 @@ def _load_pair(ref: str | Path, dist: str | Path):
 def _feature_setup(args):
     """``(FeatureConfig, predictor or None, notes)`` from ``--size``/``--styles`` or ``--ckpt``."""
     from lit3d.features.table import FeatureConfig
-    from lit3d.render.gbuffer import RenderConfig
-    from lit3d.render.styles import resolve_styles
 
-    cfg = FeatureConfig(render=RenderConfig(size=args.size or DEFAULT_SIZE),
-                        styles=tuple(resolve_styles(args.styles or "all")))
+    cfg = FeatureConfig.rendered(args.size or DEFAULT_SIZE, args.styles)
     if args.ckpt:
         predictor, cfg, notes = _model_features(args, cfg)
         return cfg, predictor, notes

@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from datamodules.cache import DataError, read_manifest
-from datamodules.voxel_cache import load_pair
+from datamodules.voxel_cache import TEST_SPLITS, load_pair
 from lit3d.completion.split_metrics import split_values
 from lit3d.completion.surface_eval import surface_values
 from lit3d.metrics.surface import SurfaceMetrics, SurfaceSample, sample_mesh
@@ -32,7 +32,6 @@ from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, UNSEEN_CATEGORIES
 GRID_SUFFIXES = (".npz", ".npy")
 MESH_SUFFIXES = (".obj", ".ply", ".off")
 MESH_FRAMES = ("unit", "voxel")
-TEST_SPLITS = ("test_same", "test_cross", "test_unseen", "test_unseen_cross")
 
 
 @dataclass(frozen=True)

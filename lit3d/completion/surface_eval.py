@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from lit3d.metrics.gathered import compute_if_updated
-from lit3d.metrics.surface import SurfaceMetrics, SurfaceSample, fscore_key
+from lit3d.metrics.surface import SurfaceMetrics, SurfaceSample, fscore_key, sample_grids
 
 CACHE_SIZE = 8  # surface samples kept by grid content
 
@@ -37,6 +37,7 @@ class SurfaceTestMetrics(torch.nn.Module):
         self.splits, self.sources, self.categories = tuple(splits), tuple(sources), list(categories)
         self.metrics = torch.nn.ModuleDict({f"{sp}_{s}": SurfaceMetrics(categories, points, fscore_at, seed)
                                             for sp in self.splits for s in self.sources})
+        self.points, self.seed = int(points), int(seed)
         self._cache: dict[tuple, SurfaceSample | None] = {}
 
     def update(self, split: str, preds: Mapping[str, torch.Tensor], target: torch.Tensor, category: torch.Tensor,
@@ -51,14 +52,13 @@ class SurfaceTestMetrics(torch.nn.Module):
     def _samples(self, occupied: torch.Tensor) -> list[SurfaceSample | None]:
         """Surface samples of ``(B, 1, R, R, R)`` bool grids; a grid seen in the last few calls (the
         prior baseline predicts one grid for every sample) is sampled once."""
-        first = next(iter(self.metrics.values()))
         out = []
         for grid in occupied.detach().cpu().numpy():
             key = (grid.shape, hash(np.packbits(grid).tobytes()))
             if key not in self._cache:
                 if len(self._cache) >= CACHE_SIZE:
                     self._cache.pop(next(iter(self._cache)))  # the oldest
-                self._cache[key] = first.samples(grid[None])[0]
+                self._cache[key] = sample_grids(grid[None], self.points, self.seed)[0]
             out.append(self._cache[key])
         return out
 

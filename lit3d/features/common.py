@@ -84,6 +84,12 @@ class FeatureConfig:
         d["version"] = FEATURE_VERSION
         return d
 
+    @classmethod
+    def rendered(cls, size: int, styles=None) -> FeatureConfig:
+        """The feature table ``lit3d-score`` computes: ``size`` px renders in ``styles`` (names, a
+        comma list; None, ``"all"`` or empty: every style), the other fields at their defaults."""
+        return cls(render=RenderConfig(size=int(size)), styles=tuple(resolve_styles(styles or "all")))
+
 
 @dataclass
 class ShapeViews:
