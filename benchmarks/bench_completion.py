@@ -123,7 +123,7 @@ def _prepare(cfg) -> tuple[object, float, int]:
 
 
 def _loading_row(dm, cfg, tmp: Path, scale: str, demand_sps: float | None, demand_name: str) -> dict:
-    from datamodules.voxel_cache import measure_loading
+    from datamodules.completion.voxel_cache import measure_loading
 
     bs, workers = int(cfg.data.batch_size), int(cfg.data.num_workers)
     items = dm.datasets["train"].items

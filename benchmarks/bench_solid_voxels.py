@@ -21,8 +21,8 @@ RES = 256
 def sample_meshes(n: int = 3) -> tuple[list, str]:
     """(list of (name, vertices, faces) placed in the 256^3 grid, where they come from)."""
     try:
-        from datamodules.readers.cad_models import load_model_mesh
-        from datamodules.readers.sweethome3d import index_sweethome3d
+        from datamodules.completion.cad_models import load_model_mesh
+        from datamodules.completion.sweethome3d import index_sweethome3d
 
         models, _ = index_sweethome3d()
         picks = [m for cat in ("chair", "table", "couch") for m in sorted(

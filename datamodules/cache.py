@@ -18,7 +18,9 @@
   training that another process re-prepared its folder (:mod:`datamodules.cache_guard`).
   :meth:`CacheBuilder.locked` holds an inter-process lock (``flock`` on ``<root>/.lock``)
   around a preparation: processes preparing one folder at once (the jobs of a multirun)
-  take turns, and the later ones find the cache complete.
+  take turns, and the later ones find the cache complete. :meth:`CacheBuilder.prepare_once` is
+  that locked, double-checked preparation, written once: every DataModule's ``prepare_data()``
+  calls it with a function that writes the items and returns them.
 
 Manifest layout (``manifest.json``)::
 
@@ -40,7 +42,7 @@ import shutil
 import tempfile
 import threading
 import zlib
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -148,17 +150,16 @@ def read_manifest(root: str | os.PathLike) -> dict | None:
 class CacheBuilder:
     """Resumable, atomic preparation of a cache folder of item files + manifest.
 
-    Usage::
+    Usage (:meth:`prepare_once` runs the lock, the checks, :meth:`begin` and :meth:`finish`)::
+
+        def write_items(b: CacheBuilder) -> tuple[list[dict], dict]:
+            for item in items:
+                if not b.has(item["file"]):  # resume: items already on disk are kept
+                    atomic_save_npz(b.path(item["file"]), ...)
+            return items, {...}              # the manifest's items and extra keys
 
         b = CacheBuilder(root, generator="completion_synth", version="1", config=cfg)
-        if not b.is_complete():
-            with b.locked():              # one process at a time prepares ``root``
-                if not b.is_complete():   # another one may have finished it meanwhile
-                    b.begin()
-                    for item in items:
-                        if not b.has(item["file"]):
-                            atomic_save_npz(b.path(item["file"]), ...)
-                    b.finish(items, extra={...})
+        b.prepare_once(write_items)
         manifest = b.manifest()
     """
 
@@ -248,6 +249,25 @@ class CacheBuilder:
                 with self._held_guard:
                     del self._held[key]
                 _funlock(f)
+
+    def prepare_once(self, write_items: Callable[[CacheBuilder], tuple[list[dict], dict | None]],
+                     before: Callable[[], object] | None = None) -> bool:
+        """The locked, double-checked preparation of ``root`` that every ``prepare_data()`` runs: nothing
+        when the cache is complete; else, holding :meth:`locked` (multirun jobs take turns), check
+        again (another process may have finished it meanwhile), then ``before()`` (e.g. removing an
+        older layout), :meth:`begin`, ``write_items(self) -> (items, extra)``, :meth:`finish`.
+        Returns True when this process prepared the cache."""
+        if self.is_complete():
+            return False
+        with self.locked():
+            if self.is_complete():  # another process prepared it while this one waited
+                return False
+            if before is not None:
+                before()
+            self.begin()
+            items, extra = write_items(self)
+            self.finish(items, extra)
+        return True
 
     def begin(self) -> None:
         """Start or resume: clean temp files, refuse a folder of another config (or wipe it after

@@ -3,7 +3,7 @@
     .venv/bin/python scripts/latent_gradients.py [--scale demo|paper] [--batch B] [--steps N] [overrides ...]
 
 Builds ``CompletionTask`` from ``experiment=completion_<scale>`` (plus Hydra overrides, e.g.
-``task.latent_grad_scale=1``), draws B synthetic furniture samples (``datamodules.synth``), and
+``task.latent_grad_scale=1``), draws B synthetic furniture samples (``datamodules.completion``), and
 for each named parameter group of ``CompletionTask.health_groups()`` prints:
 
     grad_rms      RMS over the group's elements of d(reconstruction loss)/d(param) at init
@@ -26,8 +26,8 @@ import torch
 from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
 
-from datamodules.synth.depth_voxels import make_sample
-from datamodules.synth.furniture import make_shape
+from datamodules.completion.depth_voxels import make_sample
+from datamodules.completion.furniture import make_shape
 from lit3d.cli.common import CONF_DIR
 from lit3d.utils.shapenet_categories import SEEN_CATEGORIES
 

@@ -26,16 +26,16 @@ def _prepare_counting(data_dir: str, barrier, out) -> None:
     """A spawned process: prepare ``data_dir`` right after the other one is ready too; report how
     many items this process wrote itself."""
     os.environ["OMP_NUM_THREADS"] = "1"
-    import datamodules.completion as completion
+    import datamodules.completion.sources as sources
 
     written = []
-    save_pair = completion.save_pair
+    save_pair = sources.save_pair
 
     def counting(path, *args, **kwargs):
         written.append(str(path))
         return save_pair(path, *args, **kwargs)
 
-    completion.save_pair = counting
+    sources.save_pair = counting
     dm = _tiny(Path(data_dir))
     barrier.wait(timeout=300)
     try:

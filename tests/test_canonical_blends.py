@@ -9,7 +9,7 @@ import trimesh
 
 from datamodules.canonical import CanonicalDataModule, DataError
 from datamodules.canonical.blends import BLEND_BASE, add_blends, blend_vertices, draw_blends
-from datamodules.readers import tosca
+from datamodules.canonical import tosca
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "tosca8k"
 

@@ -7,8 +7,8 @@ import pytest
 import trimesh
 
 from datamodules.canonical import CanonicalDataModule, DataError, split_pose, split_subject_pose
-from datamodules.readers import tosca
-from datamodules.synth.figures import KINDS, figure_mesh, joint_positions, make_pose, make_subject
+from datamodules.canonical import tosca
+from datamodules.canonical.figures import KINDS, figure_mesh, joint_positions, make_pose, make_subject
 from lit3d.render.depth import depth_to_mesh, depth_to_points, render_depth
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "tosca8k"

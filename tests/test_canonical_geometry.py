@@ -80,7 +80,7 @@ def test_shape_dna_ignores_isometric_bending():
 
 
 def _quadruped():
-    from datamodules.synth.figures import figure_mesh, make_subject
+    from datamodules.canonical.figures import figure_mesh, make_subject
     from lit3d.geometry.normalise import normalise_vertices
 
     v, f = figure_mesh(make_subject("quadruped", 3), None, 24)
@@ -103,7 +103,7 @@ def test_broadside_view_shows_more_of_a_quadruped():
 
 @pytest.mark.skipif(not (TOSCA / "cat0.ply").is_file(), reason="../shared/data/tosca8k is absent")
 def test_broadside_view_of_real_tosca_cat():
-    from datamodules.readers.tosca import read_mesh, z_up_to_y_up
+    from datamodules.canonical.tosca import read_mesh, z_up_to_y_up
     from lit3d.geometry.normalise import normalise_vertices
 
     v, f = read_mesh(TOSCA / "cat0.ply")

@@ -7,10 +7,8 @@ import pytest
 import trimesh
 
 from datamodules.cache import DataError
-from datamodules.canonical import CanonicalDataModule
-from datamodules.readers import posesets, tosca
-from datamodules.readers.tosca import MeshReadError
-from datamodules.synth import bodies
+from datamodules.canonical import CanonicalDataModule, bodies, posesets, tosca
+from datamodules.canonical.tosca import MeshReadError
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 

@@ -131,9 +131,15 @@ def test_mask_match_against_sklearn_jaccard():
     posed = (rng.random((6, 1, 16, 16)) > 0.4).astype(np.float32)
     items = {"subject": subject, "canon_mask": truth, "mask": posed, "pred_mask": truth.copy(), "source": "model"}
     out = mask_match(items, 0.5)
-    assert out["model"] == {"iou": 1.0, "nearest_subject": 1.0, "nn_by_mask": 1.0, "ft_by_mask": 1.0}
+    iou_other = out["model"].pop("iou_other")
+    assert out["model"] == {"iou": 1.0, "nearest_subject": 1.0, "nn_by_mask": 1.0, "ft_by_mask": 1.0,
+                            "iou_same": 1.0}
     flat = posed.reshape(6, -1) > 0.5
     ref_dist = cdist(flat, flat, metric="jaccard")  # scipy's 1 - IoU
+    canon_dist = cdist(canon.reshape(3, -1), canon.reshape(3, -1), metric="jaccard")
+    assert iou_other == pytest.approx(1 - canon_dist[idx][:, idx][subject[:, None] != subject[None]].mean())
+    same_pairs = [(i, j) for i in range(6) for j in range(6) if i != j and subject[i] == subject[j]]
+    assert out["input"]["iou_same"] == pytest.approx(np.mean([1 - ref_dist[i, j] for i, j in same_pairs]))
     ref_scores = retrieval_scores(ref_dist, subject)
     assert out["input"]["nn_by_mask"] == pytest.approx(ref_scores["nn"])
     assert out["input"]["ft_by_mask"] == pytest.approx(ref_scores["ft"])

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from datamodules.readers import shrec14, tosca
-from datamodules.readers.tosca import MeshReadError
+from datamodules.canonical import shrec14, tosca
+from datamodules.canonical.tosca import MeshReadError
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "tosca8k"
 

@@ -144,7 +144,7 @@ def test_write_figures_one_contact_sheet_per_test_subject(tmp_path, compose_cfg)
 
 
 def test_mesh_baseline_retrieval_separates_humanoids_from_quadrupeds():
-    from datamodules.synth import figures
+    from datamodules.canonical import figures
     from lit3d.canonical.baselines import baseline_retrieval
     from lit3d.retrieval.descriptor import DescriptorConfig
 

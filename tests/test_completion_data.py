@@ -8,14 +8,15 @@ import numpy as np
 import pytest
 import torch
 
-from datamodules import completion as completion_mod
 from datamodules.cache import MANIFEST, MARKER, DataError
 from datamodules.completion import CompletionDataModule
-from datamodules.synth.depth_voxels import (
-    VIEW_SETS, ViewGeometry, camera_rotation, make_sample, max_pool, solid_occupancy,
+from datamodules.completion import sources as completion_sources
+from datamodules.completion.depth_voxels import (
+    VIEW_SETS, ViewGeometry, make_sample, max_pool, solid_occupancy,
 )
-from datamodules.synth.furniture import GENERATORS, Shape, box, make_shape
-from datamodules.voxel_cache import load_pair, save_pair
+from datamodules.completion.furniture import GENERATORS, Shape, box, make_shape
+from datamodules.completion.voxel_cache import load_pair, save_pair
+from lit3d.sensing.views import camera_rotation
 from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, UNSEEN_CATEGORIES
 
 SMALL = {"train": 8, "val": 4, "test_same": 4, "test_cross": 4, "test_unseen": 24}
@@ -161,7 +162,7 @@ def test_same_seed_same_bytes_other_seed_differs(prepared, tmp_path):
 def test_interrupted_preparation_resumes_identically(prepared, tmp_path, monkeypatch):
     ref = contents(prepared)
     dm = small_dm(tmp_path / "r")
-    real = completion_mod.synth_pair
+    real = completion_sources.synth_pair
     calls = {"n": 0}
 
     def flaky(*args, **kwargs):
@@ -170,7 +171,7 @@ def test_interrupted_preparation_resumes_identically(prepared, tmp_path, monkeyp
             raise KeyboardInterrupt  # killed mid-run
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(completion_mod, "synth_pair", flaky)
+    monkeypatch.setattr(completion_sources, "synth_pair", flaky)
     with pytest.raises(KeyboardInterrupt):
         dm.prepare_data()
     assert not (dm.data_dir / MANIFEST).exists() and (dm.data_dir / MARKER).exists()
@@ -179,7 +180,7 @@ def test_interrupted_preparation_resumes_identically(prepared, tmp_path, monkeyp
         dm.setup()
     # a half-written temp file and a deleted item, as after a hard kill
     (dm.data_dir / "items" / "train" / ".x.npz.abc.tmp").write_bytes(b"partial")
-    monkeypatch.setattr(completion_mod, "synth_pair", real)
+    monkeypatch.setattr(completion_sources, "synth_pair", real)
     calls["n"] = 0
     dm.prepare_data()
     dm.setup()
@@ -196,7 +197,7 @@ def test_interrupted_preparation_resumes_identically(prepared, tmp_path, monkeyp
         counter["n"] += 1
         return real(*a, **k)
 
-    monkeypatch.setattr(completion_mod, "synth_pair", counting)
+    monkeypatch.setattr(completion_sources, "synth_pair", counting)
     dm.prepare_data()
     assert counter["n"] == 1 and contents(dm) == ref
 
@@ -257,7 +258,7 @@ def test_categories_are_the_one_list_and_are_checked(tmp_path):
 
 @pytest.mark.parametrize("res,factor", [(32, 2), (32, 4), (64, 8), (64, 16), (48, 3), (48, 12)])
 def test_max_pool_matches_torch(res, factor):
-    from datamodules.voxel_cache import max_pool_bool
+    from datamodules.completion.voxel_cache import max_pool_bool
 
     g = np.random.default_rng(res + factor).random((res, res, res)) < 0.01
     ref = torch.nn.functional.max_pool3d(torch.from_numpy(g.astype(np.float32))[None, None], factor)[0, 0] > 0

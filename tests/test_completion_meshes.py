@@ -11,14 +11,15 @@ import trimesh
 
 from datamodules.cache import DataError
 from datamodules.completion import CompletionDataModule
-from datamodules.completion_meshes import attach_models
-from datamodules.readers.cad_models import (
+from datamodules.completion.cad_models import (
     CadModel, category_of, index_mesh_folder, index_shapenet, load_model_mesh, split_models,
 )
-from datamodules.readers.sweethome3d import assign_category, credits_markdown, index_sweethome3d
-from datamodules.synth.depth_voxels import ViewGeometry, camera_rotation, make_sample, max_pool, target_occupancy
-from datamodules.synth.mesh_shapes import MeshShape
+from datamodules.completion.depth_voxels import ViewGeometry, make_sample, max_pool, target_occupancy
+from datamodules.completion.mesh_shapes import MeshShape
+from datamodules.completion.meshes import attach_models
+from datamodules.completion.sweethome3d import assign_category, credits_markdown, index_sweethome3d
 from lit3d.geometry.solid_voxels import solid_voxels, surface_voxels
+from lit3d.sensing.views import camera_rotation
 
 RES = 48
 
@@ -254,7 +255,7 @@ def test_installed_sweethome3d_catalogues_give_real_furniture():
 
 
 def test_input_statistics_of_real_models(tmp_path):
-    from datamodules.synth.input_stats import STATS, cad_rows, category_table
+    from lit3d.cli.input_stats import STATS, cad_rows, category_table
 
     write_chairs(tmp_path, 3)
     rows = cad_rows(32, "ortho", "meshes", str(tmp_path), per_category=2, categories=("chair", "table"))

@@ -14,8 +14,8 @@ from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 from omegaconf import OmegaConf
 
-from datamodules.synth.depth_voxels import make_sample
-from datamodules.synth.furniture import make_shape
+from datamodules.completion.depth_voxels import make_sample
+from datamodules.completion.furniture import make_shape
 from lit3d.callbacks.health import group_stats
 from lit3d.cli.common import CONF_DIR
 from lit3d.completion.losses import resolve_loss_scale

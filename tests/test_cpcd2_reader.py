@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from datamodules.readers.cpcd2 import read_cpcd2
-from datamodules.readers.mos import MosDataError
+from datamodules.quality.cpcd2 import read_cpcd2
+from datamodules.quality.mos import MosDataError
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "cpcd2_phil"
 

@@ -233,8 +233,8 @@ def test_sigkill_then_resume_continues_completion_gan(tmp_path):
 # ----------------------------------------------------------------------------- data preparation killed
 @pytest.mark.slow  # default suite under 10 min; runs in make test-all
 def test_killed_data_generation_keeps_finished_items_and_resumes_identically(tmp_path, compose_cfg, monkeypatch):
-    import datamodules.completion as completion_mod
-    from datamodules.voxel_cache import load_pair
+    import datamodules.completion.sources as completion_sources
+    from datamodules.completion.voxel_cache import load_pair
 
     overrides = ["experiment=completion_demo", "data.progress=false",
                  "data.sizes={train:120,val:0,test_same:0,test_cross:0,test_unseen:0}"]
@@ -258,8 +258,8 @@ def test_killed_data_generation_keeps_finished_items_and_resumes_identically(tmp
 
     cfg = compose_cfg(overrides, data_dir=data_dir)
     dm = build_datamodule(cfg.data)
-    real, calls = completion_mod.synth_pair, []
-    monkeypatch.setattr(completion_mod, "synth_pair", lambda it, *a, **k: calls.append(it["file"]) or real(it, *a, **k))
+    real, calls = completion_sources.synth_pair, []
+    monkeypatch.setattr(completion_sources, "synth_pair", lambda it, *a, **k: calls.append(it["file"]) or real(it, *a, **k))
     dm.prepare_data()
     assert len(calls) == 120 - len(done), "finished items were generated again"
     assert not {str(items_dir.parent / f) for f in calls} & {str(p) for p in done}
@@ -268,7 +268,7 @@ def test_killed_data_generation_keeps_finished_items_and_resumes_identically(tmp
     resumed = json.loads((items_dir.parent / "manifest.json").read_text())
     assert len(resumed["items"]) == 120
 
-    monkeypatch.setattr(completion_mod, "synth_pair", real)
+    monkeypatch.setattr(completion_sources, "synth_pair", real)
     fresh = build_datamodule(compose_cfg(overrides, data_dir=tmp_path / "fresh").data)
     fresh.prepare_data()
     fresh_manifest = json.loads((tmp_path / "fresh" / "completion_demo" / "manifest.json").read_text())

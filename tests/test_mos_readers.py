@@ -7,7 +7,7 @@ import openpyxl
 import pytest
 import trimesh
 
-from datamodules.readers.mos import MosDataError, read_guo2016, read_liris_epfl, read_liris_masking
+from datamodules.quality.mos import MosDataError, read_guo2016, read_liris_epfl, read_liris_masking
 
 
 def _mesh(path):

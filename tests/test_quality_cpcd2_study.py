@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.stats import spearmanr
 
-from datamodules.readers.mos import MosItem
+from datamodules.quality.mos import MosItem
 from lit3d.quality.cpcd2_study import correlation_rows, family, orientation, subsets
 
 

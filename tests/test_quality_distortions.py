@@ -7,7 +7,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from datamodules.quality import PROCEDURAL_SHAPES, procedural_shape
-from datamodules.synth.distortions import (
+from datamodules.quality.distortions import (
     LEVELS,
     distort,
     normal_noise,
@@ -96,7 +96,7 @@ def _split_obj(mesh: trimesh.Trimesh) -> str:
 
 
 def test_user_meshes_are_merged_by_position(tmp_path):
-    from datamodules.synth.quality_shapes import load_user_meshes
+    from datamodules.quality.quality_shapes import load_user_meshes
 
     cube = trimesh.creation.box()
     (tmp_path / "cube.obj").write_text(_split_obj(cube))
@@ -111,7 +111,7 @@ def test_user_meshes_are_merged_by_position(tmp_path):
 
 
 def test_user_mesh_faces_collapsed_by_merging_are_dropped(tmp_path):
-    from datamodules.synth.quality_shapes import load_user_meshes
+    from datamodules.quality.quality_shapes import load_user_meshes
 
     cube = trimesh.creation.box()
     # an extra face whose first two corners are two copies of one position (vertex 1 and a copy, 9)

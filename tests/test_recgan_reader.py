@@ -12,8 +12,8 @@ import torch.nn.functional as F
 
 from datamodules.cache import DataError
 from datamodules.completion import CompletionDataModule
-from datamodules.readers.recgan import assign_splits, centre_fit, index_recgan, load_grid
-from datamodules.voxel_cache import load_pair
+from datamodules.completion.recgan import assign_splits, centre_fit, index_recgan, load_grid
+from datamodules.completion.voxel_cache import load_pair
 
 SHARED_SAMPLE = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "recgan_sample"
 RAW = 32
@@ -249,7 +249,7 @@ def test_real_sample_converts_with_expected_counts(tmp_path):
 
 
 def _pair(category, split_kind, view_set, shape_id, view="0_0_0"):
-    from datamodules.readers.recgan import RecganPair
+    from datamodules.completion.recgan import RecganPair
 
     folder = f"{split_kind}_{'125' if view_set == 'same' else '216'}"
     return RecganPair(category, "0", folder, split_kind, view_set, shape_id, view, Path("i"), Path("t"))
@@ -280,6 +280,6 @@ def test_val_folders_are_read_and_held_out_ids_leave_every_view_set():
                                              ("P1_04090263_gun", "firearm"), ("P1_04256520_coach", "couch"),
                                              ("P1_04256520_sofa", "couch"), ("P1_03001627_chair", "chair")])
 def test_category_folder_aliases(folder, category):
-    from datamodules.readers.recgan import parse_category_folder
+    from datamodules.completion.recgan import parse_category_folder
 
     assert parse_category_folder(folder) == (folder.split("_")[1], category)

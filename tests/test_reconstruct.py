@@ -144,7 +144,7 @@ def tiny_ckpt(tmp_path_factory):
 
 def _chair_mesh():
     """A procedural chair of the built-in generator (an unseen instance: its own seed)."""
-    from datamodules.synth.furniture import make_shape, shape_mesh
+    from datamodules.completion.furniture import make_shape, shape_mesh
 
     return shape_mesh(make_shape("chair", np.random.default_rng(12345)))
 

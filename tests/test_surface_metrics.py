@@ -182,7 +182,7 @@ def test_results_md_has_surface_rows_for_the_model_and_every_baseline(tmp_path):
 def prepared(tmp_path_factory):
     """A tiny prepared completion split: 4 same-view test items at 32^3."""
     from datamodules.completion import CompletionDataModule
-    from datamodules.voxel_cache import load_pair
+    from datamodules.completion.voxel_cache import load_pair
 
     root = tmp_path_factory.mktemp("folder_eval")
     dm = CompletionDataModule(data_dir=str(root / "data"), target_res=32, input_factor=4, progress=False,

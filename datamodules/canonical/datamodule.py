@@ -11,7 +11,7 @@ normalised to [0, 1]: 0 = background, foreground in [0.1, 1], nearer = larger.
 ``view_mode`` (:mod:`lit3d.geometry.views`): ``fixed`` = the azimuths as given; ``broadside`` = each
 shape (posed and canonical alike) first turned so that its broad side faces the camera, then
 by each azimuth. ``flip_lr``: training inputs mirrored left-right with probability 1/2; the target
-with them under ``fixed`` only (:class:`~datamodules.canonical.dataset.PairDataset` says why). ``eval_views``: indices into ``azimuths`` that
+with them under ``fixed`` only (:class:`~datamodules.canonical.dataset.CanonicalPairDataset` says why). ``eval_views``: indices into ``azimuths`` that
 val, test and the pooled held-out set use (null: all); training always sees every view, so extra
 azimuths are training augmentation while evaluation keeps one view per pose. ``roll_deg``: training
 inputs turned in the image plane by up to that many degrees (a rolled camera; the target stays).
@@ -53,18 +53,20 @@ from pathlib import Path
 import lightning.pytorch as pl
 import numpy as np
 from torch.utils.data import DataLoader
+from tqdm import tqdm
 
 from datamodules.cache import CacheBuilder, DataError, atomic_save_npz
+from datamodules.canonical import bodies
 from datamodules.canonical.blends import add_blends
-from datamodules.canonical.dataset import PairDataset, mirror_views, subject_balanced_sampler
-from datamodules.canonical.images import (depth_image_problem, pairs_png, read_subject, remove_legacy_subject_files,
+from datamodules.canonical.dataset import CanonicalPairDataset, mirror_views, subject_balanced_sampler
+from datamodules.canonical.images import (depth_image_problem, depth_pairs_png, read_subject, remove_legacy_subject_files,
                                           unpack_mask)
 from datamodules.canonical.rendering import PairRenderer
+from datamodules.canonical.sheets import pose_sheet
 from datamodules.canonical.sources import ROOTLESS, CANONICAL_SOURCES, Shrec14Source, SynthSource, ToscaSource, make_source
 from datamodules.canonical.splits import (SPLIT_MODES, CANONICAL_SPLITS, deal, fold_pairs, split_counts, split_pose,
                                           split_subject_pose, thin_training)
 from datamodules.loaders import evaluation_loader
-from datamodules.synth import bodies
 from lit3d.geometry.views import VIEW_MODES
 
 log = logging.getLogger("lit3d")
@@ -74,7 +76,7 @@ DATA_VERSION = "canonical-data-1"
 SUBJECTS_DIR = "subjects"  # the cache's item folder
 FLOW_VERSION = "flow-1"  # bump when datamodules.canonical.flow changes what it writes
 
-__all__ = ["CANONICAL_SPLITS", "CanonicalDataModule", "DataError", "PairDataset", "Shrec14Source", "SynthSource",
+__all__ = ["CANONICAL_SPLITS", "CanonicalDataModule", "DataError", "CanonicalPairDataset", "Shrec14Source", "SynthSource",
            "ToscaSource", "deal", "depth_image_problem", "read_subject", "split_pose", "split_subject_pose",
            "subject_balanced_sampler", "unpack_mask"]
 
@@ -148,7 +150,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         self.manifest: dict = {}
         self.cache: dict[str, dict] = {}
         self.splits: dict[str, list[dict]] = {}
-        self.datasets: dict[str, PairDataset] = {}
+        self.datasets: dict[str, CanonicalPairDataset] = {}
         self.subject_index: dict[str, int] = {}
         self.skipped: list[str] = []  # bad inputs skipped (skip_bad=True), rendering + loading
 
@@ -213,29 +215,23 @@ class CanonicalDataModule(pl.LightningDataModule):
 
     def prepare_data(self) -> None:
         """Render every subject once into ``data_dir`` (resumable, atomic); no-op when cached."""
-        builder = self.cache_builder()
-        if builder.is_complete():
-            return
-        with builder.locked():  # the jobs of a multirun may prepare one data_dir at once: one at a time
-            if builder.is_complete():  # another process prepared it while this one waited
-                return
-            remove_legacy_subject_files(self.data_dir)
-            builder.begin()
-            from tqdm import tqdm  # noqa: PLC0415 (a dependency)
+        self.cache_builder().prepare_once(self._render_subjects,
+                                          before=lambda: remove_legacy_subject_files(self.data_dir))
 
-            subjects = self.source.subjects()
-            items, skipped = [], []
-            for s in tqdm(subjects, desc="render canonical pairs", leave=False):
-                rel = f"{SUBJECTS_DIR}/{s}.npz"
-                if not builder.has(rel):
-                    atomic_save_npz(builder.path(rel), **self._render_subject(s))
-                with np.load(builder.path(rel), allow_pickle=False) as z:
-                    skipped += [str(m) for m in z["skipped"]] if "skipped" in z.files else []
-                items.append({"file": rel, "subject": s})
-            builder.finish(items, extra={"complete": True, "source": self.hparams.source,
-                                         "image_size": self.hparams.image_size, "subjects": subjects,
-                                         "categories": {s: self.source.category(s) for s in subjects},
-                                         "skipped": skipped})
+    def _render_subjects(self, builder: CacheBuilder) -> tuple[list[dict], dict]:
+        """Render the subjects still missing from ``builder``; (items, manifest extra)."""
+        subjects = self.source.subjects()
+        items, skipped = [], []
+        for s in tqdm(subjects, desc="render canonical pairs", leave=False):
+            rel = f"{SUBJECTS_DIR}/{s}.npz"
+            if not builder.has(rel):
+                atomic_save_npz(builder.path(rel), **self._render_subject(s))
+            with np.load(builder.path(rel), allow_pickle=False) as z:
+                skipped += [str(m) for m in z["skipped"]] if "skipped" in z.files else []
+            items.append({"file": rel, "subject": s})
+        return items, {"complete": True, "source": self.hparams.source, "image_size": self.hparams.image_size,
+                       "subjects": subjects, "categories": {s: self.source.category(s) for s in subjects},
+                       "skipped": skipped}
 
     # ------------------------------------------------------------------ loading and splits
     def _load_cache(self) -> None:
@@ -283,7 +279,7 @@ class CanonicalDataModule(pl.LightningDataModule):
             if not self.splits[k]:
                 raise DataError(f"split '{k}' is empty (subjects {len(subject_poses)}, folds {hp.n_folds}): "
                                 "use more subjects/poses or fewer folds")
-            self.datasets[k] = PairDataset(self.splits[k], self.cache, self.subject_index,
+            self.datasets[k] = CanonicalPairDataset(self.splits[k], self.cache, self.subject_index,
                                            flip_lr=hp.flip_lr and k == "train", flip_target=hp.view_mode == "fixed",
                                            mirror_view=mirror_views(hp.azimuths),
                                            roll_deg=hp.roll_deg if k == "train" else 0.0)
@@ -370,11 +366,9 @@ class CanonicalDataModule(pl.LightningDataModule):
     def show(self, n: int, path: str | Path, split: str = "test") -> Path:
         """PNG with one row per sample: posed depth | posed mask | canonical depth | canonical mask; beside
         it ``<stem>_shaded.png`` (:func:`~datamodules.canonical.sheets.pose_sheet`: shaded subjects)."""
-        from datamodules.canonical.sheets import pose_sheet
-
         if not self.datasets:
             self.setup()
         path = Path(path)
         shaded = pose_sheet(self, path.with_name(path.stem + "_shaded.png"), n_subjects=max(1, min(n, 6)))
         log.info("wrote %s", shaded)
-        return pairs_png(self.datasets[split], n, path)
+        return depth_pairs_png(self.datasets[split], n, path)

@@ -8,7 +8,7 @@ bool (zeros and False for an item without targets, or whose input is rolled or m
 target). With ``flip_lr`` (training
 only) the posed images of an item are mirrored left-right with probability 1/2, and the canonical
 images with them only when ``flip_target`` (the camera convention decides, see
-:class:`PairDataset`).
+:class:`CanonicalPairDataset`).
 """
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ import torch
 from torch.utils.data import Dataset, WeightedRandomSampler
 
 
-class PairDataset(Dataset):
+class CanonicalPairDataset(Dataset):
     """Indexable pairs from the in-memory cache (see module docstring for the item dict).
 
     ``flip_lr``: mirror the posed input left-right with probability 1/2. ``flip_target``: mirror

@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from datamodules.synth.figures import capsule_bones, capsules, joint_frames
+from datamodules.canonical.figures import capsule_bones, capsules, joint_frames
 from lit3d.render.depth import project_points, rotate_y
 
 DEPTH_TOL = 0.03   # normalised depth units (0.9 per unit of the unit box): front vs back surfaces
@@ -77,7 +77,7 @@ def flow_targets(canon_verts: np.ndarray, corr: np.ndarray, canon_depth: np.ndar
 
 def skinned_canonical(subject, canon_verts: np.ndarray, pose, canon_yaw: float, posed_yaw: float) -> np.ndarray:
     """Posed positions ``(V, 3)`` of a procedural figure's canonical mesh vertices (raw, as
-    :func:`datamodules.synth.figures.figure_mesh` makes them, turned by ``canon_yaw`` degrees): each
+    :func:`datamodules.canonical.figures.figure_mesh` makes them, turned by ``canon_yaw`` degrees): each
     vertex moves rigidly with the bone whose capsule is nearest, then the whole is turned by
     ``posed_yaw`` (the posed mesh's turn)."""
     v = rotate_y(np.asarray(canon_verts, np.float64), -canon_yaw)  # undo figure_mesh's turn

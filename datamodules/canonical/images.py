@@ -8,12 +8,15 @@ poses and ``skipped`` (str) the problems of poses dropped while rendering (``ski
 """
 from __future__ import annotations
 
+import io
 import zipfile
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
 
-from datamodules.cache import DataError
+from datamodules.cache import DataError, read_manifest
+from lit3d.utils.io import atomic_write_bytes
 
 
 def depth_image_problem(depth: np.ndarray, mask: np.ndarray | None, size: int) -> str | None:
@@ -85,16 +88,10 @@ def read_subject(path: Path, size: int, n_views: int) -> tuple[dict | None, list
     return {"depth": depth, "mask": mask, "flow": flow, "vis": vis, "poses": [int(p) for p in complete[1:]]}, problems
 
 
-def pairs_png(dataset, n: int, path: str | Path) -> Path:
+def depth_pairs_png(dataset, n: int, path: str | Path) -> Path:
     """PNG (written atomically) of ``n`` items spread over ``dataset`` (a
-    :class:`~datamodules.canonical.dataset.PairDataset`), one row each: posed depth | posed mask |
+    :class:`~datamodules.canonical.dataset.CanonicalPairDataset`), one row each: posed depth | posed mask |
     canonical depth | canonical mask, ``S`` px a tile."""
-    import io
-
-    from PIL import Image
-
-    from lit3d.utils.io import atomic_write_bytes
-
     rows = []
     for i in np.linspace(0, len(dataset) - 1, min(n, len(dataset))).astype(int):
         b = dataset[int(i)]
@@ -111,8 +108,6 @@ def pairs_png(dataset, n: int, path: str | Path) -> Path:
 def remove_legacy_subject_files(data_dir: str | Path) -> None:
     """Delete the subject files of the cache layout before CacheBuilder (``data_dir/<subject>.npz``,
     listed by a manifest without ``generator``); the new layout renders them again."""
-    from datamodules.cache import read_manifest
-
     data_dir = Path(data_dir)
     try:
         man = read_manifest(data_dir)

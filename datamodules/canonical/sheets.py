@@ -9,6 +9,9 @@ from pathlib import Path
 import numpy as np
 
 from lit3d.render.depth import ORTHO_MAG
+from lit3d.render.shaded import shaded_views
+from lit3d.utils.figures import labelled_grid
+from lit3d.utils.io import atomic_write_bytes
 
 CELL = 256
 
@@ -16,8 +19,6 @@ CELL = 256
 def _shaded(verts: np.ndarray, faces: np.ndarray, size: int) -> np.ndarray:
     """``(size, size, 3) uint8`` shaded front view (the depth camera's) of a normalised mesh."""
     import trimesh
-
-    from lit3d.render.shaded import shaded_views
 
     mesh = trimesh.Trimesh(verts, faces, process=False)
     return shaded_views(mesh, [[0.0, 0.0, 1.0]], size=size, extent=ORTHO_MAG)[0]
@@ -27,9 +28,6 @@ def pose_sheet(dm, path: str | Path, n_subjects: int = 4, n_poses: int = 5, cell
     """PNG (written atomically) of ``n_subjects`` subjects spread over ``dm``'s source, each in its
     canonical pose and its first ``n_poses`` poses, shaded, ``cell`` px a panel, labelled.
     ``dm`` is a :class:`~datamodules.canonical.CanonicalDataModule` (its meshes and normalisation)."""
-    from lit3d.utils.figures import labelled_grid
-    from lit3d.utils.io import atomic_write_bytes
-
     src = dm.source
     subjects = src.subjects()
     picks = [subjects[int(i)] for i in np.unique(np.linspace(0, len(subjects) - 1, min(n_subjects, len(subjects))).astype(int))]

@@ -1,14 +1,14 @@
 """Where canonical-form meshes come from: one class per data source, each enumerating subjects and
 poses and loading meshes ``(V, 3) float, (F, 3) int`` unnormalised with y up.
 
-    synth    procedural humanoids / quadrupeds (``datamodules.synth.figures``); canonical = T-pose
+    synth    procedural humanoids / quadrupeds (``datamodules.canonical.figures``); canonical = T-pose
              / standing pose; no download.
     tosca    TOSCA meshes under ``root`` (.mat/.vert+.tri/.off/.ply); canonical = pose 0 (null pose).
     shrec14  SHREC'14 humans under ``root`` with a PSB ``.cla`` (classes = subjects); canonical =
              the pose at ``canonical_pose`` within each class.
-    anny     people from the Anny body model (:mod:`datamodules.synth.bodies`): ``n_subjects``
+    anny     people from the Anny body model (:mod:`datamodules.canonical.bodies`): ``n_subjects``
              phenotypes x ``n_poses`` joint-limit poses, both seeded; canonical = the rest pose.
-    faust    FAUST registrations under ``root`` (:mod:`datamodules.readers.posesets`); canonical =
+    faust    FAUST registrations under ``root`` (:mod:`datamodules.canonical.posesets`); canonical =
              pose ``canonical_pose``, which is also an item (FAUST has no separate rest pose).
     sumner   Sumner & Popovic's animals under ``root``; canonical = each animal's reference pose.
 """
@@ -19,7 +19,9 @@ from collections.abc import Sequence
 import numpy as np
 
 from datamodules.cache import DataError
+from datamodules.canonical import bodies, figures, shrec14, tosca
 from datamodules.canonical.flow import skinned_canonical
+from datamodules.canonical.posesets import index_faust, index_sumner
 
 CANONICAL_SOURCES = ("synth", "tosca", "shrec14", "anny", "faust", "sumner")
 ROOTLESS = ("synth", "anny")  # sources that need no root folder
@@ -52,8 +54,6 @@ class SynthSource(_Source):
 
     def __init__(self, kinds: Sequence[str], n_subjects: int, n_poses: int, seed: int, mesh_resolution: int,
                  pose_seed: int, yaw_range: float, pose_strength: float):
-        from datamodules.synth import figures
-
         self.f = figures
         self.kinds = list(kinds)
         self.n_subjects, self.n_poses = n_subjects, n_poses
@@ -117,8 +117,6 @@ class _MeshFileSource(_Source):
         return self.canon
 
     def mesh(self, subject, pose):
-        from datamodules.readers import tosca
-
         v, f = tosca.read_mesh(self.items[(subject, int(pose))])
         return (tosca.z_up_to_y_up(v) if self.up_axis == "z" else v), f
 
@@ -127,8 +125,6 @@ class ToscaSource(_MeshFileSource):
     kind = "tosca"
 
     def __init__(self, root: str, classes: Sequence[str] | None, canonical_pose: int, up_axis: str):
-        from datamodules.readers import tosca
-
         items = tosca.index_tosca(root, list(classes) if classes else None)
         self.items = {(it.cls, it.pose): it.path for it in items}
         self.canon = canonical_pose
@@ -142,8 +138,6 @@ class Shrec14Source(_MeshFileSource):
     kind = "shrec14"
 
     def __init__(self, root: str, cla: str | None, canonical_pose: int, up_axis: str):
-        from datamodules.readers import shrec14
-
         items = shrec14.index_shrec14(root, cla)
         self.items = {(it.subject, it.pose): it.path for it in items}
         self.canon, self.up_axis = canonical_pose, up_axis
@@ -159,8 +153,6 @@ class AnnySource(_Source):
 
     def __init__(self, n_subjects: int, n_poses: int, seed: int, pose_seed: int, yaw_range: float,
                  pose_strength: float, phenotypes: str = "uniform"):
-        from datamodules.synth import bodies
-
         self.b = bodies
         self.model = bodies.BodyModel()
         self.n_subjects, self.n_poses, self.seed = n_subjects, n_poses, seed
@@ -210,8 +202,6 @@ class FaustSource(_MeshFileSource):
     kind = "faust"
 
     def __init__(self, root: str, canonical_pose: int):
-        from datamodules.readers.posesets import index_faust
-
         self.items, self.canon, self.up_axis = index_faust(root), canonical_pose, "y"
         missing = sorted({s for s, _ in self.items} - {s for s, p in self.items if p == canonical_pose})
         if missing:
@@ -230,8 +220,6 @@ class SumnerSource(_MeshFileSource):
     kind = "sumner"
 
     def __init__(self, root: str, classes: Sequence[str] | None):
-        from datamodules.readers.posesets import index_sumner
-
         self.items = index_sumner(root, list(classes) if classes else None)
         self.canon, self.up_axis = 0, "y"
 

@@ -18,7 +18,7 @@ from torch.utils.data import BatchSampler, Dataset, Sampler
 from lit3d.features.matrix import FeatureMatrix, minibatch_count, minibatches
 
 
-class PairDataset(Dataset):
+class QualityPairDataset(Dataset):
     """Rows of a :class:`FeatureMatrix` as dicts (module docstring); ``shape_names`` gives the ids."""
 
     def __init__(self, fm: FeatureMatrix, shape_names: Sequence[str] | None = None):

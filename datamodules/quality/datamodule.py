@@ -3,16 +3,16 @@
 Two sources:
 
 - ``source="synth"`` (default, no download): procedural reference shapes (plus every
-  mesh in ``user_mesh_dir``) x distortion types x levels (``datamodules.synth.distortions``).
+  mesh in ``user_mesh_dir``) x distortion types x levels (``datamodules.quality.distortions``).
   The target is the **ordinal severity score** of the distortion level within its
   type, ``(level + 1) / n_levels`` in (0, 1]: a rank that the generator knows, *not*
   a human opinion score. It only says "level 3 of smoothing is worse than level 2 of
   smoothing"; how smoothing compares with noise is a convention of this set.
 - ``source="liris_epfl" | "liris_masking" | "guo2016"``: the human-rated datasets, read
-  from ``root`` in their published layout (``datamodules.readers.mos``). Target: the
+  from ``root`` in their published layout (``datamodules.quality.mos``). Target: the
   mean opinion score (MOS).
 - ``source="cpcd2"``: coloured point clouds in the CPCD2.0 layout (zipped ASCII PLY +
-  ``mos.csv``, ``datamodules.readers.cpcd2``); the clouds are rendered as points.
+  ``mos.csv``, ``datamodules.quality.cpcd2``); the clouds are rendered as points.
 
 Either way targets are oriented "higher = more distorted" and scaled to [0, 1] with
 the dataset's published range (:class:`lit3d.features.matrix.TargetScaling`).
@@ -52,17 +52,18 @@ from datamodules.cache import (
     write_json,
 )
 from datamodules.loaders import evaluation_loader
-from datamodules.quality.batches import PairDataset, ShuffledBatches
+from datamodules.quality.batches import QualityPairDataset, ShuffledBatches
+from datamodules.quality.cpcd2 import read_cpcd2
 from datamodules.quality.features import (  # noqa: F401  (re-exported)
     FeatureFn,
-    feature_config,
     feature_file,
     resolve_feature_fn,
     write_feature_tables,
 )
-from datamodules.quality.preview import pairs_png
-from datamodules.synth.distortions import DISTORTIONS, LEVELS, distort, severity
-from datamodules.synth.quality_shapes import (  # noqa: F401  (re-exported)
+from datamodules.quality.mos import read_mos_dataset
+from datamodules.quality.preview import mesh_pairs_png
+from datamodules.quality.distortions import DISTORTIONS, LEVELS, distort, severity
+from datamodules.quality.quality_shapes import (  # noqa: F401  (re-exported)
     MESH_SUFFIXES,
     PROCEDURAL_SHAPES,
     load_user_meshes,
@@ -196,9 +197,6 @@ class QualityDataModule(pl.LightningDataModule):
         return pairs
 
     def _real_pairs(self) -> tuple[list[dict], TargetScaling]:
-        from datamodules.readers.cpcd2 import read_cpcd2
-        from datamodules.readers.mos import read_mos_dataset
-
         hp = self.hparams
         if not hp.root:
             raise DataError(f"data source '{self.source}' needs data.root=PATH (the unpacked dataset folder)")
@@ -219,32 +217,30 @@ class QualityDataModule(pl.LightningDataModule):
 
     # ------------------------------------------------------------ prepare
     def prepare_data(self) -> None:
-        builder = self.cache_builder()
-        if builder.is_complete():
-            return
-        with builder.locked():  # the jobs of a multirun may prepare one data_dir at once: one at a time
-            if builder.is_complete():  # another process prepared it while this one waited
-                return
-            builder.begin()
-            if self.source == "synth":
-                pairs = self._synth_pairs()
-                scaling = TargetScaling(0.0, 1.0, False, SEVERITY_NAME)
-            else:
-                pairs, scaling = self._real_pairs()
-            hp = self.hparams
-            tables, pairs, skipped = write_feature_tables(builder.root, pairs, hp.feature_fn, hp.feature_options,
-                                                          int(hp.feature_workers), bool(hp.skip_bad))
-            self.skipped += skipped
-            raw = np.array([p["score"] for p in pairs], dtype=np.float64)
-            fm = FeatureMatrix.from_tables(tables, [p["shape"] for p in pairs], scaling.forward(raw),
-                                           [p["item"] for p in pairs], dataset=self.name, target_name=scaling.name)
-            atomic_save_npz(builder.path("matrix.npz"), compress=False, X=fm.X, names=np.array(fm.names),
-                            shapes=fm.shapes, target=fm.target, items=np.array(fm.items), raw_score=raw)
-            write_json(builder.path("pairs.json"), pairs)
-            items = [{"file": feature_file(p["item"]), "item": p["item"], "shape": p["shape"]} for p in pairs]
-            builder.finish(items + [{"file": "matrix.npz"}, {"file": "pairs.json"}], extra={
-                "scaling": scaling.to_dict(), "target_name": scaling.name, "n_pairs": len(pairs),
-                "n_features": len(fm.names), "dataset": self.name, "skipped": self.skipped})
+        """Meshes (synth), feature tables and the feature matrix into :attr:`cache_dir`; no-op when
+        cached (:meth:`~datamodules.cache.CacheBuilder.prepare_once`)."""
+        self.cache_builder().prepare_once(self._write_tables)
+
+    def _write_tables(self, builder: CacheBuilder) -> tuple[list[dict], dict]:
+        if self.source == "synth":
+            pairs = self._synth_pairs()
+            scaling = TargetScaling(0.0, 1.0, False, SEVERITY_NAME)
+        else:
+            pairs, scaling = self._real_pairs()
+        hp = self.hparams
+        tables, pairs, skipped = write_feature_tables(builder.root, pairs, hp.feature_fn, hp.feature_options,
+                                                      int(hp.feature_workers), bool(hp.skip_bad))
+        self.skipped += skipped
+        raw = np.array([p["score"] for p in pairs], dtype=np.float64)
+        fm = FeatureMatrix.from_tables(tables, [p["shape"] for p in pairs], scaling.forward(raw),
+                                       [p["item"] for p in pairs], dataset=self.name, target_name=scaling.name)
+        atomic_save_npz(builder.path("matrix.npz"), compress=False, X=fm.X, names=np.array(fm.names),
+                        shapes=fm.shapes, target=fm.target, items=np.array(fm.items), raw_score=raw)
+        write_json(builder.path("pairs.json"), pairs)
+        items = [{"file": feature_file(p["item"]), "item": p["item"], "shape": p["shape"]} for p in pairs]
+        return items + [{"file": "matrix.npz"}, {"file": "pairs.json"}], {
+            "scaling": scaling.to_dict(), "target_name": scaling.name, "n_pairs": len(pairs),
+            "n_features": len(fm.names), "dataset": self.name, "skipped": self.skipped}
 
     # ------------------------------------------------------------ setup
     def load_matrix(self) -> FeatureMatrix:
@@ -298,7 +294,7 @@ class QualityDataModule(pl.LightningDataModule):
         return self.splits[name]
 
     def _loader(self, split: str, shuffle: bool) -> DataLoader:
-        ds = PairDataset(self.split(split), self.shape_names)
+        ds = QualityPairDataset(self.split(split), self.shape_names)
         # a seeded generator also for evaluation: making an iterator then draws nothing from torch's global RNG
         generator = torch.Generator().manual_seed(int(self.hparams.seed))
         if shuffle:
@@ -340,4 +336,4 @@ class QualityDataModule(pl.LightningDataModule):
     def show(self, n: int, path: str | Path) -> Path:
         """PNG: up to ``n`` pairs as depth-shaded silhouettes (reference | distorted) with their target."""
         self.setup()
-        return pairs_png(self.matrix, self.sources, n, path)
+        return mesh_pairs_png(self.matrix, self.sources, n, path)

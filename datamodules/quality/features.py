@@ -15,28 +15,19 @@ from pathlib import Path
 from typing import Any
 
 from datamodules.cache import DataError
+from lit3d.features.table import feature_config, feature_table
 from lit3d.utils.io import atomic_write_text
 from lit3d.utils.progress import progress
 
 FeatureFn = Callable[[Path, Path], Mapping[str, float]]
 
 
-def feature_config(options: Mapping[str, Any] | None = None):
-    """``lit3d.features.table.FeatureConfig`` from plain options (see
-    :func:`lit3d.features.table.feature_config`; imported lazily: the renderer is heavy)."""
-    from lit3d.features.table import feature_config as from_options
-
-    return from_options(options)
-
-
 def resolve_feature_fn(spec: str | None, options: Mapping[str, Any] | None = None) -> FeatureFn:
     """``None`` -> the renderer's cached feature table (``lit3d.features.table.feature_table``
-    with :func:`feature_config` of ``options``; ``options["cache_dir"]`` = its JSON cache);
+    with :func:`lit3d.features.table.feature_config` of ``options``; ``options["cache_dir"]`` = its JSON cache);
     else a dotted path to ``fn(ref_path, dist_path, **options) -> dict``."""
     options = dict(options or {})
     if spec is None:
-        from lit3d.features.table import feature_table
-
         cfg = feature_config(options)
         cache_dir = options.get("cache_dir")
 

@@ -12,7 +12,7 @@ import trimesh
 from lit3d.features.matrix import FeatureMatrix
 
 
-def pairs_png(fm: FeatureMatrix, sources: Mapping[str, dict], n: int, path: str | Path, tile: int = 128) -> Path:
+def mesh_pairs_png(fm: FeatureMatrix, sources: Mapping[str, dict], n: int, path: str | Path, tile: int = 128) -> Path:
     """PNG: up to ``n`` pairs of ``fm`` spread over its rows (reference | distorted, meshes from
     ``sources[item]``) with their target."""
     from PIL import Image, ImageDraw

@@ -7,6 +7,7 @@ import time
 import numpy as np
 
 from lit3d.geometry.canonical_forms import canonical_forms_multi
+from lit3d.geometry.spectral import shape_dna, shape_dna_distances
 from lit3d.metrics.retrieval import retrieval_scores
 from lit3d.retrieval.descriptor import DescriptorConfig, distance_matrix_from_features, mesh_features
 from lit3d.utils.progress import progress
@@ -39,8 +40,6 @@ def mesh_rows(meshes, methods, cfg: DescriptorConfig, max_vertices: int | None =
     """The mesh rows' inputs for a seed study: ``({method: descriptor features}, {"shapedna": (n, n)
     distances}, {row: seconds})`` for the canonical forms of ``methods`` (full resolution, landmark
     geodesics; :func:`lit3d.geometry.canonical_forms.canonical_forms_multi`) and ShapeDNA."""
-    from lit3d.geometry.spectral import shape_dna, shape_dna_distances
-
     methods = list(methods)
     forms_methods = [m for m in methods if m != SHAPEDNA]
     feats, dists, secs = {}, {}, {}

@@ -31,8 +31,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from lit3d.canonical.baselines import baseline_retrieval
+from lit3d.canonical.heldout import HELDOUT_FILE, heldout_arrays, save_heldout, settings_of
 from lit3d.canonical.report import write_figures, write_results  # noqa: F401
 from lit3d.metrics.depth import composite_depth
+from lit3d.metrics.retrieval import chance_scores, retrieval_scores
+from lit3d.retrieval.descriptor import DescriptorConfig, distance_matrix_from_depths
 from lit3d.utils.evaluation import Evaluation
 
 log = logging.getLogger("lit3d")
@@ -64,9 +68,6 @@ def heldout_items(task, outputs: dict[str, torch.Tensor], datamodule) -> dict | 
     """This fold's held-out items (:func:`lit3d.canonical.heldout.heldout_arrays`) for the pooled
     protocol (:mod:`lit3d.canonical.pooled`); None off rank 0 or for a datamodule that does not
     list its held-out items."""
-    from lit3d.canonical.heldout import heldout_arrays
-    from lit3d.canonical.pooled import settings_of
-
     trainer = getattr(task, "_trainer", None)
     if (trainer is not None and not trainer.is_global_zero) or not hasattr(datamodule, "held_out_ids"):
         return None
@@ -78,8 +79,6 @@ def heldout_items(task, outputs: dict[str, torch.Tensor], datamodule) -> dict | 
 
 def write_artefacts(evaluation: Evaluation, out_dir: Path) -> list[Path]:
     """``<out_dir>/heldout.npz`` from the ``heldout`` artefact, when :func:`protocol` made one."""
-    from lit3d.canonical.heldout import HELDOUT_FILE, save_heldout
-
     held = evaluation.artefacts.get("heldout")
     if not held:
         return []
@@ -105,9 +104,6 @@ def retrieval_results(hp, outputs: dict[str, torch.Tensor], datamodule=None) -> 
 def depth_retrieval(hp, outputs: dict[str, torch.Tensor], labels: np.ndarray) -> dict[str, dict]:
     """Retrieval scores of the predicted canonical forms, the posed inputs and the true canonical
     forms (each depth image back-projected to a surface, then the CM-BOF-style descriptor), and chance."""
-    from lit3d.metrics.retrieval import chance_scores, retrieval_scores
-    from lit3d.retrieval.descriptor import DescriptorConfig, distance_matrix_from_depths
-
     cfg = DescriptorConfig(**(hp.retrieval or {}))
     predicted = PREDICTION_SOURCE.get(hp.arch, "model")
     sources = {
@@ -133,9 +129,6 @@ def jittered_target(hp, outputs: dict[str, torch.Tensor], labels: np.ndarray, da
     jitter = float(hp.get("ceiling_jitter_deg") or 0.0)
     if not jitter or datamodule is None or not hasattr(datamodule, "canonical_turned"):
         return {}
-    from lit3d.metrics.retrieval import retrieval_scores
-    from lit3d.retrieval.descriptor import DescriptorConfig, distance_matrix_from_depths
-
     names = {i: s for s, i in datamodule.subject_index.items()}
     turns = np.random.default_rng(0).uniform(-jitter, jitter, len(labels))
     views = [datamodule.canonical_turned(names[int(s)], int(v), t)
@@ -156,9 +149,6 @@ def mesh_baseline_retrieval(hp, outputs: dict[str, torch.Tensor], datamodule) ->
     if datamodule is None or not hasattr(datamodule, "normalized_mesh"):
         log.info("mesh baselines skipped: the datamodule has no normalized_mesh()")
         return {}
-    from lit3d.canonical.baselines import baseline_retrieval
-    from lit3d.retrieval.descriptor import DescriptorConfig
-
     names = {i: s for s, i in datamodule.subject_index.items()}
     keys = sorted({(int(s), int(p)) for s, p in zip(outputs["subject_idx"], outputs["pose"])})
     t0 = time.perf_counter()

@@ -14,6 +14,8 @@ import torch
 from PIL import Image
 
 from lit3d.metrics.depth import composite_depth
+from lit3d.render.depth import ORTHO_MAG, depth_to_mesh
+from lit3d.render.shaded import shaded_views
 from lit3d.utils.figures import labelled_grid
 
 CELL = 256
@@ -32,9 +34,6 @@ def depth_tile(depth: np.ndarray, size: int = CELL) -> np.ndarray:
 def surface_tile(depth: np.ndarray, mask: np.ndarray, size: int = CELL) -> np.ndarray:
     """``(size, size, 3) uint8`` shaded render of a depth image's back-projected surface (white
     when the mask is empty)."""
-    from lit3d.render.depth import ORTHO_MAG, depth_to_mesh
-    from lit3d.render.shaded import shaded_views
-
     verts, faces = depth_to_mesh(depth, mask)
     if len(faces) == 0:
         return np.full((size, size, 3), 255, np.uint8)

@@ -27,6 +27,14 @@ from lit3d.utils.io import atomic_write_bytes
 
 HELDOUT_FILE = "heldout.npz"
 IMAGES = ("pred_depth", "pred_mask", "depth", "mask", "canon_depth", "canon_mask")
+# the task settings the pooled protocol scores with (saved as ``settings`` in heldout.npz)
+SETTINGS = ("retrieval", "mask_threshold", "chance_trials", "mesh_baselines", "baseline_max_vertices",
+            "baseline_landmarks", "baseline_smacof_eps")
+
+
+def settings_of(task_cfg: dict) -> dict:
+    """The retrieval settings (:data:`SETTINGS`) present in a task config or the task's hparams."""
+    return {k: task_cfg[k] for k in SETTINGS if k in task_cfg}
 
 
 def item_ids(subjects, poses, views) -> np.ndarray:

@@ -54,6 +54,7 @@ from lit3d.canonical.losses import canonical_loss, flow_loss, flow_smoothness, v
 from lit3d.canonical.warp import pixels_to_grid
 from lit3d.metrics.depth import MaskedDepthMSE, MaskIoU
 from lit3d.metrics.gathered import GatheredTensors
+from lit3d.utils.checkpoints import load_checkpoint
 from lit3d.utils.log_images import log_image, media_loggers
 
 METRICS = ("depth_mse", "iou", "depth_mse_input", "iou_input")
@@ -148,8 +149,6 @@ class CanonicalTask(pl.LightningModule):
         """Start from the net of another canonical checkpoint ``path`` (pretraining, e.g. on Anny
         bodies): its ``net.*`` weights, every one present with the same shape, else one ValueError
         naming the file and the first mismatch. The optimiser starts afresh."""
-        from lit3d.utils.checkpoints import load_checkpoint
-
         state = load_checkpoint(path).get("state_dict", {})
         net = {k[len("net."):]: v for k, v in state.items() if k.startswith("net.")}
         own = self.net.state_dict()

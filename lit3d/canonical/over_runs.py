@@ -23,7 +23,7 @@ from lit3d.canonical.heldout import pool
 from lit3d.canonical.pooled import SCORES, canonical_masks, job_dirs, mask_iou, mean_sd, prediction_masks
 from lit3d.utils.tables import markdown_table
 
-MASK_KEYS = ("iou", "nearest_subject", "nn_by_mask", "ft_by_mask")
+MASK_KEYS = ("iou", "nearest_subject", "nn_by_mask", "ft_by_mask", "iou_same", "iou_other")
 
 
 def load(sweep_dirs) -> list[dict]:
@@ -55,7 +55,8 @@ def over_runs(runs: list[dict], rows=("model", "input")) -> dict:
         if all(row in r["summary"] for r in runs):
             out["scores"][row] = {s: _stats([r["summary"][row][s][0] for r in runs]) for s in SCORES}
         if all(row in r.get("mask_match", {}) for r in runs):
-            out["masks"][row] = {k: _stats([r["mask_match"][row][k] for r in runs]) for k in MASK_KEYS}
+            out["masks"][row] = {k: _stats([r["mask_match"][row][k] for r in runs]) for k in MASK_KEYS
+                                 if all(k in r["mask_match"][row] for r in runs)}  # older runs lack iou_same/other
     return out
 
 
@@ -70,7 +71,7 @@ def markdown(table: dict, names: list[str]) -> str:
                             [[row, *(cell(v[s]) for s in SCORES)] for row, v in table["scores"].items()])]
     if table["masks"]:
         parts.append(markdown_table(["row", *MASK_KEYS],
-                                    [[row, *(cell(v[k]) for k in MASK_KEYS)] for row, v in table["masks"].items()]))
+                                    [[row, *(cell(v[k]) if k in v else "–" for k in MASK_KEYS)] for row, v in table["masks"].items()]))
     return "\n\n".join(parts) + "\n"
 
 

@@ -29,8 +29,16 @@ from pathlib import Path
 
 import numpy as np
 
-from lit3d.canonical.heldout import HELDOUT_FILE, pool
+from datamodules.canonical import CanonicalDataModule
+from datamodules.canonical.dataset import CanonicalPairDataset
+from lit3d.canonical.baselines import mesh_rows
+from lit3d.canonical.heldout import HELDOUT_FILE, pool, settings_of
+from lit3d.canonical.report import write_pooled_results
+from lit3d.metrics.depth import composite_depth
+from lit3d.metrics.retrieval import chance_scores, retrieval_scores
+from lit3d.retrieval.descriptor import DescriptorConfig, depth_meshes, distance_matrix_from_features, mesh_features
 from lit3d.utils.config_dir import config_dir
+from lit3d.utils.io import write_json
 
 log = logging.getLogger("lit3d")
 
@@ -41,8 +49,6 @@ SCORES = ("nn", "ft", "st", "e", "dcg")
 def depth_meshes_of(pooled: dict, cfg, mask_threshold: float) -> dict[str, list]:
     """``{row: [(verts, faces)]}`` back-projected from the pooled depth images: the prediction
     (mask probability thresholded at ``mask_threshold``), the posed input, the true canonical."""
-    from lit3d.metrics.depth import composite_depth
-    from lit3d.retrieval.descriptor import depth_meshes
     import torch
 
     def meshes(d, m):
@@ -108,15 +114,26 @@ def prediction_masks(items: dict, mask_threshold: float) -> dict[str, np.ndarray
     return rows
 
 
+def subject_separation(pairwise: np.ndarray, subjects: np.ndarray) -> dict[str, float]:
+    """Mean of ``pairwise`` ``(N, N)`` (a similarity, e.g. mask IoU) over pairs of distinct items of
+    one subject (``iou_same``; NaN when every subject has one item) and of two subjects
+    (``iou_other``); ``subjects`` ``(N,)``."""
+    same = subjects[:, None] == subjects[None, :]
+    other_pose = same & ~np.eye(len(subjects), dtype=bool)
+    return {"iou_same": float(pairwise[other_pose].mean()) if other_pose.any() else float("nan"),
+            "iou_other": float(pairwise[~same].mean()) if (~same).any() else float("nan")}
+
+
 def mask_match(items: dict, mask_threshold: float) -> dict[str, dict[str, float]]:
     """Descriptor-free checks of the pooled items: per depth row (the prediction and the posed
     input), the mean mask IoU with the item's true canonical mask (``iou``) and the share of items
     whose nearest true canonical mask (highest IoU among the subjects' canonical masks) is their
     own subject's (``nearest_subject``; chance = 1 / subjects), and retrieval among the row's own
-    masks with distance 1 - IoU (``nn_by_mask``, ``ft_by_mask``: no codebook, so no seed).
+    masks with distance 1 - IoU (``nn_by_mask``, ``ft_by_mask``: no codebook, so no seed), and the
+    mean IoU between two of the row's masks of one subject (``iou_same``, other poses) and of two
+    subjects (``iou_other``): canonical forms that keep the person have ``iou_same`` above
+    ``iou_other`` (the true canonical masks: 1 against the subjects' own spread).
     Masks ``(N, 1, S, S)`` or ``(N, S, S)``."""
-    from lit3d.metrics.retrieval import retrieval_scores
-
     subjects = np.asarray(items["subject"]).astype(str)
     truth = _flat(items["canon_mask"]) > 0.5
     _, own, canon = canonical_masks(items)
@@ -125,8 +142,10 @@ def mask_match(items: dict, mask_threshold: float) -> dict[str, dict[str, float]
         nearest = mask_iou(m, canon).argmax(1)
         out[row] = {"iou": float(np.mean([mask_iou(m[i:i + 1], truth[i:i + 1])[0, 0] for i in range(len(m))])),
                     "nearest_subject": float((nearest == own).mean())}
-        by_mask = retrieval_scores(1.0 - mask_iou(m, m), subjects)
-        out[row].update(nn_by_mask=float(by_mask["nn"]), ft_by_mask=float(by_mask["ft"]))
+        pairwise = mask_iou(m, m)
+        by_mask = retrieval_scores(1.0 - pairwise, subjects)
+        out[row].update(nn_by_mask=float(by_mask["nn"]), ft_by_mask=float(by_mask["ft"]),
+                        **subject_separation(pairwise, subjects))
     return out
 
 
@@ -135,9 +154,6 @@ def score_rows(features: dict[str, list], labels: np.ndarray, cfg, seeds, extra_
     """``{row: {score: [value per seed]}}``: each row's descriptor features
     (:func:`lit3d.retrieval.descriptor.mesh_features`) through a codebook per seed; ``extra_dists``
     ``{row: (n, n)}`` (seed-free, e.g. ShapeDNA) scored once per seed alike; chance per seed."""
-    from lit3d.metrics.retrieval import chance_scores, retrieval_scores
-    from lit3d.retrieval.descriptor import distance_matrix_from_features
-
     out: dict[str, dict[str, list[float]]] = {}
     for seed in seeds:
         per = {row: retrieval_scores(distance_matrix_from_features(f, cfg, seed), labels) for row, f in features.items()}
@@ -164,9 +180,6 @@ def study(items: dict, datamodule, settings: dict, seeds, rows=None) -> dict:
     images of :func:`lit3d.canonical.heldout.pool`); ``settings``: the task's ``retrieval``,
     ``mask_threshold``, ``chance_trials``, ``mesh_baselines``, ``baseline_max_vertices``,
     ``baseline_landmarks``, ``baseline_smacof_eps``. ``rows``: restrict to these row names."""
-    from lit3d.canonical.baselines import mesh_rows
-    from lit3d.retrieval.descriptor import DescriptorConfig, mesh_features
-
     cfg = DescriptorConfig(**(settings.get("retrieval") or {}))
     want = (lambda r: rows is None or r in rows)  # noqa: E731
     labels = np.asarray(items["subject"])
@@ -208,15 +221,7 @@ def compose(overrides: list[str]):
         return hydra_compose(config_name="train", overrides=["task=canonical", *overrides])
 
 
-def settings_of(task_cfg: dict) -> dict:
-    keys = ("retrieval", "mask_threshold", "chance_trials", "mesh_baselines", "baseline_max_vertices",
-            "baseline_landmarks", "baseline_smacof_eps")
-    return {k: task_cfg[k] for k in keys if k in task_cfg}
-
-
 def build_datamodule(data: dict):
-    from datamodules.canonical import CanonicalDataModule
-
     data = {k: v for k, v in data.items() if k != "_target_"}
     return CanonicalDataModule(**data)
 
@@ -228,8 +233,6 @@ def run(run_dirs, seeds, out_dir, overrides=(), rows=None, strict: bool = True, 
     ``out_dir``; returns the .md path. ``mesh_baselines``: the canonical-form rows (default: the task's
     ``mesh_baselines``)."""
     from omegaconf import OmegaConf
-
-    from lit3d.canonical.report import write_pooled_results
 
     t0 = time.perf_counter()
     if run_dirs:
@@ -244,10 +247,8 @@ def run(run_dirs, seeds, out_dir, overrides=(), rows=None, strict: bool = True, 
         dm = build_datamodule(data)
         dm.prepare_data()
         dm.setup()
-        from datamodules.canonical.dataset import PairDataset
-
         records = dm.splits["test"] if fold_test else dm.held_out_records()
-        ds = PairDataset(records, dm.cache, dm.subject_index)
+        ds = CanonicalPairDataset(records, dm.cache, dm.subject_index)
         its = [ds[i] for i in range(len(ds))]
         items = {k: np.stack([it[k][0].numpy() for it in its]) for k in ("depth", "mask", "canon_depth", "canon_mask")}
         if all(it["has_flow"] for it in its):  # flow targets (data.flow_targets=true): the warp oracle row
@@ -262,8 +263,6 @@ def run(run_dirs, seeds, out_dir, overrides=(), rows=None, strict: bool = True, 
                   settings=settings, wall_seconds=time.perf_counter() - t0)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    from lit3d.utils.io import write_json
-
     write_json(out_dir / "pooled.json", result)
     return write_pooled_results(result, out_dir)
 

@@ -10,6 +10,7 @@ import io
 from pathlib import Path
 
 
+from lit3d.canonical.figures import subject_sheets
 from lit3d.utils.tables import fmt, markdown_table
 from lit3d.utils.io import atomic_write_bytes, atomic_write_text
 
@@ -173,6 +174,8 @@ def _mask_match_lines(match: dict | None) -> list[str]:
         return []
     parts = [f"{row} {v['iou']:.2f} IoU, nearest canonical mask of its own subject {v['nearest_subject']:.0%}, "
              f"retrieval by mask IoU NN {v['nn_by_mask']:.2f} / FT {v['ft_by_mask']:.2f}"
+             + (f", IoU between its masks of one subject {v['iou_same']:.3f} against two subjects "
+                f"{v['iou_other']:.3f}" if "iou_same" in v else "")
              for row, v in match.items()]
     return ["Masks, against the true canonical mask (no descriptor, no seed): " + "; ".join(parts) + ".", ""]
 
@@ -184,8 +187,6 @@ def write_figures(task, datamodule, out_dir: Path, n: int = 4, evaluation=None) 
     datamodule's source when ``metrics.json`` is in ``out_dir`` (lit3d-eval writes them before the
     figures, without knowing the data source)."""
     import json
-
-    from lit3d.canonical.figures import subject_sheets
 
     out_dir = Path(out_dir)
     task.eval()

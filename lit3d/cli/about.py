@@ -9,11 +9,17 @@ argparse commands (``lit3d-score``, ``lit3d-reconstruct``) use :func:`version_li
 from __future__ import annotations
 
 import inspect
+import re
+import signal
 import sys
+import threading
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from lit3d.utils.checkpoints import first_line
 from lit3d.utils.provenance import lit3d_version
+
+EXIT_USER = 2        # a problem with the command line, a config or an input file
 
 # entry-point module -> (command, help page in conf/hydra/help/)
 COMMANDS = {
@@ -54,31 +60,78 @@ def about_flags(args: Sequence[str], hydra_main: Callable) -> list[str]:
 USER_ERRORS = (ValueError, FileNotFoundError, PermissionError, NotImplementedError)
 
 
-def report_error(prog: str, exc: Exception, prefix: str = "") -> int:
-    """One line ``PROG: error: ...`` (a user error: bad input, exit 2) or ``PROG: internal error (...)``
-    (exit 1) on stderr; returns the exit status."""
-    from lit3d.cli.common import EXIT_USER
-    from lit3d.utils.checkpoints import first_line
+def allocation_failure(exc: BaseException) -> str | None:
+    """``"not enough memory (tried to allocate 2.25 GiB)"`` for an allocation that failed (a
+    ``MemoryError``, numpy's included, or torch's "can't allocate memory" / "out of memory"
+    ``RuntimeError``); None for any other error. A resource limit, not a bug: exit 2."""
+    text = str(exc)
+    if not isinstance(exc, MemoryError) and not (
+            isinstance(exc, RuntimeError) and re.search(r"can't allocate memory|out of memory", text, re.I)):
+        return None
+    size = None
+    if m := re.search(r"allocate (\d+) bytes", text):  # torch on CPU
+        n, units = float(m.group(1)), ["bytes", "KiB", "MiB", "GiB", "TiB", "PiB"]
+        while n >= 1024 and len(units) > 1:
+            n, units = n / 1024, units[1:]
+        size = f"{n:.2f} {units[0]}"
+    elif m := re.search(r"allocate ([\d.]+ [KMGTP]i?B)", text, re.I):
+        size = m.group(1)
+    return "not enough memory" + (f" (tried to allocate {size})" if size else "")
 
-    user = isinstance(exc, USER_ERRORS)
+
+def report_error(prog: str, exc: Exception, prefix: str = "") -> int:
+    """One line ``PROG: error: ...`` (a user error: bad input or a resource limit such as memory,
+    exit 2) or ``PROG: internal error (...)`` (exit 1) on stderr; returns the exit status."""
+    memory = allocation_failure(exc)
+    user = memory is not None or isinstance(exc, USER_ERRORS)
     kind = "error" if user else f"internal error ({type(exc).__name__}; rerun with --debug)"
-    print(f"{prog}: {kind}: {prefix}{first_line(exc, type(exc).__name__)}", file=sys.stderr, flush=True)
+    print(f"{prog}: {kind}: {prefix}{memory or first_line(exc, type(exc).__name__)}", file=sys.stderr, flush=True)
     return EXIT_USER if user else 1
+
+
+class Stopped(KeyboardInterrupt):
+    """A stop by a signal inside an argparse CLI: SIGTERM (raised by :func:`run_argparse_cli`'s
+    handler) or Ctrl-C. A ``KeyboardInterrupt``, so what finishes a set of files on Ctrl-C
+    (:func:`lit3d.utils.io.write_file_set`) finishes it on SIGTERM too. ``detail``: what the
+    command kept, said on its stop line."""
+
+    def __init__(self, signame: str = "SIGINT", detail: str = ""):
+        super().__init__(signame)
+        self.signame, self.detail = signame, detail
+
+    @property
+    def exit_code(self) -> int:
+        return 128 + int(getattr(signal, self.signame))  # 130 for SIGINT, 143 for SIGTERM
+
+    def line(self, prog: str) -> str:
+        what = "interrupted" if self.signame == "SIGINT" else f"stopped by {self.signame}"
+        return f"{prog}: {what}" + (f" {self.detail}" if self.detail else "")
+
+
+def _raise_stopped(signum, _frame) -> None:
+    raise Stopped(signal.Signals(signum).name)
 
 
 def run_argparse_cli(prog: str, parser, run: Callable, argv: Sequence[str] | None = None) -> int:
     """The argparse CLIs' ``main``: quiet third-party output, parse, ``run(args)``; Ctrl-C exits 130
-    with one line, any other error is :func:`report_error`'s line (``--debug``: the traceback)."""
+    and SIGTERM 143, each with one line (:class:`Stopped`); any other error is
+    :func:`report_error`'s line (``--debug``: the traceback)."""
     from lit3d.utils import quiet
 
     quiet.install()
     args = parser.parse_args(argv)
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _raise_stopped) if main_thread else None
     try:
         return run(args)
-    except KeyboardInterrupt:
-        print(f"{prog}: interrupted", file=sys.stderr, flush=True)
-        return 130
+    except KeyboardInterrupt as exc:
+        stop = exc if isinstance(exc, Stopped) else Stopped("SIGINT")
+        print(stop.line(prog), file=sys.stderr, flush=True)
+        return stop.exit_code
     except Exception as exc:
         if args.debug:
             raise
         return report_error(prog, exc)
+    finally:
+        if main_thread:  # None: the earlier handler was not set from Python
+            signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)

@@ -10,6 +10,7 @@ Errors the user can act on end the process with one line on stderr (see :func:`r
 what                                                       exit   line
 ========================================================  =====  =========================================
 bad option/file (UserError, DataError, ShapeError, ???)    2      ``error: <file or option>: <problem>``
+wrong type/range of a config value (ConfigValueError)      2      ``error: <key>=<value>: expected <what>``
 unwritable output (run dir, data_dir: a file, read-only)   2      ``error: <path>: <problem>``
 NaN/Inf loss (FloatingPointError)                          1      ``error: non-finite loss at ... step``
 SIGTERM or Ctrl-C during training (last.ckpt saved)        143    ``error: <run dir>: stopped by SIGTERM``
@@ -30,7 +31,8 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from lit3d.cli.about import about_flags
+from lit3d.cli.about import EXIT_USER, about_flags
+from lit3d.cli.config_checks import ConfigValueError, check_config_values
 from lit3d.cli.rundir import claim_run_dir, hold_output_dir
 from lit3d.utils import quiet
 from lit3d.utils.checkpoints import first_line
@@ -42,7 +44,6 @@ log = logging.getLogger("lit3d")
 
 CONF_DIR = str(config_dir())
 # keys of a task config read by the CLI and not passed to the LightningModule
-EXIT_USER = 2        # a problem with the command line, a config or an input file
 EXIT_DIVERGED = 1    # training stopped on a NaN/Inf loss
 EXIT_SIGTERM = 128 + signal.SIGTERM
 
@@ -259,9 +260,10 @@ def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None, c
     try:
         check_group_overrides(args)
         composed = check_composes(args, config_name)
+        check_config_values(composed)  # types and ranges (lit3d.cli.config_checks)
         check_output_paths(composed)
         args, run_dir_lock = claim_run_dir(composed, args)  # one process per run dir (lit3d.cli.rundir)
-    except (UserError, OutputError) as exc:
+    except (UserError, ConfigValueError, OutputError) as exc:
         if _debug_requested():
             raise
         fail(exc, EXIT_USER)
@@ -279,7 +281,7 @@ def exit_code_for(exc: BaseException) -> int | None:
 
     if isinstance(exc, Interrupted):
         return exc.exit_code
-    if isinstance(exc, (UserError, DataError, ShapeError, MissingMandatoryValue)):
+    if isinstance(exc, (UserError, ConfigValueError, DataError, ShapeError, MissingMandatoryValue)):
         return EXIT_USER
     if _file_system_fault(exc):  # an output that cannot be written: the path and the problem
         return EXIT_USER
@@ -337,6 +339,7 @@ def run_cli(fn: Callable[[DictConfig], Any], cfg: DictConfig) -> Any:
         missing = sorted(OmegaConf.missing_keys(cfg))
         if missing:  # before any work or logging: the one line is all the user sees
             raise UserError(f"missing value for {missing[0]}: set {missing[0]}=... on the command line")
+        check_config_values(cfg)  # again here: a multirun job's values are not composed by cli_main
         log_once_through_hydra()  # imports Lightning: only once the command line is known to be whole
         with hold_output_dir(cfg):  # a multirun job's dir; a no-op where cli_main holds the run dir
             return fn(cfg)

@@ -26,16 +26,19 @@ from lit3d.cli.common import (
     run_evaluation,
     to_plain,
 )
+from lit3d.cli.resume_checks import check_eval_data
 from lit3d.utils.provenance import add_to_metrics, provenance
 
 
 def checkpoint_meta_for(cfg: DictConfig) -> dict:
-    """The checkpoint's lit3d metadata; refuses a checkpoint of another task than ``task=NAME``."""
+    """The checkpoint's lit3d metadata; refuses a checkpoint of another task than ``task=NAME``, and
+    one of another task than the data config's (``data=NAME``, :func:`check_eval_data`)."""
     meta = read_checkpoint_meta(cfg.ckpt_path)
     have = (meta.get("task") or {}).get("name")
     wanted = cfg.get("task_info")
     if wanted is not None and wanted.get("name") != have:
         raise UserError(f"{cfg.ckpt_path}: checkpoint is for task '{have}', not '{wanted.get('name')}'")
+    check_eval_data(cfg.ckpt_path, meta, cfg.get("data"))
     return meta
 
 

@@ -20,11 +20,13 @@ inputs share a stem, NAME keeps the extension (a_cow_png, a_cow_npy) and a note 
 An input's files are written together (temp folder, renamed into place when all exist),
 never over an input file. A bad input gets one line naming the file and the problem, the
 batch goes on, and the exit status is 2; an unusable --out (a file, read-only, would replace
-an input) stops the run with exit 2 before the network is loaded.
+an input, is an input folder) stops the run with exit 2 before the network is loaded. SIGTERM
+or Ctrl-C ends with one line saying which sets were kept (exit 143 or 130); a rerun skips them.
 """
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -46,7 +48,8 @@ def _parser() -> argparse.ArgumentParser:
     cam.add_argument("--depth-scale", type=float, default=0.001,
                      help="metres per unit of integer depth images (default 0.001: millimetres)")
     cut = p.add_argument_group("object")
-    cut.add_argument("--mask", help="object mask image (non-zero = object), or a folder of NAME.png/.npy masks")
+    cut.add_argument("--mask", help="object mask image (non-zero = object), or a folder of masks named like the "
+                                    "depth images (NAME.png/.npy...: the same stem exactly)")
     cut.add_argument("--near", type=float, default=None, help="ignore depth nearer than this (metres)")
     cut.add_argument("--far", type=float, default=None, help="ignore depth farther than this (metres)")
     cut.add_argument("--remove-plane", action="store_true", help="remove the dominant plane (table, floor)")
@@ -115,17 +118,14 @@ def _check_args(args) -> None:
 
 
 def _mask_for(args, depth_path: Path, shape):
-    from lit3d.reconstruct.depth_io import InputError, read_mask
+    """``(mask (H, W) bool, its file)`` for ``depth_path`` (``(None, None)`` without --mask); a
+    mask folder is paired by exact stem (:func:`lit3d.reconstruct.depth_io.find_mask`)."""
+    from lit3d.reconstruct.depth_io import find_mask, read_mask
 
     if not args.mask:
-        return None
-    m = Path(args.mask)
-    if m.is_dir():
-        found = [q for q in sorted(m.glob(depth_path.stem + ".*")) if q.is_file()]
-        if not found:
-            raise InputError(f"{depth_path}: no mask {m}/{depth_path.stem}.* in the mask folder")
-        m = found[0]
-    return read_mask(m, shape)
+        return None, None
+    m = find_mask(args.mask, depth_path)
+    return read_mask(m, shape), m
 
 
 class _Scorer:
@@ -175,7 +175,8 @@ def _one(args, path: Path, name: str, completer, mapper, scorer, protected) -> d
     t_read = time.perf_counter() - t0
     h, w = depth.shape
     intr = _intrinsics(args, w, h, str(path))
-    opts = Options(mask=_mask_for(args, path, depth.shape), near=args.near, far=args.far,
+    mask, mask_file = _mask_for(args, path, depth.shape)
+    opts = Options(mask=mask, near=args.near, far=args.far,
                    remove_plane=args.remove_plane, largest_cluster=args.largest_cluster, fuse_input=not args.no_fuse)
     res = reconstruct(depth, intr, completer, opts, label=str(path), canonical=mapper)
     timings = {"read": t_read, **res.timings}
@@ -195,6 +196,7 @@ def _one(args, path: Path, name: str, completer, mapper, scorer, protected) -> d
         "grids": {"input": [completer.geometry.input_res] * 3, "output": [completer.geometry.target_res] * 3},
         "fuse_input": opts.fuse_input, "counts": res.info, "mesh_frame": "camera (x right, y down, z forward), metres",
         "notes": notes, "output_name": name, "request": request_key(args, path),
+        "mask": None if mask_file is None else str(mask_file),
     }
     if mapper is not None:
         summary["mesh_frame"] += "; canonical pose placed at the posed subject's position and size"
@@ -234,6 +236,7 @@ def _plan_outputs(args, inputs: list[Path]) -> tuple[list[str], list[Path]]:
     from lit3d.reconstruct.outputs import output_files
     from lit3d.utils.io import check_output_dir, check_targets, unique_names
 
+    _check_out_is_no_input_folder(args)
     names, notes = unique_names(inputs)
     for note in notes:
         _say(f"note: {note}")
@@ -243,6 +246,20 @@ def _plan_outputs(args, inputs: list[Path]) -> tuple[list[str], list[Path]]:
     check_targets(planned, protected)  # before --out is created: a refused run leaves nothing
     check_output_dir(out)
     return names, protected
+
+
+def _check_out_is_no_input_folder(args) -> None:
+    """--out may not be a folder given as input, itself or through a link: a rerun would read the
+    outputs (``NAME.png``, ``NAME_occupancy.npz``) as depth images. A subfolder is fine (a folder
+    input is not read recursively). Raises OutputError."""
+    from lit3d.utils.io import OutputError
+
+    out = Path(args.out)
+    for given in map(Path, args.depth):
+        if given.is_dir() and given.resolve() == out.resolve():
+            via = f", through the link {out} -> {os.readlink(out)}" if out.is_symlink() else ""
+            raise OutputError(f"{out}: --out is the input folder {given}{via}; a rerun would read the outputs as "
+                              f"depth images: choose another folder (a subfolder such as {given / 'out'} is fine)")
 
 
 def _dedupe(inputs: list[Path]) -> list[Path]:
@@ -287,32 +304,61 @@ def _run(args) -> int:
     skipped = len(inputs) - len(todo)
     inputs, names = [p for p, _ in todo], [n for _, n in todo]
     bar = tqdm(inputs, desc="reconstruct", unit="image", disable=len(inputs) < 2, file=sys.stderr)
-    done = 0
-    for path, name in zip(bar, names):
-        try:
-            s = _one(args, path, name, completer, mapper, scorer, protected)
-            done += 1
-            if len(inputs) < 2:
-                _say(f"wrote {Path(args.out) / name}.{{{args.format},png,json}} and "
-                     f"{name}_occupancy.npz ({s['timings_s']['total']:.1f} s)")
-        except Exception as exc:
-            if args.debug:
-                raise
-            from lit3d.utils.io import OutputError
+    done, current = [], None
+    try:
+        for k, (path, name) in enumerate(zip(bar, names), 1):
+            current = (k, path, name)
+            try:
+                s = _one(args, path, name, completer, mapper, scorer, protected)
+                done.append(name)
+                if len(inputs) < 2:
+                    _say(f"wrote {Path(args.out) / name}.{{{args.format},png,json}} and "
+                         f"{name}_occupancy.npz ({s['timings_s']['total']:.1f} s)")
+            except Exception as exc:
+                if args.debug:
+                    raise
+                from lit3d.utils.io import OutputError
 
-            failed += 1
-            out_fault = isinstance(exc, OutputError)
-            with bar.external_write_mode(file=sys.stderr):
-                code = _report(exc, "" if out_fault or str(path) in str(exc) else f"{path}: ")
-            status = max(status, code)
-            if out_fault:  # the output folder takes no more files (full, gone read-only): stop here
-                failed = len(inputs) - done
-                break
+                failed += 1
+                out_fault = isinstance(exc, OutputError)
+                with bar.external_write_mode(file=sys.stderr):
+                    code = _report(exc, "" if out_fault or str(path) in str(exc) else f"{path}: ")
+                status = max(status, code)
+                if out_fault:  # the output folder takes no more files (full, gone read-only): stop here
+                    failed = len(inputs) - len(done)
+                    break
+    except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM (lit3d.cli.about.Stopped): say what is kept
+        bar.close()
+        raise _stopped(args, exc, len(inputs), done, current, skipped) from None
     if len(inputs) > 1 or skipped:
         _say(f"{len(inputs) - failed} of {len(inputs)} images reconstructed into {args.out}"
              + (f"; {failed} failed (see above)" if failed else "")
              + (f"; {skipped} already there skipped (--overwrite redoes them)" if skipped else ""))
     return status
+
+
+def _stopped(args, exc: KeyboardInterrupt, total: int, done: list[str], current, skipped: int):
+    """The :class:`lit3d.cli.about.Stopped` of a batch stopped by SIGTERM or Ctrl-C, its line saying
+    what was kept: the finished sets (whole: :func:`lit3d.utils.io.write_file_set` finishes a set
+    whose renames had begun, and writes nothing of one still being made) and that a rerun skips them.
+    ``current``: ``(1-based position, input, output name)`` of the image being made, or None."""
+    from lit3d.cli.about import Stopped
+    from lit3d.reconstruct.outputs import finished_set, request_key
+
+    at, busy = "before the first image", ""
+    if current is not None:
+        k, path, name = current
+        at = f"at image {k} of {total}"
+        whole = name in done or finished_set(args.out, name, args.format, not args.no_figure, request_key(args, path))
+        if name not in done and whole:
+            done = [*done, name]  # stopped during its renames, which were finished
+        busy = "" if whole else f"; {path} (in progress) was not written"
+    n = len(done)
+    kept = f"the {n} finished set{'s' if n != 1 else ''} in {args.out} {'are' if n != 1 else 'is'} whole and kept" \
+        if n else f"nothing new was written to {args.out}"
+    before = f" ({skipped} more done by an earlier run)" if skipped else ""
+    return Stopped(getattr(exc, "signame", "SIGINT"), f"{at}{before}: {kept}{busy}; the same command again does "
+                   "the rest (finished sets are skipped)")
 
 
 def _to_do(args, inputs: list[Path], names: list[str]) -> list[tuple[Path, str]]:

@@ -35,9 +35,10 @@ import argparse
 import json
 import sys
 import time
+import warnings
 from pathlib import Path
 
-from lit3d.cli.about import run_argparse_cli, version_line
+from lit3d.cli.about import allocation_failure, run_argparse_cli, version_line
 
 DEFAULT_SIZE = 256
 
@@ -229,12 +230,36 @@ def _feature_setup(args):
 
 
 def _score(args, cfg, predictor, ref, dist):
-    """``(feature table, seconds, prediction or None)`` of one loaded pair."""
+    """``(feature table, seconds, prediction or None)`` of one loaded pair. The feature cache is
+    optional: a cache that cannot be written gives one warning line (once a run), the score is
+    computed all the same. Memory that cannot be allocated for the renders is one line naming the
+    render size (exit 2)."""
+    from lit3d.features.common import CacheWarning
     from lit3d.features.table import default_cache_dir, feature_table
 
     t0 = time.perf_counter()
-    table = feature_table(ref, dist, cfg, cache_dir=None if args.no_cache else default_cache_dir(),
-                          device=args.device)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", CacheWarning)
+            table = feature_table(ref, dist, cfg, cache_dir=None if args.no_cache else default_cache_dir(),
+                                  device=args.device)
+    except (MemoryError, RuntimeError) as exc:
+        what = allocation_failure(exc)
+        if what is None:
+            raise
+        where = f" on {args.device}" if args.device else ""
+        if args.ckpt:
+            raise ValueError(f"{args.ckpt}: the model's render size {cfg.render.size} px: {what}{where}") from None
+        raise ValueError(f"--size {cfg.render.size}: {what} for renders of {cfg.render.size} px{where}; "
+                         f"try a smaller --size (default {DEFAULT_SIZE})") from None
+    said = vars(args).setdefault("_cache_warnings", set())
+    for w in caught:
+        if not issubclass(w.category, CacheWarning):  # not ours: shown as it would have been
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
+        elif str(w.message) not in said:
+            said.add(str(w.message))
+            print(f"lit3d-score: warning: {w.message}; the score is computed but not cached (--no-cache skips "
+                  "the cache, LIT3D_CACHE=DIR moves it)", file=sys.stderr, flush=True)
     seconds = time.perf_counter() - t0
     prediction = None
     if predictor is not None:

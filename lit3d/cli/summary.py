@@ -7,17 +7,29 @@ from __future__ import annotations
 import hydra
 from omegaconf import DictConfig
 
-from lit3d.cli.common import CONF_DIR, cli_main, import_object, run_cli, task_kwargs
+from lit3d.cli.common import CONF_DIR, UserError, _construct, cli_main, import_object, run_cli, task_kwargs
+from lit3d.utils.checkpoints import first_line
+
+
+def summary_rows(task_cfg: DictConfig) -> list[dict]:
+    """The task's per-component rows, its nets built on the meta device. A bad size gives the one
+    line ``lit3d-train`` gives (``task config: ...``, :class:`UserError`); a net that cannot run at
+    the configured sizes (a shape error in the meta forward, e.g. ``task.net.image_size`` too small
+    for its pooling levels) gives ``task config: the nets do not run at these sizes (...)``."""
+    import torch
+
+    task_cls = import_object(task_cfg["_target_"])
+    try:
+        with torch.device("meta"):
+            return _construct("task", lambda: task_cls.summary_rows(task_kwargs(task_cfg)))
+    except RuntimeError as exc:
+        raise UserError(f"task config: the nets do not run at these sizes ({first_line(exc, 'RuntimeError')})") from exc
 
 
 def summary(cfg: DictConfig) -> str:
-    import torch
-
     from lit3d.utils.summary import format_summary_table
 
-    task_cls = import_object(cfg.task["_target_"])
-    with torch.device("meta"):
-        rows = task_cls.summary_rows(task_kwargs(cfg.task))
+    rows = summary_rows(cfg.task)
     text = f"# {cfg.task_info.name}: per-component summary (batch 1, meta device)\n\n" + format_summary_table(rows)
     print(text)
     return text

@@ -32,6 +32,7 @@ from lit3d.cli.common import (
     task_meta,
     to_plain,
 )
+from lit3d.cli.resume_checks import check_resume_config, check_weights_fit
 from lit3d.cli.run_log import with_csv_logger, write_run_curves
 from lit3d.utils.io import atomic_write_text, write_json
 from lit3d.utils.log_images import WANDB, logger_kind
@@ -161,11 +162,16 @@ def train(cfg: DictConfig) -> float | None:
     pl.seed_everything(cfg.seed, workers=True)
     torch.set_float32_matmul_precision(cfg.matmul_precision)
     ckpt_path = resolve_ckpt_path(cfg.get("ckpt_path"), output_dir)
-    wandb_id = (read_checkpoint_meta(ckpt_path).get("wandb_id") if ckpt_path else None) or uuid.uuid4().hex[:8]
+    meta = read_checkpoint_meta(ckpt_path) if ckpt_path else {}
+    if ckpt_path:  # its task, data and architecture against this config (lit3d.cli.resume_checks)
+        check_resume_config(ckpt_path, meta, cfg, output_dir)
+    wandb_id = meta.get("wandb_id") or uuid.uuid4().hex[:8]
 
-    atomic_write_text(output_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
     datamodule = build_datamodule(cfg.data)
     task = build_task(cfg.task)
+    if ckpt_path:  # before the data is prepared: weights of another size are one line, not Lightning's traceback
+        check_weights_fit(ckpt_path, task)
+    atomic_write_text(output_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))  # once every check passed
     loggers = with_csv_logger(build_loggers(cfg, wandb_id), output_dir)  # the CSV log is always on (curves.png)
     callbacks = [instantiate(c) for c in (cfg.get("callbacks") or {}).values() if c is not None]
     callbacks.append(MetadataCallback(task_meta(cfg), to_plain(cfg.data), wandb_id))

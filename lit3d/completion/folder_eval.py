@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from datamodules.cache import DataError, read_manifest
-from datamodules.voxel_cache import TEST_SPLITS, load_pair
+from datamodules.completion.voxel_cache import TEST_SPLITS, load_pair
 from lit3d.completion.split_metrics import split_values
 from lit3d.completion.surface_eval import surface_values
 from lit3d.metrics.surface import SurfaceMetrics, SurfaceSample, sample_mesh

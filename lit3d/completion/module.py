@@ -32,6 +32,7 @@ from lit3d.completion.paired import PairedSamples, extrude_silhouette
 from lit3d.completion.previews import log_validation_previews
 from lit3d.completion.prior import mean_training_target
 from lit3d.completion.split_metrics import split_values, threshold_index
+from lit3d.completion.summary import summarize_completion
 from lit3d.completion.surface_eval import SurfaceTestMetrics
 from lit3d.metrics.gathered import compute_if_updated
 from lit3d.callbacks.nonfinite import NonFiniteLossError, guard_step, validate_mode  # noqa: F401 (re-exported)
@@ -368,8 +369,6 @@ class CompletionTask(pl.LightningModule):
     @staticmethod
     def summary_rows(kwargs: dict) -> list[dict]:
         """Per-component rows for ``lit3d-summary`` (meta device, nothing allocated)."""
-        from lit3d.completion.summary import summarize_completion
-
         return summarize_completion(kwargs["nets"])
 
 

@@ -26,7 +26,7 @@ def extrude_silhouette(partial: torch.Tensor, size: int) -> torch.Tensor:
 
     Args:
         partial: ``(B, 1, r, r, r)`` {0, 1}; along the last axis index 0 is nearest the depth
-            camera (:mod:`datamodules.synth.depth_voxels`).
+            camera (:mod:`datamodules.completion.depth_voxels`).
         size: output side (nearest upsampling, as the input-as-prediction baseline).
     """
     occ = partial > 0.5

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from lit3d.completion.figures import collect_samples, split_figure
 from lit3d.completion.module import split_key
 from lit3d.completion.surface_report import surface_section
 from lit3d.utils.io import atomic_write_bytes, atomic_write_text
@@ -128,8 +129,6 @@ def write_figures(task, datamodule, out_dir: Path, n: int = 4, evaluation=None) 
     ``<split>_prediction.npz`` / ``<split>_target.npz``) so that ``lit3d-score`` can
     compare them by rendering: ``lit3d-score same_target.npz same_prediction.npz``.
     """
-    from lit3d.completion.figures import collect_samples, split_figure
-
     out_dir = Path(out_dir)
     paths = []
     task.eval()

@@ -1,7 +1,8 @@
 """What the mesh table (:mod:`lit3d.features.table`) and the point-cloud table
 (:mod:`lit3d.features.points`) share, imported by both (neither imports the other's internals):
 
-- the configuration and result types: :class:`FeatureConfig`, :class:`ShapeViews`,
+- the configuration and result types: :class:`FeatureConfig` (and :func:`feature_config`, one
+  from plain options), :class:`ShapeViews`,
   :class:`FeatureTable`, :func:`overall_score`, the cache key :func:`content_key`;
 - the feature cache: :func:`cache_path`, :func:`read_cached_table`, :func:`write_cached_table`
   (JSON files ``<key>.json``, written atomically and sorted);
@@ -21,7 +22,8 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Callable, Iterator
+import warnings
+from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
@@ -35,7 +37,7 @@ from lit3d.metrics import image as im
 from lit3d.render.colour_styles import COLOUR_STYLES
 from lit3d.render.gbuffer import RenderConfig
 from lit3d.render.styles import apply_styles, resolve_styles
-from lit3d.utils.io import write_json
+from lit3d.utils.io import output_error, write_json
 
 FEATURE_VERSION = 2
 IMAGE_MEASURES = ("mask_ssim", "mask_ssim_window", "mask_ssim_negative", "mask_ssim_merge", "ssim",
@@ -89,6 +91,23 @@ class FeatureConfig:
         """The feature table ``lit3d-score`` computes: ``size`` px renders in ``styles`` (names, a
         comma list; None, ``"all"`` or empty: every style), the other fields at their defaults."""
         return cls(render=RenderConfig(size=int(size)), styles=tuple(resolve_styles(styles or "all")))
+
+
+def feature_config(options: Mapping[str, Any] | None = None) -> FeatureConfig:
+    """:class:`FeatureConfig` from plain options, as stored in data configs and checkpoints
+    (``data.feature_options``): ``size``, ``extent``, ``distance``, ``shadings``, ``styles``,
+    ``measures``, ``mesh_measures``, ``n_samples``, ``fsim_downsample``, ``chunk``, ``workers``
+    (missing -> the defaults; ``cache_dir`` is ignored). The one definition: the data's feature
+    function and :meth:`lit3d.quality.predict.QualityPredictor.feature_config` both call it."""
+    o = dict(options or {})
+    render_kw = {k: o.pop(k) for k in ("size", "extent", "distance") if k in o}
+    if "shadings" in o:
+        render_kw["shadings"] = tuple(o.pop("shadings"))
+    o.pop("cache_dir", None)
+    for k in ("styles", "measures"):
+        if k in o and o[k] is not None:
+            o[k] = tuple(o[k])
+    return FeatureConfig(render=RenderConfig(**render_kw), **o)
 
 
 @dataclass
@@ -171,11 +190,21 @@ def read_cached_table(path: Path | None, key: str) -> FeatureTable | None:
     return None
 
 
+class CacheWarning(UserWarning):
+    """The optional feature cache could not be written (read-only, full disk...): the table is
+    returned all the same, uncached; the message names the cache folder and the problem."""
+
+
 def write_cached_table(path: Path | None, key: str, cfg: FeatureConfig, features: dict[str, float]) -> None:
     """Write ``{"key", "config": cfg.key_dict(), "features"}`` to ``path`` (atomic, sorted JSON;
-    nothing without a path)."""
-    if path is not None:
+    nothing without a path). The cache is optional: a write that fails (OSError) leaves no file
+    and warns (:class:`CacheWarning`) instead of raising."""
+    if path is None:
+        return
+    try:
         write_json(path, {"key": key, "config": cfg.key_dict(), "features": features})
+    except OSError as exc:
+        warnings.warn(CacheWarning(f"feature cache not written: {output_error(path.parent, exc)}"), stacklevel=2)
 
 
 # --------------------------------------------------------------------------- worker threads

@@ -111,7 +111,7 @@ def _rgb_measures(a: torch.Tensor, b: torch.Tensor, ma, mb, crop, measures) -> d
     return {k: v for k, v in out.items() if k in want}
 
 
-def _view_measures(ga, gb, v: int, names: list[str], cfg: FeatureConfig, colour: bool,
+def _point_view_measures(ga, gb, v: int, names: list[str], cfg: FeatureConfig, colour: bool,
                    albedo: bool = True) -> dict[tuple[str, str], torch.Tensor]:
     """``{(measure, style): (1,) float32}`` for view ``v`` of two point G-buffers (crop of the union of masks).
 
@@ -176,7 +176,7 @@ def point_feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_di
             if device is not None:
                 sa, sb = sa.to(device), sb.to(device)
             for v in range(sa.mask.shape[0]):
-                pending.append((shading, submit(_view_measures, sa, sb, v, names, cfg, colour, i == 0)))
+                pending.append((shading, submit(_point_view_measures, sa, sb, v, names, cfg, colour, i == 0)))
         per: dict[str, list[float]] = {}
         for shading, res in pending:
             for (k, s), t in res.result().items():

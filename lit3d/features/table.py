@@ -21,10 +21,8 @@ of both meshes' vertex/face arrays and the feature configuration.
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
@@ -40,6 +38,7 @@ from lit3d.features.common import (
     cache_path,
     content_key,
     crop_box,
+    feature_config,
     overall_score,
     pair_measures,
     read_cached_table,
@@ -50,7 +49,7 @@ from lit3d.features.common import (
 from lit3d.features.points import point_feature_table
 from lit3d.metrics.mesh import chamfer_hausdorff
 from lit3d.render.convert import mesh_hash, to_mesh
-from lit3d.render.gbuffer import RenderConfig, render_gbuffers
+from lit3d.render.gbuffer import render_gbuffers
 from lit3d.render.points import is_point_source, load_points
 from lit3d.render.splat import render_point_gbuffers
 from lit3d.render.styles import apply_styles
@@ -60,22 +59,6 @@ __all__ = [  # with the names of lit3d.features.common that callers have always 
     "content_key", "default_cache_dir", "feature_config", "feature_table", "image_measures", "overall_score",
     "pair_measures", "render_views",
 ]
-
-
-def feature_config(options: Mapping[str, Any] | None = None) -> FeatureConfig:
-    """:class:`FeatureConfig` from plain options, as stored in data configs and checkpoints
-    (``data.feature_options``): ``size``, ``extent``, ``distance``, ``shadings``, ``styles``,
-    ``measures``, ``mesh_measures``, ``n_samples``, ``fsim_downsample``, ``chunk``, ``workers``
-    (missing -> the defaults; ``cache_dir`` is ignored)."""
-    o = dict(options or {})
-    render_kw = {k: o.pop(k) for k in ("size", "extent", "distance") if k in o}
-    if "shadings" in o:
-        render_kw["shadings"] = tuple(o.pop("shadings"))
-    o.pop("cache_dir", None)
-    for k in ("styles", "measures"):
-        if k in o and o[k] is not None:
-            o[k] = tuple(o[k])
-    return FeatureConfig(render=RenderConfig(**render_kw), **o)
 
 
 def render_views(mesh, cfg: FeatureConfig | None = None, device=None, rgb: bool = False) -> ShapeViews:

@@ -3,7 +3,7 @@
     v, f = simplify(verts, faces, target_faces=2000)          # about 2000 faces
     v, f = simplify_to_vertices(verts, faces, max_vertices=1500)   # at most 1500 vertices
 
-Used by the quality distortion levels (:mod:`datamodules.synth.distortions`) and the
+Used by the quality distortion levels (:mod:`datamodules.quality.distortions`) and the
 canonical-form baselines (:mod:`lit3d.geometry.canonical_forms`, dense ``V x V`` geodesics).
 """
 from __future__ import annotations

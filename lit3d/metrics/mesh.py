@@ -9,12 +9,12 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from lit3d.render.convert import normalise as _normalise
+
 
 def surface_samples(mesh, n: int = 20000, seed: int = 0, normalise: bool = True) -> np.ndarray:
     """``(n, 3) float64`` points sampled uniformly (by area) on ``mesh``'s surface."""
     import trimesh
-
-    from lit3d.render.convert import normalise as _normalise
 
     m = _normalise(mesh) if normalise else mesh
     pts, _ = trimesh.sample.sample_surface(m, n, seed=seed)

@@ -22,7 +22,11 @@ from pathlib import Path
 import numpy as np
 
 from lit3d.features.table import FeatureConfig, feature_table
+from lit3d.render.convert import ShapeError, to_mesh
 from lit3d.render.gbuffer import RenderConfig
+from lit3d.render.styles import resolve_styles
+from lit3d.utils.io import atomic_write_text
+from lit3d.utils.tables import markdown_table
 
 DEFAULT_CANVASES = (128, 256, 512, 1024)
 DEFAULT_STYLES = ("basic_1", "ceramic_lightbulb", "clay_studio", "metal_shiny", "toon", "lambert_white")
@@ -64,8 +68,6 @@ def canvas_rows(ref, dist, canvases=DEFAULT_CANVASES, styles=DEFAULT_STYLES, bas
 
 def markdown(rows: list[dict]) -> str:
     """The table as markdown, plus the drift (max - min) of each column."""
-    from lit3d.utils.tables import markdown_table
-
     cols = ("ssim", "mask_ssim", "mask_ssim_window", "mask_ssim_negative", "mask_ssim_merge")
     body = [[str(r["canvas"]), str(r["shape_px"])] + [f"{r[c]:.4f}" for c in cols] for r in rows]
     body.append(["drift (max-min)", ""] + [f"{max(r[c] for r in rows) - min(r[c] for r in rows):.4f}" for c in cols])
@@ -84,10 +86,6 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--canvases", default=",".join(map(str, DEFAULT_CANVASES)))
     p.add_argument("--styles", default=",".join(DEFAULT_STYLES), help="comma list or 'all'")
     a = p.parse_args(argv)
-    from lit3d.render.convert import ShapeError, to_mesh
-    from lit3d.render.styles import resolve_styles
-    from lit3d.utils.io import atomic_write_text
-
     try:
         if a.ref and a.dist:
             ref, dist = to_mesh(a.ref), to_mesh(a.dist)

@@ -24,9 +24,14 @@ from pathlib import Path
 
 import numpy as np
 
+from datamodules.quality import QualityDataModule
+from datamodules.quality.cpcd2 import read_cpcd2
 from lit3d.features.matrix import FeatureMatrix
 from lit3d.features.table import FeatureConfig, default_cache_dir, feature_config, feature_table, overall_score
 from lit3d.quality.correlation import pearson, spearman
+from lit3d.quality.protocol import LearnedScore
+from lit3d.quality.trainer import TrainConfig
+from lit3d.utils.tables import markdown_table
 
 LOWER_IS_BETTER = ("mse", "rmse", "canny", "hausdorff", "chamfer", "d1_mse", "d2_mse", "y_mse")
 BASELINES = ("d1_psnr", "d2_psnr", "y_psnr", "hausdorff", "chamfer")
@@ -45,8 +50,6 @@ def family(stimulus: str) -> str:
 
 def study_tables(root: str | Path, cfg: FeatureConfig | None = None, cache_dir=None, log=print):
     """``(items, tables)``: the reader's rated items and one feature dict per item (cached)."""
-    from datamodules.readers.cpcd2 import read_cpcd2
-
     ds = read_cpcd2(root)
     tables = []
     for it in ds.items:
@@ -116,9 +119,6 @@ def learned_factory(max_features: int = 6, candidates=None):
     """The learned score used here: SFS (Spearman on the training data) + the thesis MLP, SGD with
     momentum (lr 0.01, 150 epochs: the unit tests' fast set-up of the same model); ``candidates``
     restricts the features SFS may pick."""
-    from lit3d.quality.protocol import LearnedScore
-    from lit3d.quality.trainer import TrainConfig
-
     return lambda: LearnedScore(TrainConfig(lr=0.01, momentum=0.9, epochs=150), "sfs", criterion="train",
                                 sfs_kind="spearman", max_features=max_features, candidates=candidates)
 
@@ -149,16 +149,12 @@ def cross_from_synth(train: FeatureMatrix, items, tables, factory=None) -> dict[
 
 def synth_matrix(feature_options: dict, data_dir: str | Path, n_levels: int | None = 3) -> FeatureMatrix:
     """The built-in synthetic ordinal set (``data=quality_synth``) with these feature options."""
-    from datamodules.quality import QualityDataModule
-
     dm = QualityDataModule(data_dir=str(data_dir), source="synth", n_levels=n_levels,
                            feature_options=dict(feature_options))
     return dm.load_matrix()
 
 
 def markdown(rows) -> str:
-    from lit3d.utils.tables import markdown_table
-
     subs = ("all", "geometry", "colour_only")
     head = ["score", "kind"] + [f"SROCC {s} (n={rows[0][f'n_{s}']})" for s in subs] + [f"PLCC {s}" for s in subs]
     body = [[r["score"], r["kind"]] + [f"{r[f'spearman_{s}']:.3f}" for s in subs]

@@ -10,17 +10,32 @@
 The reference is ``--ref`` (any mesh ``lit3d-score`` reads; vertices split by per-corner normals or
 texture coordinates are merged first, so that a distortion moves the surface, not the seams) or the
 built-in procedural shape ``bumpy`` (smooth body, bumps on one hemisphere). The distortions are
-those of the synthetic quality set (:mod:`datamodules.synth.distortions`), at one level each:
+those of the synthetic quality set (:mod:`datamodules.quality.distortions`), at one level each:
 what the score of each says is how visible the damage is in the renders (1 = identical).
 """
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import sys
 from pathlib import Path
 
-# name -> (distortion kind, level index into datamodules.synth.distortions.LEVELS, description)
+import numpy as np
+import torch
+
+from datamodules.quality.distortions import distort
+from datamodules.quality.quality_shapes import procedural_shape
+from lit3d.features.table import FeatureConfig, render_views
+from lit3d.metrics.image import ssim_map, to_grey
+from lit3d.render.convert import to_mesh
+from lit3d.render.gbuffer import RenderConfig
+from lit3d.utils import quiet
+from lit3d.utils.figures import labelled_grid
+from lit3d.utils.io import atomic_write_bytes, atomic_write_text
+from lit3d.utils.tables import fmt, markdown_table
+
+# name -> (distortion kind, level index into datamodules.quality.distortions.LEVELS, description)
 DISTORTIONS: dict[str, tuple[str, int, str]] = {
     "noise_mild": ("noise", 0, "normal noise, 0.2% of the diagonal"),
     "noise_strong": ("noise", 2, "normal noise, 0.8% of the diagonal"),
@@ -35,11 +50,7 @@ FIGURE_VIEWS = (0, 4, 8)
 def reference_mesh(ref: str | None):
     """The demo's reference: ``ref`` (vertices merged) or the procedural ``bumpy`` shape."""
     if ref is None:
-        from datamodules.synth.quality_shapes import procedural_shape
-
         return procedural_shape("bumpy"), "procedural shape 'bumpy' (built in)"
-    from lit3d.render.convert import to_mesh
-
     mesh = to_mesh(ref)
     mesh.merge_vertices(merge_tex=True, merge_norm=True)
     return mesh, str(ref)
@@ -48,9 +59,6 @@ def reference_mesh(ref: str | None):
 def prepare(out: Path, ref: str | None = None) -> list[tuple[str, Path]]:
     """Write ``out/meshes/reference.obj`` and one ``<name>.obj`` per distortion; ``out/pairs.tsv``
     lists ``name, path, description``. Returns ``[(name, path)]``."""
-    from datamodules.synth.distortions import distort
-    from lit3d.utils.io import atomic_write_text
-
     mesh, source = reference_mesh(ref)
     meshes = out / "meshes"
     meshes.mkdir(parents=True, exist_ok=True)
@@ -80,9 +88,6 @@ def _mean(features: dict[str, float], measure: str) -> float:
 def report(out: Path) -> str:
     """``out/results.md`` (one row per distorted version, best first) and ``out/quality_demo.png``
     from the ``lit3d-score --json`` outputs in ``out/scores/``. Returns the markdown."""
-    from lit3d.utils.io import atomic_write_text
-    from lit3d.utils.tables import fmt, markdown_table
-
     (ref, source), pairs = _pairs(out)
     scores = {}
     for name, _path, _text in pairs:
@@ -117,18 +122,6 @@ def report(out: Path) -> str:
 def figure(out: Path, ref: Path, source: str, rows: list[tuple[str, Path, str, dict]]) -> Path:
     """``out/quality_demo.png``: the reference and each distorted version (best score first) in
     three views, with the SSIM map of the first view against the reference."""
-    import io
-
-    import numpy as np
-    import torch
-
-    from lit3d.features.table import FeatureConfig, render_views
-    from lit3d.metrics.image import ssim_map, to_grey
-    from lit3d.render.convert import to_mesh
-    from lit3d.render.gbuffer import RenderConfig
-    from lit3d.utils.figures import labelled_grid
-    from lit3d.utils.io import atomic_write_bytes
-
     cfg = FeatureConfig(render=RenderConfig(size=256, shadings=("smooth",)), styles=(FIGURE_STYLE,))
 
     def views(path: Path) -> torch.Tensor:  # (V, 3, H, W) in [0, 1]
@@ -177,8 +170,6 @@ def main(argv: list[str] | None = None) -> int:
     pr = sub.add_parser("report", help="results.md and quality_demo.png from the lit3d-score JSON outputs")
     pr.add_argument("out", type=Path)
     args = p.parse_args(argv)
-    from lit3d.utils import quiet
-
     quiet.install()
     if args.cmd == "prepare":
         for name, path in prepare(args.out, args.ref):

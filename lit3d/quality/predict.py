@@ -24,6 +24,7 @@ from pathlib import Path
 
 import torch
 
+from lit3d.features.common import FeatureConfig, feature_config
 from lit3d.quality.nets import QualityMLP
 from lit3d.quality.protocol import TargetScaling
 from lit3d.utils.checkpoints import META_KEY, first_line, load_checkpoint
@@ -64,10 +65,9 @@ class QualityPredictor:
     def target_name(self) -> str:
         return self.scaling.name if self.scaling else "distortion"
 
-    def feature_config(self):
-        """The :class:`lit3d.features.table.FeatureConfig` of the training features."""
-        from lit3d.features.table import feature_config
-
+    def feature_config(self) -> FeatureConfig:
+        """:func:`lit3d.features.common.feature_config` of :attr:`feature_options`: the
+        configuration the training features were computed with."""
         return feature_config(self.feature_options)
 
     def describe_target(self) -> str:

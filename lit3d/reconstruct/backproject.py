@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from datamodules.synth.sensor import RECGAN_FOV_DEG  # noqa: F401 (re-exported: the camera the data was made with)
+from lit3d.sensing.sensor import RECGAN_FOV_DEG  # noqa: F401 (re-exported: the camera the data was made with)
 from lit3d.reconstruct.depth_io import InputError
 
 

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from lit3d.reconstruct.depth_io import InputError
+from lit3d.reconstruct.pipeline import load_task
+from lit3d.render.depth import CAMERA_DISTANCE, DEPTH_FAR, DEPTH_NEAR, FG_MIN, ORTHO_MAG, depth_to_points
 
 FLIP = np.array([1.0, -1.0, -1.0])  # camera frame (y down, z forward) <-> GL (y up, z back)
 
@@ -27,7 +29,6 @@ FLIP = np.array([1.0, -1.0, -1.0])  # camera frame (y down, z forward) <-> GL (y
 @dataclass
 class CanonicalMapper:
     """A loaded canonical-task checkpoint (see the module doc)."""
-
     task: object
     image_size: int
     path: str
@@ -37,7 +38,6 @@ class CanonicalMapper:
         """Normalised GL points ``(N, 3)`` -> ``(S, S) float32`` normalised depth and ``(S, S) bool`` mask."""
         from scipy import ndimage
 
-        from lit3d.render.depth import CAMERA_DISTANCE, DEPTH_FAR, DEPTH_NEAR, FG_MIN, ORTHO_MAG
 
         s = self.image_size
         col = np.floor((points_gl[:, 0] / ORTHO_MAG + 1) / 2 * s).astype(int)
@@ -67,8 +67,6 @@ class CanonicalMapper:
 
     def map_points(self, points: np.ndarray, label: str) -> tuple[np.ndarray, dict]:
         """``(N, 3)`` camera-frame visible points -> ``(M, 3)`` canonical-pose points (same frame), info."""
-        from lit3d.render.depth import depth_to_points
-
         gl = points * FLIP
         lo, hi = gl.min(0), gl.max(0)
         centre, scale = (lo + hi) / 2, 1.0 / max(float((hi - lo).max()), 1e-9)
@@ -85,8 +83,6 @@ class CanonicalMapper:
 
 def load_canonical(path: str, device: str = "cpu") -> CanonicalMapper:
     """Load a canonical-task checkpoint (``weights_only=True``) as a :class:`CanonicalMapper`."""
-    from lit3d.reconstruct.pipeline import load_task
-
     task, _ = load_task(path, device, "canonical")
     net = dict(task.hparams.get("net") or {})
     return CanonicalMapper(task, int(net.get("image_size", 128)), str(path), device)

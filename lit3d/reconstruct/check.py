@@ -23,6 +23,8 @@ from lit3d.reconstruct.backproject import RECGAN_FOV_DEG, Intrinsics
 from lit3d.reconstruct.grid import occupancy_iou, solid_voxels
 from lit3d.reconstruct.pipeline import Completer, Options, reconstruct
 from lit3d.reconstruct.synthetic import pose_in_front, render_depth_pinhole
+from lit3d.metrics.mesh import directed_distances, surface_samples
+from lit3d.reconstruct.pipeline import load_completer
 
 WIDTH, HEIGHT = 320, 240
 
@@ -30,8 +32,6 @@ WIDTH, HEIGHT = 320, 240
 def round_trip(mesh, completer: Completer, azimuth: float = 30.0, elevation: float = 20.0, up_axis: int = 1,
                fuse_input: bool = True, label: str = "<mesh>") -> dict:
     """Render ``mesh`` (posed 1.5 m in front of the 3D-RecGAN++ camera), reconstruct it, measure."""
-    from lit3d.metrics.mesh import directed_distances, surface_samples
-
     posed = pose_in_front(mesh, azimuth=azimuth, elevation=elevation, up_axis=up_axis)
     intr = Intrinsics.from_fov(RECGAN_FOV_DEG, WIDTH, HEIGHT)
     depth = render_depth_pinhole(posed, intr, WIDTH, HEIGHT)
@@ -50,8 +50,6 @@ def main(argv: list[str] | None = None) -> None:
     from pathlib import Path
 
     import trimesh
-
-    from lit3d.reconstruct.pipeline import load_completer
 
     argv = list(sys.argv[1:] if argv is None else argv)
     completer = load_completer(argv[0])

@@ -12,10 +12,17 @@ Integer depth equal to its type's maximum (65535 for 16 bits: a sensor's "no rea
 pixels beyond ``1e4`` m (renderers' "infinitely far" background) count as background.
 :func:`read_depth_info` also says which units were applied and how many pixels were taken as
 "no reading" (written to the JSON of ``lit3d-reconstruct``, and printed as a note when non-zero).
+A ``.npy``/``.npz`` is read by its content (an ``.npz`` archive named ``.npy`` is still an archive).
+Refused with one line: a path that is not a regular file (a FIFO, a device: never read, it could
+block), an image of several pages or frames (a multi-page TIFF: one depth image per file), an
+image over Pillow's decompression-bomb limit. :func:`find_mask` pairs a mask folder's files with
+the depth images by exact name stem.
 """
 from __future__ import annotations
 
 import os
+import re
+import stat
 import zipfile
 from pathlib import Path
 
@@ -30,14 +37,45 @@ class InputError(ValueError):
     """A bad input file or option: the message is one line naming the file and the problem."""
 
 
+_NOT_REGULAR = ((stat.S_ISFIFO, "a named pipe (FIFO)"), (stat.S_ISSOCK, "a socket"),
+                (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"))
+
+
+def regular_file(p: Path, what: str = "file") -> None:
+    """Raise :class:`InputError` unless ``p`` is a regular file (or a link to one): missing, a
+    broken link, a folder, a FIFO or device (not read: it could block) are each named as such."""
+    try:
+        mode = p.stat().st_mode
+    except FileNotFoundError:
+        problem = f"broken symbolic link (to {os.readlink(p)})" if p.is_symlink() else f"no such {what}"
+        raise InputError(f"{p}: {problem}") from None
+    except OSError as exc:
+        raise InputError(f"{p}: cannot read it ({exc.strerror or type(exc).__name__})") from None
+    if stat.S_ISDIR(mode):
+        raise InputError(f"{p}: a folder, not a {what}")
+    kind = next((name for test, name in _NOT_REGULAR if test(mode)), None if stat.S_ISREG(mode) else "not a file")
+    if kind:
+        raise InputError(f"{p}: {kind}, not a regular {what}; give an image or array file")
+
+
 def _image(path: Path) -> np.ndarray:
     """Pixels of an image file as an array (PIL; ``I;16`` stays uint16)."""
     from PIL import Image, UnidentifiedImageError
 
     try:
         with Image.open(path) as im:
+            pages = getattr(im, "n_frames", 1)
+            if pages > 1:  # PIL would give page 1 alone
+                what = "pages (a multi-page TIFF)" if im.format == "TIFF" else f"frames (an animated {im.format})"
+                raise InputError(f"{path}: {pages} {what}; one depth image per file is read: save each page "
+                                 "as its own file")
             im.load()
             return np.asarray(im)
+    except Image.DecompressionBombError as exc:
+        n = [f"{int(v):,}" for v in re.findall(r"\d+", str(exc))[:2]]  # "(N pixels) exceeds limit of M"
+        size = f"of {n[0]} pixels, over the reader's limit of {n[1]}" if len(n) == 2 else "over the reader's limit"
+        raise InputError(f"{path}: image {size} (Pillow's decompression-bomb guard); crop or downscale it") \
+            from None
     except UnidentifiedImageError:
         raise InputError(f"{path}: not an image (unreadable as {path.suffix.lstrip('.').upper()})") from None
     except OSError as exc:
@@ -45,10 +83,12 @@ def _image(path: Path) -> np.ndarray:
 
 
 def _array(path: Path) -> np.ndarray:
+    """The array of a ``.npy``, or the one array (or key ``depth``) of an ``.npz``: by content, not suffix."""
     try:
-        if path.suffix == ".npy":
-            return np.load(path, allow_pickle=False)
-        with np.load(path, allow_pickle=False) as z:
+        loaded = np.load(path, allow_pickle=False)
+        if isinstance(loaded, np.ndarray):
+            return loaded
+        with loaded as z:
             keys = list(z.keys())
             if "depth" in keys:
                 return z["depth"]
@@ -87,8 +127,7 @@ def read_depth_info(path: str | os.PathLike, depth_scale: float = 0.001) -> tupl
     """:func:`read_depth` plus what was assumed: ``{"dtype", "units", "depth_scale_applied",
     "no_reading_pixels"}`` (``units``: ``"integer units x depth_scale"`` or ``"metres (float)"``)."""
     p = Path(path)
-    if not p.is_file():
-        raise InputError(f"{p}: no such file")
+    regular_file(p)
     suffix = p.suffix.lower()
     if suffix not in DEPTH_SUFFIXES:
         raise InputError(f"{p}: unknown depth format '{p.suffix}' (expected {' '.join(DEPTH_SUFFIXES)})")
@@ -143,8 +182,7 @@ def check_depth(depth: np.ndarray, label: str | os.PathLike) -> np.ndarray:
 def read_mask(path: str | os.PathLike, shape: tuple[int, int]) -> np.ndarray:
     """Object mask image or array -> ``(H, W) bool`` (non-zero = object); must match ``shape``."""
     p = Path(path)
-    if not p.is_file():
-        raise InputError(f"{p}: no such mask file")
+    regular_file(p, "mask file")
     suffix = p.suffix.lower()
     arr = _array(p) if suffix in (".npy", ".npz") else _image(p)
     arr = np.asarray(arr)
@@ -156,6 +194,25 @@ def read_mask(path: str | os.PathLike, shape: tuple[int, int]) -> np.ndarray:
     if not mask.any():
         raise InputError(f"{p}: mask is empty (no non-zero pixel)")
     return mask
+
+
+def find_mask(mask: str | os.PathLike, depth_path: Path) -> Path:
+    """The mask file of the depth image ``depth_path``: ``mask`` itself, or, for a folder, its file
+    named exactly like the depth image's stem with a mask suffix (:data:`MASK_SUFFIXES`): no glob
+    pattern (``scan[1].png`` pairs with ``scan[1].png``, never ``scan1.png``), no other suffix
+    (``cow.json`` is not a mask). None there, or several (``cow.png``, ``cow.npy``): InputError."""
+    m = Path(mask)
+    if not m.is_dir():
+        return m
+    stem = depth_path.stem
+    found = sorted(q for q in m.iterdir() if q.stem == stem and q.suffix.lower() in MASK_SUFFIXES)
+    if not found:
+        raise InputError(f"{depth_path}: no mask {m}/{stem}.<{'|'.join(s[1:] for s in MASK_SUFFIXES)}> "
+                         "in the mask folder")
+    if len(found) > 1:
+        raise InputError(f"{depth_path}: {len(found)} masks for it in {m} ({', '.join(q.name for q in found)}); "
+                         "keep one")
+    return found[0]
 
 
 def list_inputs(paths: list[str]) -> list[Path]:

@@ -1,5 +1,4 @@
 """The labelled picture of one reconstruction (``S`` = 256 px panels by default)::
-
     input depth      | partial points: camera view | side view | back view
     object pixels    | completed shape: camera view | side view | back view
 
@@ -14,6 +13,7 @@ import io
 import numpy as np
 
 from lit3d.utils.figures import font
+from lit3d.render.views import camera_poses
 
 # view directions (towards the camera) in the GL frame of the input camera (x right, y up, z back)
 VIEWS = {"camera view": (0.0, 0.0, 1.0), "side view": (1.0, 0.25, 0.15), "back view": (-0.35, 0.35, -1.0)}
@@ -43,8 +43,6 @@ def depth_panel(depth: np.ndarray, keep: np.ndarray | None, size: int) -> np.nda
 
 
 def _view_frames(directions: np.ndarray) -> np.ndarray:
-    from lit3d.render.views import camera_poses
-
     return camera_poses(3.0, directions)
 
 

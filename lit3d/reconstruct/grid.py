@@ -1,9 +1,8 @@
 """Camera-frame points <-> the completion network's voxel grids, in the training geometry.
 
-Grid convention (as in :mod:`datamodules.synth.depth_voxels` and the 3D-RecGAN++ files):
+Grid convention (as in :mod:`lit3d.sensing.views` and the 3D-RecGAN++ files):
 ``[i, j, k]`` = ``[x right, y up in the image, depth away from the camera]``. From the
 camera frame of :mod:`lit3d.reconstruct.backproject` (``y`` down, ``z`` forward, metres)::
-
     i = (x - c_x) s + R/2,   j = -(y - c_y) s + R/2,   k = (z - c_z) s + R/2
 
 with ``s`` voxels per metre and ``c`` the placement centre. What the checkpoint was trained
@@ -24,18 +23,13 @@ along ``i`` and its prediction is flipped back (:meth:`GridGeometry.to_network`)
 """
 from __future__ import annotations
 
-import inspect
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
-
-def _synth_defaults() -> dict:
-    """``margin``/``push`` of the synthetic data generator (its keyword defaults, not copied)."""
-    from datamodules.synth.depth_voxels import make_sample
-
-    params = inspect.signature(make_sample).parameters
-    return {k: float(params[k].default) for k in ("margin", "push")}
+from lit3d.sensing.sensor import make_sensor
+from lit3d.sensing.views import GRID_MARGIN, SURFACE_PUSH
+from lit3d.metrics.mesh import surface_samples
 
 
 @dataclass(frozen=True)
@@ -51,7 +45,6 @@ class GridGeometry:
         note: how the geometry was found (e.g. a default for an older checkpoint), or "".
         mirror_x: the training grids' ``i`` axis points to the image's left.
     """
-
     source: str
     target_res: int
     input_factor: int
@@ -74,9 +67,8 @@ class GridGeometry:
         net's ``in_res``/``out_res``; a checkpoint without a data config gets the synthetic
         geometry at the net's sizes, with a note."""
         out_res, in_res = int(net_cfg["out_res"]), int(net_cfg["in_res"])
-        d = _synth_defaults()
         if not data_cfg:
-            return cls("synth", out_res, out_res // in_res, d["margin"], d["push"],
+            return cls("synth", out_res, out_res // in_res, GRID_MARGIN, SURFACE_PUSH,
                        note="checkpoint has no data config: assumed the built-in synthetic geometry")
         source = str(data_cfg.get("source", "synth"))
         factor = int(data_cfg.get("input_factor", out_res // in_res))
@@ -89,11 +81,9 @@ class GridGeometry:
             raw = int(data_cfg.get("raw_res", 256))
             # voxel step = extent / (raw - 1) in a raw^3 grid, pooled to R: margin of half a raw voxel
             return cls("recgan", out_res, factor, 0.5 * out_res / raw, 0.0, note, mirror_x=True)
-        from datamodules.synth.sensor import make_sensor
-
         sensor = make_sensor(data_cfg.get("sensor"))
         shrink = out_res / sensor.raw_res if sensor.raw_res else 1.0  # made finer, then pooled
-        return cls("synth", out_res, factor, d["margin"] * shrink, d["push"] * shrink, note, mirror_x=sensor.mirror_x)
+        return cls("synth", out_res, factor, GRID_MARGIN * shrink, SURFACE_PUSH * shrink, note, mirror_x=sensor.mirror_x)
 
     def as_dict(self) -> dict:
         return {**asdict(self), "input_res": self.input_res}
@@ -102,7 +92,6 @@ class GridGeometry:
 @dataclass(frozen=True)
 class Placement:
     """Camera frame <-> continuous grid index coordinates for one image (see the module doc)."""
-
     centre: tuple[float, float, float]
     scale: float  # voxels per metre
     res: int
@@ -164,8 +153,6 @@ def solid_voxels(mesh, placement: Placement, samples_per_voxel: float = 8.0) -> 
     samples mark their voxels (so thin parts are kept, as in the conservative training targets),
     a one-voxel closing seals sample gaps and small holes, and enclosed cavities are filled."""
     from scipy import ndimage
-
-    from lit3d.metrics.mesh import surface_samples
 
     r = placement.res
     area_vox = float(mesh.area) * placement.scale ** 2

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lit3d.reconstruct.depth_io import InputError, find_mask
 from lit3d.reconstruct.pipeline import Result, index_to_camera_matrix
 from lit3d.utils.io import write_file_set
 
@@ -70,12 +71,23 @@ def _stamp(path) -> list | None:
     return [str(p.resolve()), st.st_size, st.st_mtime_ns]
 
 
+def _mask_file(mask, path: Path):
+    """The mask file input ``path`` is cut with (``--mask`` itself, or its file in a mask folder);
+    the folder where it has none (that input then fails with its own line)."""
+    try:
+        return find_mask(mask, path) if mask else None
+    except InputError:
+        return mask
+
+
 def request_key(args, path: Path) -> str:
     """sha256 of what decides the set of input ``path``: the input file and every file the run
-    reads (path, size, mtime) and every option of the command line ``args`` (an argparse
-    Namespace) but the output folder, the device and the switches of this kind."""
+    reads (path, size, mtime; of a mask folder, the mask of this input) and every option of the
+    command line ``args`` (an argparse Namespace) but the output folder, the device and the
+    switches of this kind."""
     options = {k: v for k, v in sorted(vars(args).items()) if k not in REQUEST_IGNORED and k not in REQUEST_FILES}
     files = {k: _stamp(getattr(args, k, None)) for k in REQUEST_FILES}
+    files["mask"] = _stamp(_mask_file(getattr(args, "mask", None), path))
     text = json.dumps({"input": _stamp(path), "files": files, "options": options}, sort_keys=True, default=str)
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 

@@ -23,12 +23,13 @@ from lit3d.reconstruct.backproject import Intrinsics, backproject
 from lit3d.reconstruct.depth_io import InputError
 from lit3d.reconstruct.grid import GridGeometry, Placement, fit_placement, voxelise_points
 from lit3d.reconstruct.segment import depth_range_mask, largest_depth_cluster, remove_plane
+from lit3d.render.convert import ShapeError, voxels_to_mesh
+from lit3d.utils.checkpoints import META_KEY, load_checkpoint
 
 
 @dataclass
 class Completer:
     """A loaded completion checkpoint: the LightningModule (eval mode), its threshold and geometry."""
-
     task: object
     threshold: float
     geometry: GridGeometry
@@ -56,8 +57,6 @@ def load_task(path: str | Path, device: str, want: str):
     "canonical"), loaded with ``weights_only=True`` on ``device``, in eval mode."""
     import torch
 
-    from lit3d.utils.checkpoints import META_KEY, load_checkpoint
-
     ckpt = load_checkpoint(path, InputError)
     meta = ckpt.get(META_KEY) if isinstance(ckpt, dict) else None
     if not isinstance(meta, dict) or "hyper_parameters" not in ckpt:
@@ -81,8 +80,6 @@ def load_task(path: str | Path, device: str, want: str):
 
 def load_completer(path: str | Path, device: str = "cpu") -> Completer:
     """Load a completion checkpoint (see :class:`Completer`)."""
-    from lit3d.utils.checkpoints import META_KEY
-
     task, ckpt = load_task(path, device, "completion")
     geom = GridGeometry.from_checkpoint(ckpt[META_KEY].get("data"), task.net_cfg)
     notes = [geom.note] if geom.note else []
@@ -92,7 +89,6 @@ def load_completer(path: str | Path, device: str = "cpu") -> Completer:
 @dataclass
 class Options:
     """How the object is cut from the image (all optional)."""
-
     mask: np.ndarray | None = None      # (H, W) bool
     near: float | None = None           # metres
     far: float | None = None            # metres
@@ -104,7 +100,6 @@ class Options:
 @dataclass
 class Result:
     """Everything one reconstruction produced (arrays described in the module doc)."""
-
     points: np.ndarray          # (N, 3) float64 visible points, camera frame, metres
     keep: np.ndarray            # (H, W) bool pixels used
     placement: Placement
@@ -141,8 +136,7 @@ def reconstruct(depth: np.ndarray, intr: Intrinsics, completer: Completer, opts:
     ``canonical`` (a :class:`lit3d.reconstruct.canonical.CanonicalMapper`) first maps the visible
     points to the subject's canonical pose (step ``canonical``), which is then completed.
     """
-    from lit3d.render.convert import ShapeError, voxels_to_mesh
-    from datamodules.voxel_cache import max_pool_bool
+    from datamodules.completion.voxel_cache import max_pool_bool
 
     opts = opts or Options()
     geom = completer.geometry

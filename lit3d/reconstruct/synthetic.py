@@ -10,15 +10,17 @@ from __future__ import annotations
 import numpy as np
 
 from lit3d.reconstruct.backproject import Intrinsics
+from lit3d.geometry.normalise import normalise_vertices
+from lit3d.reconstruct.backproject import RECGAN_FOV_DEG
+from lit3d.render.camera import render_pinhole_depth
+from lit3d.sensing.views import camera_rotation
+from lit3d.utils.io import atomic_write_bytes
 
 
 def pose_in_front(mesh, distance: float = 1.5, size: float = 0.6, azimuth: float = 30.0,
                   elevation: float = 20.0, up_axis: int = 1):
     """A copy of ``mesh`` centred on the optical axis at ``distance`` metres, longest side ``size``
     metres, seen from ``azimuth``/``elevation`` degrees (object ``up_axis`` points up in the image)."""
-    from datamodules.synth.depth_voxels import camera_rotation
-    from lit3d.geometry.normalise import normalise_vertices
-
     m = mesh.copy()
     v, _ = normalise_vertices(np.asarray(m.vertices, dtype=np.float64))
     if up_axis != 1:  # bring the object's up axis to +y
@@ -30,8 +32,6 @@ def pose_in_front(mesh, distance: float = 1.5, size: float = 0.6, azimuth: float
 
 def render_depth_pinhole(mesh, intr: Intrinsics, width: int, height: int) -> np.ndarray:
     """``(H, W) float32`` z-depth in metres (0 = background) of a camera-frame mesh."""
-    from lit3d.render.camera import render_pinhole_depth
-
     verts = np.asarray(mesh.vertices, dtype=np.float64) * np.array([1.0, -1.0, -1.0])  # camera -> GL
     # our cx/cy address the pixel centre (see backproject's doc); the renderer's the pixel corner
     depth = render_pinhole_depth(verts, np.asarray(mesh.faces), np.eye(4), width, height, intr.fx, intr.fy,
@@ -47,9 +47,6 @@ def main(argv: list[str] | None = None) -> None:
 
     import trimesh
     from PIL import Image
-
-    from lit3d.reconstruct.backproject import RECGAN_FOV_DEG
-    from lit3d.utils.io import atomic_write_bytes
 
     src, out = (sys.argv[1:] if argv is None else argv)[:2]
     depth = render_depth_pinhole(pose_in_front(trimesh.load(src, force="mesh")),

@@ -2,7 +2,7 @@
 
 Every depth image in lit3d comes from here: the canonical task's normalised depth
 (:mod:`lit3d.render.depth`), the completion data's voxel-unit depth
-(:mod:`datamodules.synth.depth_voxels`), the retrieval descriptor's views
+(:mod:`datamodules.completion.depth_voxels`), the retrieval descriptor's views
 (:mod:`lit3d.retrieval.descriptor`) and the quality G-buffer
 (:mod:`lit3d.render.gbuffer`, which adds colour outputs to the same pass).
 
@@ -17,6 +17,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
+
+from lit3d.render.egl import import_pyrender, offscreen_renderer
 
 
 def look_at(eye: np.ndarray, target: np.ndarray | None = None, up: np.ndarray | None = None,
@@ -65,8 +67,6 @@ class OrthoCamera:
 
     def pyrender_camera(self):
         """The matching ``pyrender.OrthographicCamera``."""
-        from lit3d.render.egl import import_pyrender
-
         return import_pyrender().OrthographicCamera(xmag=self.half_width, ymag=self.half_width,
                                                     znear=self.znear, zfar=self.zfar)
 
@@ -100,8 +100,6 @@ def render_ortho(scene, poses: np.ndarray, size: int, camera: OrthoCamera, flags
         ``(color, dist, mask)`` per view: ``(S, S, 3|4) uint8`` colour or ``None`` for depth-only
         passes, ``(S, S) float64`` camera distance (0 = background), ``(S, S) bool`` foreground.
     """
-    from lit3d.render.egl import offscreen_renderer
-
     renderer = offscreen_renderer(size, size) if renderer is None else renderer
     node = scene.add(camera.pyrender_camera(), pose=np.asarray(poses[0]))
     try:
@@ -133,8 +131,6 @@ def render_ortho_depth(verts: np.ndarray, faces: np.ndarray, poses: np.ndarray, 
         ``(V, S, S)`` each when ``poses`` is ``(V, 4, 4)``.
     """
     import trimesh
-
-    from lit3d.render.egl import import_pyrender
 
     pyrender = import_pyrender()
     poses = np.asarray(poses, dtype=np.float64)
@@ -173,8 +169,6 @@ def render_pinhole_depth(verts: np.ndarray, faces: np.ndarray, pose: np.ndarray,
         perspective linearisation is exact for this camera.
     """
     import trimesh
-
-    from lit3d.render.egl import import_pyrender, offscreen_renderer
 
     pyrender = import_pyrender()
     scene = pyrender.Scene()

@@ -7,6 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from lit3d.render.gbuffer import RenderConfig, render_gbuffer
+from lit3d.render.styles import apply_styles
+
 
 def shaded_views(mesh, directions, size: int = 256, style: str = "clay_studio", extent: float = 0.9,
                  background: float = 1.0, distance: float = 3.0) -> np.ndarray:
@@ -25,9 +28,6 @@ def shaded_views(mesh, directions, size: int = 256, style: str = "clay_studio", 
     Returns:
         ``(V, size, size, 3) uint8``.
     """
-    from lit3d.render.gbuffer import RenderConfig, render_gbuffer
-    from lit3d.render.styles import apply_styles
-
     dirs = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
     dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
     gb = render_gbuffer(mesh, RenderConfig(size=size, extent=extent, distance=distance, shadings=("smooth",)),

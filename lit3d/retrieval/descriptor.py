@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from lit3d.render.camera import OrthoCamera, look_at, render_ortho_depth
+from lit3d.render.depth import depth_to_mesh
 from lit3d.utils.progress import progress
 
 
@@ -228,8 +229,6 @@ def distance_matrix_from_meshes(meshes: list[tuple[np.ndarray, np.ndarray]], cfg
 
 def depth_meshes(depths: np.ndarray, masks: np.ndarray, cfg: DescriptorConfig | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
     """Each ``(S, S)`` normalised depth + mask back-projected to a surface ``(verts, faces)``."""
-    from lit3d.render.depth import depth_to_mesh
-
     cfg = cfg or DescriptorConfig()
     return [depth_to_mesh(np.asarray(d, np.float64), np.asarray(m), cfg.max_jump) for d, m in zip(depths, masks)]
 

@@ -5,7 +5,7 @@ a MatCap style), what a person reads; used by the completion figures.
 :func:`depth_shaded` / :func:`panel`: renderer-free depth-shaded projections along one grid
 axis (near = bright), for quick previews (``lit3d-data`` show).
 
-Grid axes (``datamodules.synth.depth_voxels``): index ``[i, j, k]`` is GL ``x = i`` (right),
+Grid axes (``datamodules.completion.depth_voxels``): index ``[i, j, k]`` is GL ``x = i`` (right),
 ``y = j`` (up), ``z = -k`` (``k = 0`` nearest the depth camera, which looks down GL ``-z``).
 """
 from __future__ import annotations
@@ -13,6 +13,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 import torch.nn.functional as F
+
+from lit3d.render.convert import ShapeError, voxels_to_mesh
+from lit3d.render.shaded import shaded_views
 
 # GL directions from the shape towards the camera: front (the depth camera's side) and back,
 # both from above and from the right/left, so the visible and the completed parts both show
@@ -35,9 +38,6 @@ def render_voxels(volume: torch.Tensor | np.ndarray, threshold: float = 0.5, siz
             [-0.5, 0.5]^3, so every grid of a figure is drawn at the same scale).
     An empty grid (nothing above ``threshold``) gives blank images.
     """
-    from lit3d.render.convert import ShapeError, voxels_to_mesh
-    from lit3d.render.shaded import shaded_views
-
     vol = volume.detach().float().cpu().numpy() if isinstance(volume, torch.Tensor) else np.asarray(volume, np.float32)
     dirs = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
     blank = np.full((len(dirs), size, size, 3), 255, np.uint8)

@@ -1,12 +1,12 @@
 """Procedural shapes of the unseen categories (test only): car, faucet, firearm, guitar, monitor,
 plane (:data:`~lit3d.utils.shapenet_categories.UNSEEN_CATEGORIES`). Built from the primitives
-of :mod:`datamodules.synth.primitives`; catalogue: :data:`datamodules.synth.furniture.GENERATORS`.
+of :mod:`datamodules.completion.primitives`; catalogue: :data:`datamodules.completion.furniture.GENERATORS`.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from datamodules.synth.primitives import Primitive, Shape, box, cylinder, ellipsoid, pose, rot_x, rot_y, torus
+from datamodules.completion.primitives import Primitive, Shape, box, cylinder, ellipsoid, pose, rot_x, rot_y, torus
 
 
 def car(rng: np.random.Generator) -> Shape:

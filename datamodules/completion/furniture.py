@@ -2,8 +2,8 @@
 
 Seen categories (training): bench, chair, couch, table, each assembled from parts with
 random proportions and styles (this module). Unseen categories (test only): car, faucet,
-firearm, guitar, monitor, plane (:mod:`datamodules.synth.unseen_shapes`). Both are built
-from the analytic primitives of :mod:`datamodules.synth.primitives`; :func:`make_shape`
+firearm, guitar, monitor, plane (:mod:`datamodules.completion.unseen_shapes`). Both are built
+from the analytic primitives of :mod:`datamodules.completion.primitives`; :func:`make_shape`
 draws a shape of any category (names: :mod:`lit3d.utils.shapenet_categories`).
 """
 from __future__ import annotations
@@ -12,9 +12,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from datamodules.synth.primitives import Primitive, Shape, beam, box, cylinder, ellipsoid, pose, rot_x, rot_y
-from datamodules.synth.primitives import shape_mesh  # noqa: F401 (imported from here by depth_voxels)
-from datamodules.synth.unseen_shapes import car, faucet, firearm, guitar, monitor, plane
+from datamodules.completion.primitives import Primitive, Shape, beam, box, cylinder, ellipsoid, pose, rot_x, rot_y
+from datamodules.completion.primitives import shape_mesh  # noqa: F401 (imported from here by depth_voxels)
+from datamodules.completion.unseen_shapes import car, faucet, firearm, guitar, monitor, plane
 
 
 # ---------------------------------------------------------------- parts

@@ -1,23 +1,35 @@
 """Completion items from real CAD models (``data.source=meshes | shapenet | sweethome3d``).
 
-The plan is the procedural one (:func:`datamodules.completion.synth_items`: the same splits,
+The plan is the procedural one (:func:`datamodules.completion.plan.synth_items`: the same splits,
 view sets, views per shape and names) with a real model behind every item of a category that
 has at least ``min_models`` models; such a category's models are split by model id
-(:func:`datamodules.readers.cad_models.split_models`: train / val / test, test shared by
+(:func:`datamodules.completion.cad_models.split_models`: train / val / test, test shared by
 test_same and test_cross as in 3D-RecGAN++), and unseen categories, never trained on, use all
 of theirs. A category with fewer models keeps procedural shapes, and the manifest says so
 (``fallback``). Each item is rendered and voxelised by
-:func:`datamodules.completion.view_pair` like a procedural one.
+:func:`datamodules.completion.plan.view_pair` like a procedural one.
+:func:`prepare_mesh_items` takes the :class:`~datamodules.completion.plan.ItemSpec` and a
+:class:`MeshSpec` (the mesh source's own settings), not the DataModule.
 """
 from __future__ import annotations
 
 import logging
+import multiprocessing as mp
 from collections import Counter
-from dataclasses import fields
+from collections.abc import Mapping
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, fields
 from pathlib import Path
 
-from datamodules.cache import DataError
-from datamodules.readers.cad_models import CadModel, index_mesh_folder, index_shapenet, split_models
+from tqdm.auto import tqdm
+
+from datamodules.cache import CacheBuilder, DataError
+from datamodules.completion.cad_models import CadModel, index_mesh_folder, index_shapenet, split_models
+from datamodules.completion.mesh_shapes import mesh_shape
+from datamodules.completion.plan import ItemSpec, synth_pair, view_pair
+from datamodules.completion.sweethome3d import credits_markdown, index_sweethome3d
+from datamodules.completion.voxel_cache import save_pair
+from lit3d.sensing.sensor import make_sensor
 
 log = logging.getLogger("lit3d.data")
 
@@ -25,11 +37,22 @@ MESH_SOURCES = ("meshes", "shapenet", "sweethome3d")
 SPLIT_GROUP = {"train": "train", "val": "val", "test_same": "test", "test_cross": "test"}
 
 
+@dataclass(frozen=True)
+class MeshSpec:
+    """The settings of a mesh source: ``source`` (meshes | shapenet | sweethome3d), ``root`` (None:
+    the installed Sweet Home 3D catalogues), ``model_split`` (train/val/test fractions of a seen
+    category's models), ``min_models`` (fewer: the category keeps procedural shapes) and ``up_axis``."""
+
+    source: str
+    root: Path | None
+    model_split: Mapping[str, float]
+    min_models: int
+    up_axis: str
+
+
 def index_models(source: str, root: str | Path | None) -> tuple[list[CadModel], list[dict]]:
     """(models, dropped) of a mesh source; ``root`` None means the installed catalogues (sweethome3d)."""
     if source == "sweethome3d":
-        from datamodules.readers.sweethome3d import index_sweethome3d  # noqa: PLC0415
-
         return index_sweethome3d(root)
     if root is None:
         raise DataError(f"data.source={source} needs a folder: set data.root=PATH")
@@ -79,12 +102,6 @@ def make_pairs(job: dict) -> list[tuple[str, str | None]]:
     ``job``: items, models ({id: CadModel record}), data_dir, seed, target_res, input_factor,
     render_factor, sensor (dict), compress, up_axis. Returns ``[(file, error or None)]``.
     """
-    from datamodules.completion import synth_pair, view_pair  # noqa: PLC0415
-    from datamodules.readers.cad_models import CadModel  # noqa: PLC0415
-    from datamodules.synth.mesh_shapes import mesh_shape  # noqa: PLC0415
-    from datamodules.synth.sensor import make_sensor  # noqa: PLC0415
-    from datamodules.voxel_cache import save_pair  # noqa: PLC0415
-
     sensor = make_sensor(job["sensor"])
     done, loaded = [], {}
     for it in job["items"]:
@@ -127,30 +144,24 @@ def _run_jobs(jobs: list[dict], workers: int):
         for job in jobs:
             yield make_pairs(job)
         return
-    import multiprocessing as mp  # noqa: PLC0415
-    from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: PLC0415
-
     with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
         for fut in as_completed([pool.submit(make_pairs, job) for job in jobs]):
             yield fut.result()
 
 
-def prepare_mesh_items(dm, builder) -> tuple[list[dict], dict]:
+def prepare_mesh_items(builder: CacheBuilder, spec: ItemSpec, mesh: MeshSpec, skip_bad: bool = False,
+                       workers: int = 0, progress: bool = True) -> tuple[list[dict], dict]:
     """Plan, render and save the items of a mesh source into ``builder``; (items, manifest extra).
 
-    ``dm``: the :class:`~datamodules.completion.CompletionDataModule` (its sizes, categories,
-    sensor, model split, ``min_models``, ``up_axis``, ``skip_bad``, ``prepare_workers``).
+    ``spec``: the plan and the bytes of each item; ``mesh``: the source, its models and their split;
+    ``skip_bad``: skip the items of unreadable models (else the first raises :class:`DataError`);
+    ``workers``: render in that many spawned processes (0 or 1: in this one).
     """
-    from tqdm.auto import tqdm  # noqa: PLC0415
-
-    from datamodules.completion import synth_items  # noqa: PLC0415
-
-    models, dropped = index_models(dm.source, dm.root)
-    planned = synth_items(dm.sizes, dm.categories, dm.unseen_categories, dm.seed, dm.views_per_shape,
-                          dm.unseen_view_set)
-    items, fallback = attach_models(planned, models, dm.categories, dm.model_split, dm.seed, dm.min_models)
+    models, dropped = index_models(mesh.source, mesh.root)
+    items, fallback = attach_models(spec.items(), models, spec.categories, dict(mesh.model_split), spec.seed,
+                                    mesh.min_models)
     for cat, why in fallback.items():
-        log.warning("data.source=%s: %s keeps %s", dm.source, cat, why)
+        log.warning("data.source=%s: %s keeps %s", mesh.source, cat, why)
     by_id = {m.model_id: m for m in models}
     todo = sorted((it for it in items if not builder.has(it["file"])), key=lambda it: (it.get("model_id", ""), it["file"]))
     jobs, chunk = [], []
@@ -161,17 +172,17 @@ def prepare_mesh_items(dm, builder) -> tuple[list[dict], dict]:
         chunk.append(it)
     if chunk:
         jobs.append(chunk)
-    base = {"data_dir": str(builder.root), "seed": dm.seed, "target_res": dm.target_res, "input_factor": dm.input_factor,
-            "render_factor": dm.render_factor, "sensor": dm.sensor.as_dict(), "compress": dm.compress,
-            "up_axis": dm.up_axis}
+    base = {"data_dir": str(builder.root), "seed": spec.seed, "target_res": spec.target_res,
+            "input_factor": spec.input_factor, "render_factor": spec.render_factor, "sensor": spec.sensor.as_dict(),
+            "compress": spec.compress, "up_axis": mesh.up_axis}
     jobs = [{**base, "items": c, "models": {it["model_id"]: model_fields(by_id[it["model_id"]])
                                             for it in c if it.get("model_id")}} for c in jobs]
     bad: dict[str, str] = {}
-    bar = tqdm(total=len(todo), desc=f"completion {dm.source}", unit="item", disable=not dm.progress, dynamic_ncols=True)
-    for results in _run_jobs(jobs, dm.prepare_workers):
+    bar = tqdm(total=len(todo), desc=f"completion {mesh.source}", unit="item", disable=not progress, dynamic_ncols=True)
+    for results in _run_jobs(jobs, workers):
         for file, error in results:
             if error is not None:
-                if not dm.skip_bad:
+                if not skip_bad:
                     raise DataError(error)
                 bad[file] = error
         bar.update(len(results))
@@ -181,9 +192,7 @@ def prepare_mesh_items(dm, builder) -> tuple[list[dict], dict]:
     items = [it for it in items if it["file"] not in bad]
     used = sorted({it["model_id"] for it in items if it.get("model_id")})
     kept = [by_id[i] for i in used]
-    if dm.source == "sweethome3d":
-        from datamodules.readers.sweethome3d import credits_markdown  # noqa: PLC0415
-
+    if mesh.source == "sweethome3d":
         (builder.root / "CREDITS.md").write_text(credits_markdown(kept))
     extra = {"skipped": sorted(set(bad.values())), "fallback": fallback, "dropped": dropped,
              "models": [m.record() for m in kept], **summary(models, items)}

@@ -1,5 +1,8 @@
 """Statistics of completion inputs against their targets: do synthetic inputs look like real ones?
 
+A study (``python -m lit3d.cli.input_stats``), not part of the data pipeline: it calibrated the
+``recgan`` sensor of :mod:`lit3d.sensing.sensor` against the released 3D-RecGAN++ sample.
+
 Per pair of a 2.5D surface grid and its complete target (both ``(R, R, R) bool``):
 
 - ``inside``: share of surface voxels that are target voxels;
@@ -14,27 +17,35 @@ Per pair of a 2.5D surface grid and its complete target (both ``(R, R, R) bool``
 
 ``recgan_rows`` reads a 3D-RecGAN++ folder (its pairs pooled from 256^3 to ``R``);
 ``synthetic_rows`` generates seen-category samples with a sensor of
-:mod:`datamodules.synth.sensor`; ``cad_rows`` does the same with real CAD models
+:mod:`lit3d.sensing.sensor`; ``cad_rows`` does the same with real CAD models
 (``--cad sweethome3d``, ``--cad meshes=DIR``, ``--cad shapenet=DIR``).
-``python -m datamodules.synth.input_stats --real ROOT`` prints them side by side per resolution
+``python -m lit3d.cli.input_stats --real ROOT`` prints them side by side per resolution
 (the README's calibration table), then per category.
 """
 from __future__ import annotations
 
 import argparse
+import json
 from collections.abc import Iterable, Sequence
 
 import numpy as np
+from scipy import ndimage
+
+from datamodules.cache import stable_seed
+from datamodules.completion.depth_voxels import VIEW_SETS, make_sample
+from datamodules.completion.furniture import make_shape
+from datamodules.completion.mesh_shapes import mesh_shape
+from datamodules.completion.meshes import index_models
+from datamodules.completion.recgan import convert_pair, index_recgan
+from datamodules.completion.voxel_cache import max_pool_bool
+from lit3d.utils.io import atomic_write_text
+from lit3d.utils.tables import markdown_table as markdown
 
 STATS = ("inside", "outside_dist", "input_iou", "fill", "surface_ratio", "coverage")
 
 
 def pair_statistics(surface: np.ndarray, target: np.ndarray, input_factor: int = 4) -> dict[str, float]:
     """The statistics of one ``(R, R, R) bool`` surface/target pair (see the module doc)."""
-    from scipy import ndimage
-
-    from datamodules.voxel_cache import max_pool_bool
-
     n_surf = int(surface.sum())
     inside = surface & target
     out = surface & ~target
@@ -55,8 +66,6 @@ def pair_statistics(surface: np.ndarray, target: np.ndarray, input_factor: int =
 
 def recgan_rows(root: str, res: int, input_factor: int = 4, raw_res: int = 256) -> list[dict]:
     """One row (category, split folder, name + :data:`STATS`) per pair of a 3D-RecGAN++ folder."""
-    from datamodules.readers.recgan import convert_pair, index_recgan
-
     pairs, _ = index_recgan(root)
     rows = []
     for p in pairs:
@@ -70,10 +79,6 @@ def synthetic_rows(res: int, sensor, per_category: int = 6, seed: int = 0, input
                    categories: Sequence[str] = ("bench", "chair", "couch", "table"),
                    view_set: str = "same") -> list[dict]:
     """Rows for ``per_category`` synthetic samples (one shape and one random view each) per category."""
-    from datamodules.cache import stable_seed
-    from datamodules.synth.depth_voxels import VIEW_SETS, make_sample
-    from datamodules.synth.furniture import make_shape
-
     views = VIEW_SETS[view_set]
     rows = []
     for category in categories:
@@ -91,11 +96,6 @@ def cad_rows(res: int, sensor, source: str = "sweethome3d", root: str | None = N
              seed: int = 0, input_factor: int = 4, categories: Sequence[str] = ("bench", "chair", "couch", "table"),
              view_set: str = "same") -> list[dict]:
     """Rows for up to ``per_category`` real models per category (seeded pick, one random view each)."""
-    from datamodules.cache import stable_seed
-    from datamodules.completion_meshes import index_models
-    from datamodules.synth.depth_voxels import VIEW_SETS, make_sample
-    from datamodules.synth.mesh_shapes import mesh_shape
-
     models, _ = index_models(source, root)
     views = VIEW_SETS[view_set]
     rows = []
@@ -112,8 +112,6 @@ def cad_rows(res: int, sensor, source: str = "sweethome3d", root: str | None = N
 
 def category_table(columns: dict[str, list[dict]], stats: Sequence[str] = ("fill", "input_iou", "inside", "coverage")) -> str:
     """A markdown table of per-category means (``n`` rows in brackets), one column per named row set."""
-    from lit3d.utils.tables import markdown_table as table
-
     names = list(columns)
     cats = sorted({r["category"] for rows in columns.values() for r in rows})
     out = []
@@ -124,7 +122,7 @@ def category_table(columns: dict[str, list[dict]], stats: Sequence[str] = ("fill
                 v = [r[k] for r in columns[n] if r["category"] == cat]
                 cells.append(f"{np.mean(v):.3f} ({len(v)})" if v else "–")
             out.append([cat, k, *cells])
-    return table(["category", "statistic", *names], out)
+    return markdown(["category", "statistic", *names], out)
 
 
 def summary(rows: Iterable[dict]) -> dict[str, tuple[float, float, float, float]]:
@@ -139,20 +137,14 @@ def summary(rows: Iterable[dict]) -> dict[str, tuple[float, float, float, float]
 
 def markdown_table(columns: dict[str, dict]) -> str:
     """A markdown table, one column per named summary, ``mean ± sd [min, max]`` per statistic."""
-    from lit3d.utils.tables import markdown_table as table
-
     names = list(columns)
     rows = [[k, *(f"{m:.3f} ± {s:.3f} [{lo:.3f}, {hi:.3f}]" for m, s, lo, hi in (columns[n][k] for n in names))]
             for k in STATS]
-    return table(["statistic", *names], rows)
+    return markdown(["statistic", *names], rows)
 
 
 def write_fixture(path: str, root: str, res: int, input_factor: int = 4) -> None:
     """Save the per-pair statistics of a 3D-RecGAN++ folder (numbers only, no grids) as JSON."""
-    import json
-
-    from lit3d.utils.io import atomic_write_text
-
     rows = [{k: (round(float(v), 6) if k in STATS else v) for k, v in r.items()}
             for r in recgan_rows(root, res, input_factor)]
     atomic_write_text(path, json.dumps({"source": str(root), "res": res, "input_factor": input_factor,
@@ -175,7 +167,7 @@ def compare(synthetic: Sequence[dict], real: Sequence[dict], z: float = 2.5,
 
 def main(argv: list[str] | None = None) -> None:
     """Print the real sample's statistics beside those of synthetic sets per resolution."""
-    ap = argparse.ArgumentParser(prog="python -m datamodules.synth.input_stats", description=main.__doc__)
+    ap = argparse.ArgumentParser(prog="python -m lit3d.cli.input_stats", description=main.__doc__)
     ap.add_argument("--real", required=True, help="3D-RecGAN++ folder (e.g. ../shared/data/recgan_sample)")
     ap.add_argument("--res", type=int, nargs="+", default=[64, 256], help="grid sides to compare at")
     ap.add_argument("--sensor", nargs="+", default=["ortho", "recgan"], help="synthetic sensors (names)")

@@ -1,6 +1,6 @@
 """A real mesh as a completion shape: the counterpart of the procedural :class:`Shape`.
 
-:func:`datamodules.synth.depth_voxels.make_sample` takes either. A procedural shape's target
+:func:`datamodules.completion.depth_voxels.make_sample` takes either. A procedural shape's target
 comes from its primitives' analytic inside tests; a :class:`MeshShape`'s from
 :func:`lit3d.geometry.solid_voxels.solid_voxels` (surface shell, enclosed cavities and the
 generalised winding number for open meshes), made directly on the target grid: equal to the
@@ -11,6 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from datamodules.completion.cad_models import CadModel, load_model_mesh
 
 
 @dataclass
@@ -40,10 +42,8 @@ class MeshShape:
         return trimesh.Trimesh(self.points, self.faces, process=False)
 
 
-def mesh_shape(model, up_axis: str = "y") -> MeshShape:
-    """A :class:`~datamodules.readers.cad_models.CadModel` loaded as a :class:`MeshShape`."""
-    from datamodules.readers.cad_models import load_model_mesh  # noqa: PLC0415
-
+def mesh_shape(model: CadModel, up_axis: str = "y") -> MeshShape:
+    """A :class:`~datamodules.completion.cad_models.CadModel` loaded as a :class:`MeshShape`."""
     mesh = load_model_mesh(model, up_axis)
     return MeshShape(model.category, np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64),
                      model.model_id)

@@ -21,7 +21,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from datamodules.readers.tosca import MeshReadError, read_mesh
+from datamodules.canonical.tosca import MeshReadError, read_mesh
 
 MESH_EXTS = (".obj", ".off", ".ply")
 

@@ -1,4 +1,4 @@
-"""Analytic solid primitives of the procedural shapes (see :mod:`datamodules.synth.furniture`).
+"""Analytic solid primitives of the procedural shapes (see :mod:`datamodules.completion.furniture`).
 
 A shape is a list of :class:`Primitive` (box, cylinder, ellipsoid, torus), each
 with a 4x4 transform from its local frame to the object frame. Object frame:

@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from datamodules.cache import DataError, stable_hash
-from datamodules.voxel_cache import max_pool_bool
+from datamodules.completion.voxel_cache import max_pool_bool
 from lit3d.utils.shapenet_categories import CATEGORY_ALIASES
 
 log = logging.getLogger("lit3d.data")

@@ -3,11 +3,12 @@
 ``CompletionDataModule(source="synth")`` generates procedural furniture (seen:
 bench, chair, couch, table) and unseen categories (car, faucet, firearm, guitar,
 monitor, plane), renders one depth view per sample and voxelises it like
-3D-RecGAN++ (see :mod:`datamodules.synth.depth_voxels`).
+3D-RecGAN++ (see :mod:`datamodules.completion.depth_voxels`).
 ``CompletionDataModule(source="recgan", root=PATH)`` converts the real release
-(see :mod:`datamodules.readers.recgan`). ``source="meshes" | "shapenet" | "sweethome3d"`` renders
-real CAD models the procedural way (:mod:`datamodules.completion_meshes`). Both write the same packed-bit cache
-(:mod:`datamodules.voxel_cache`) with a ``manifest.json`` into ``data_dir``.
+(see :mod:`datamodules.completion.recgan`). ``source="meshes" | "shapenet" | "sweethome3d"`` renders
+real CAD models the procedural way (:mod:`datamodules.completion.meshes`). All write the same packed-bit cache
+(:mod:`datamodules.completion.voxel_cache`) with a ``manifest.json`` into ``data_dir``; the item plan is
+:mod:`datamodules.completion.plan`, each source's preparation :mod:`datamodules.completion.sources`.
 
 Batches (default collate) are dicts:
     input    (B, 1, r, r, r) float32 {0,1}   r = target_res / input_factor
@@ -23,111 +24,33 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import lightning.pytorch as pl
-import numpy as np
+import torch
 from torch.utils.data import DataLoader
 
-from datamodules.cache import CacheBuilder, DataError, bytes_on_disk, stable_seed
-from datamodules.completion_meshes import MESH_SOURCES
+from datamodules.cache import CacheBuilder, DataError, bytes_on_disk
+from datamodules.completion.meshes import MESH_SOURCES, MeshSpec, prepare_mesh_items
+from datamodules.completion.plan import DEFAULT_SIZES, DataConfigError, ItemSpec, check_sizes
+from datamodules.completion.sources import prepare_recgan_items, prepare_synth_items
+from datamodules.completion.voxel_cache import DATA_SPLITS, TEST_SPLITS, VoxelPairDataset, load_pair
 from datamodules.loaders import evaluation_loader
-from datamodules.synth.sensor import SENSORS, make_sensor
-from datamodules.voxel_cache import DATA_SPLITS, TEST_SPLITS, VoxelPairDataset, load_pair, save_pair
+from lit3d.sensing.sensor import SENSORS, make_sensor
+from lit3d.utils.figures import labelled_grid
 from lit3d.utils.shapenet_categories import (
     SEEN_CATEGORIES,
     select_seen_categories,
     select_unseen_categories,
 )
+from lit3d.utils.voxel_images import BACK_VIEW, FRONT_VIEW, render_voxels, to_resolution
 
 log = logging.getLogger("lit3d.data")
 
-DEFAULT_SIZES = {"train": 240, "val": 40, "test_same": 40, "test_cross": 40, "test_unseen": 40}
 SYNTH_VERSION = "1"
 RECGAN_VERSION = "1"
 MESHES_VERSION = "1"
 DATA_SOURCES = ("synth", "recgan") + MESH_SOURCES
 DEFAULT_MODEL_SPLIT = {"train": 0.7, "val": 0.1, "test": 0.2}
 
-
-class DataConfigError(DataError):
-    """A data setting that cannot work (e.g. source=recgan without root)."""
-
-
-# ---------------------------------------------------------------- synthetic item plan
-def check_sizes(sizes: dict | None) -> dict:
-    """``data.sizes`` as ``{split: int >= 0}``; an unknown split (``+data.sizes.trian=10``) or a
-    count that is not a whole number >= 0 raises :class:`DataConfigError` listing the known splits,
-    before any cache is touched (an unknown key would otherwise be dropped and change the cache hash)."""
-    out = {}
-    for k, v in dict(sizes or {}).items():
-        if k not in DATA_SPLITS:
-            raise DataConfigError(f"data.sizes.{k}: unknown split; known: {', '.join(DATA_SPLITS)}")
-        n = 0 if v is None else v
-        if isinstance(n, bool) or not isinstance(n, (int, float)) or n < 0 or n != int(n):
-            raise DataConfigError(f"data.sizes.{k}={v!r}: expected a whole number of items >= 0")
-        out[k] = int(n)
-    return out
-
-
-def synth_items(sizes: dict, categories: Sequence[str], unseen_categories: Sequence[str], seed: int,
-                views_per_shape: int = 4, unseen_view_set: str = "same") -> list[dict]:
-    """The plan of every synthetic item (cheap: no geometry), deterministic in ``seed``.
-
-    Items cycle over the categories (balanced counts); the j-th item of a category
-    shows shape ``j // views_per_shape`` of that category. Shape instances come from groups: train, val, test (shared by test_same
-    and test_cross, as in 3D-RecGAN++ whose test_125/test_216 hold the same ids) and
-    unseen. Views of one shape are distinct and drawn from the split's view set.
-    """
-    from datamodules.synth.depth_voxels import VIEW_SETS, view_index  # noqa: PLC0415
-
-    items = []
-    for split in DATA_SPLITS:
-        n = int(sizes.get(split, 0) or 0)
-        cats = list(unseen_categories) if split.startswith("test_unseen") else list(categories)
-        if n <= 0 or not cats:
-            continue
-        group = {"test_same": "test", "test_cross": "test", "test_unseen": "unseen",
-                 "test_unseen_cross": "unseen"}.get(split, split)
-        view_set = {"test_cross": "cross", "test_unseen": unseen_view_set, "test_unseen_cross": "cross"}.get(split, "same")
-        views = VIEW_SETS[view_set]
-        for i in range(n):
-            category = cats[i % len(cats)]
-            j = i // len(cats)  # item number within the category
-            shape_index = j // views_per_shape
-            vrng = np.random.default_rng(stable_seed(seed, "views", split, category, shape_index))
-            chosen = vrng.choice(len(views), size=min(views_per_shape, len(views)), replace=False)
-            v = int(chosen[j % len(chosen)])
-            a, b, c = view_index(view_set, v)
-            name = f"{category}_{group}{shape_index:04d}_{a}_{b}_{c}"
-            items.append({
-                "name": name, "split": split, "category": category, "view_set": view_set,
-                "shape_group": group, "shape_index": shape_index, "view": [float(x) for x in views[v]],
-                "file": f"items/{split}/{name}.npz",
-            })
-    return items
-
-
-def synth_pair(item: dict, seed: int, target_res: int, input_factor: int, render_factor: int = 2,
-               sensor: str | dict | None = None):
-    """Generate one planned synthetic item -> (input, target) bool grids.
-
-    ``sensor``: :mod:`datamodules.synth.sensor` (name or fields; None = orthographic, noise-free);
-    its noise is drawn from a generator seeded by ``seed`` and the item's name.
-    """
-    from datamodules.synth.furniture import make_shape  # noqa: PLC0415
-
-    rng = np.random.default_rng(stable_seed(seed, "shape", item["shape_group"], item["category"], item["shape_index"]))
-    return view_pair(make_shape(item["category"], rng), item, seed, target_res, input_factor, render_factor, sensor)
-
-
-def view_pair(shape, item: dict, seed: int, target_res: int, input_factor: int, render_factor: int = 2,
-              sensor: str | dict | None = None):
-    """One planned item's view of ``shape`` (procedural or a real mesh) -> (input, target) bool grids;
-    the sensor noise is drawn from a generator seeded by ``seed`` and the item's split and name."""
-    from datamodules.synth.depth_voxels import make_sample  # noqa: PLC0415
-
-    noise = np.random.default_rng(stable_seed(seed, "sensor", item["split"], item["name"]))
-    out = make_sample(shape, tuple(item["view"]), target_res=target_res, input_factor=input_factor,
-                      render_factor=render_factor, sensor=sensor, rng=noise)
-    return out["input"], out["target"]
+__all__ = ["DATA_SOURCES", "DEFAULT_SIZES", "CompletionDataModule", "DataConfigError"]
 
 
 class CompletionDataModule(pl.LightningDataModule):
@@ -152,7 +75,7 @@ class CompletionDataModule(pl.LightningDataModule):
         skip_bad: recgan: skip bad files with a warning (count in describe()) instead of raising.
         compress: zlib-compress the packed bits (smaller; measured about as fast to load).
         render_factor: synth depth image size = render_factor * target_res.
-        sensor: synth: camera, handedness and noise of the 2.5D input (:mod:`datamodules.synth.sensor`):
+        sensor: synth: camera, handedness and noise of the 2.5D input (:mod:`lit3d.sensing.sensor`):
             "ortho" (orthographic, noise-free), "recgan" (3D-RecGAN++'s perspective camera and
             handedness, noise calibrated on its released sample), or a dict of Sensor fields.
         progress: tqdm progress bar during preparation.
@@ -227,71 +150,34 @@ class CompletionDataModule(pl.LightningDataModule):
             self.source, (f"completion_{self.source}", MESHES_VERSION))
         return CacheBuilder(self.data_dir, gen, ver, self.cache_config())
 
+    @property
+    def spec(self) -> ItemSpec:
+        """What decides the planned items and their bytes (synthetic and mesh sources; recgan uses
+        its categories, seed, grid sizes and compression)."""
+        return ItemSpec(self.sizes, self.categories, self.unseen_categories, self.seed, self.views_per_shape,
+                        self.unseen_view_set, self.target_res, self.input_factor, self.render_factor, self.sensor,
+                        self.compress)
+
     # ---------------------------------------------------------------- preparation
     def prepare_data(self) -> None:
-        """Generate (synth) or convert (recgan) into ``data_dir``; no-op when the cache is complete."""
+        """Generate (synth), render (mesh sources) or convert (recgan) into ``data_dir``; no-op when
+        the cache is complete (:meth:`~datamodules.cache.CacheBuilder.prepare_once`)."""
         if self.source == "recgan" and self.root is None:
             raise DataConfigError("data.source=recgan needs the 3D-RecGAN++ folder: set data.root=PATH")
-        builder = self._builder()
-        if builder.is_complete():
-            return
-        with builder.locked():  # the jobs of a multirun may prepare one data_dir at once: one at a time
-            if builder.is_complete():  # another process prepared it while this one waited
-                return
-            builder.begin()
-            if self.source == "synth":
-                items, extra = self._prepare_synth(builder)
-            elif self.source in MESH_SOURCES:
-                from datamodules.completion_meshes import prepare_mesh_items  # noqa: PLC0415
+        self._builder().prepare_once(self._prepare_items)
 
-                items, extra = prepare_mesh_items(self, builder)
-            else:
-                items, extra = self._prepare_recgan(builder)
-            extra.update(target_res=self.target_res, input_res=self.input_res,
-                         seen_categories=list(SEEN_CATEGORIES))
-            builder.finish(items, extra)
-
-    def _progress(self, iterable, total: int, desc: str):
-        from tqdm.auto import tqdm  # noqa: PLC0415
-
-        return tqdm(iterable, total=total, desc=desc, unit="item", disable=not self.progress, dynamic_ncols=True)
-
-    def _prepare_synth(self, builder: CacheBuilder) -> tuple[list[dict], dict]:
-        items = synth_items(self.sizes, self.categories, self.unseen_categories, self.seed,
-                            self.views_per_shape, self.unseen_view_set)
-        todo = [it for it in items if not builder.has(it["file"])]
-        if len(todo) < len(items):
-            log.info("%s: %d of %d items already prepared", self.data_dir, len(items) - len(todo), len(items))
-        for it in self._progress(todo, len(todo), "completion synth"):
-            inp, tgt = synth_pair(it, self.seed, self.target_res, self.input_factor, self.render_factor, self.sensor)
-            save_pair(builder.path(it["file"]), inp, tgt, compress=self.compress)
-        return items, {"skipped": []}
-
-    def _prepare_recgan(self, builder: CacheBuilder) -> tuple[list[dict], dict]:
-        from datamodules.readers.recgan import assign_splits, convert_pair, index_recgan  # noqa: PLC0415
-
-        pairs, problems = index_recgan(self.root, skip_bad=self.skip_bad)
-        planned = assign_splits(pairs, self.categories, self.unseen_categories, self.val_fraction, self.seed)
-        items = []
-        for split, p in self._progress(planned, len(planned), "completion recgan"):
-            it = {"name": p.name, "split": split, "category": p.category, "view_set": p.view_set,
-                  "shape_id": p.shape_id, "view": p.view, "source_folder": p.folder,
-                  "input_file": str(p.input_path.relative_to(self.root)),
-                  "file": f"items/{split}/{p.name}_{p.view_set}.npz"}
-            if not builder.has(it["file"]):
-                try:
-                    inp, tgt = convert_pair(p, self.raw_res, self.target_res, self.input_res)
-                except DataError as exc:
-                    if not self.skip_bad:
-                        raise
-                    log.warning("skipping: %s", exc)
-                    problems.append(str(exc))
-                    continue
-                save_pair(builder.path(it["file"]), inp, tgt, compress=self.compress)
-            items.append(it)
-        if problems:
-            log.warning("%s: skipped %d bad file(s)", self.root, len(problems))
-        return items, {"skipped": problems}
+    def _prepare_items(self, builder: CacheBuilder) -> tuple[list[dict], dict]:
+        if self.source == "synth":
+            items, extra = prepare_synth_items(builder, self.spec, self.progress)
+        elif self.source in MESH_SOURCES:
+            mesh = MeshSpec(self.source, self.root, self.model_split, self.min_models, self.up_axis)
+            items, extra = prepare_mesh_items(builder, self.spec, mesh, self.skip_bad, self.prepare_workers,
+                                              self.progress)
+        else:
+            items, extra = prepare_recgan_items(builder, self.spec, self.root, self.raw_res, self.val_fraction,
+                                                self.skip_bad, self.progress)
+        extra.update(target_res=self.target_res, input_res=self.input_res, seen_categories=list(SEEN_CATEGORIES))
+        return items, extra
 
     # ---------------------------------------------------------------- loading
     def setup(self, stage: str | None = None) -> None:
@@ -358,11 +244,6 @@ class CompletionDataModule(pl.LightningDataModule):
         the target's grid) and the target as shaded marching-cubes renders
         (:func:`lit3d.utils.voxel_images.render_voxels`), seen from the depth camera's side and
         from behind, ``cell`` px each, labelled with split, name and the input's fill."""
-        import torch  # noqa: PLC0415
-
-        from lit3d.utils.figures import labelled_grid  # noqa: PLC0415
-        from lit3d.utils.voxel_images import BACK_VIEW, FRONT_VIEW, render_voxels, to_resolution  # noqa: PLC0415
-
         if not self.datasets:
             self.setup()
         splits = [s for s in DATA_SPLITS if len(self.datasets[s])]

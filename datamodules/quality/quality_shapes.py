@@ -2,7 +2,7 @@
 
 :func:`procedural_shape` makes one of :data:`PROCEDURAL_SHAPES` (centred, about unit size, smooth
 and rough regions on most); :func:`load_user_meshes` reads every mesh file of a folder. The
-distortions applied to them are in :mod:`datamodules.synth.distortions`.
+distortions applied to them are in :mod:`datamodules.quality.distortions`.
 """
 from __future__ import annotations
 

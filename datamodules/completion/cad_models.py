@@ -1,6 +1,6 @@
 """Real CAD models for the completion data: a folder of meshes, ShapeNetCore, one loader.
 
-Two layouts are indexed here (the Sweet Home 3D catalogues: :mod:`datamodules.readers.sweethome3d`):
+Two layouts are indexed here (the Sweet Home 3D catalogues: :mod:`datamodules.completion.sweethome3d`):
 
 * ``data.source=meshes``: ``<root>/<category>/<model>.<ext>`` (one file = one model) or
   ``<root>/<category>/<model>/**/*.<ext>`` (a folder = one model, its files its parts), with

@@ -4,19 +4,20 @@ Grid convention (view-aligned, the same as the real 3D-RecGAN++ files, where the
 2.5D surface lies within about one voxel of the target's low-z face):
 arrays are indexed ``[i, j, k]`` = ``[x, y, depth]``; x to the camera's right, y
 up in the image, ``k`` grows away from the camera (the camera looks along +k).
-The object is rotated into the camera frame and scaled/centred so that its
-longest side spans ``res - 2 * margin`` voxels.
+The object is rotated into the camera frame (:func:`lit3d.sensing.views.camera_rotation`) and
+scaled/centred so that its longest side spans ``res - 2 * margin`` voxels (``margin`` =
+:data:`lit3d.sensing.views.GRID_MARGIN` unless given).
 
 Steps for one sample:
 1. camera rotation from (azimuth, elevation, roll) in degrees;
 2. normalisation from the mesh vertices in the camera frame;
 3. target: union of the primitives' analytic inside tests at voxel centres, each
    primitive grown by half a voxel (a conservative, binvox-like filled solid);
-4. depth image (pyrender, EGL) through the sensor's camera (:mod:`datamodules.synth.sensor`:
+4. depth image (pyrender, EGL) through the sensor's camera (:mod:`lit3d.sensing.sensor`:
    orthographic at ``render_factor * res`` pixels a side, or 3D-RecGAN++'s pinhole camera);
 5. back-projection: each foreground pixel's surface point (with the sensor's range noise and
-   holes), pushed a quarter voxel along its ray into the object, marks its voxel -> partial
-   surface grid at ``res`` (noise-free, >95% of these voxels are target voxels with the
+   holes), pushed :data:`~lit3d.sensing.views.SURFACE_PUSH` (a quarter voxel) along its ray
+   into the object, marks its voxel -> partial surface grid at ``res`` (noise-free, >95% of these voxels are target voxels with the
    conservative target of step 3); the sensor may misregister the points by a sub-voxel
    shift and mirror ``i`` (3D-RecGAN++'s handedness);
 6. the network input is that grid max-pooled by ``input_factor``.
@@ -27,11 +28,13 @@ import itertools
 
 import numpy as np
 
-from datamodules.synth.furniture import Shape, shape_mesh
-from datamodules.synth.mesh_shapes import MeshShape
-from datamodules.synth.sensor import Sensor, bin_points, make_sensor, render_perspective, sensed_points
-from datamodules.voxel_cache import max_pool_bool
+from datamodules.completion.furniture import Shape, shape_mesh
+from datamodules.completion.mesh_shapes import MeshShape
+from datamodules.completion.voxel_cache import max_pool_bool
+from lit3d.geometry.solid_voxels import solid_voxels
 from lit3d.render.camera import OrthoCamera, look_at, render_ortho_depth
+from lit3d.sensing.sensor import Sensor, bin_points, make_sensor, render_perspective, sensed_points
+from lit3d.sensing.views import GRID_MARGIN, SURFACE_PUSH, camera_rotation
 
 # Analogues of the 3D-RecGAN++ view sets: same-view 5x5x5 (125 views), cross-view
 # 6x6x6 (216 views), as (azimuth, elevation, roll) grids. The two sets share no view.
@@ -50,26 +53,10 @@ def view_index(view_set: str, idx: int) -> tuple[int, int, int]:
     return idx // (n * n), (idx // n) % n, idx % n
 
 
-def camera_rotation(azimuth: float, elevation: float, roll: float = 0.0) -> np.ndarray:
-    """(3, 3) rotation object frame (y up) -> camera frame (OpenGL: x right, y up, camera looks along -z).
-
-    The camera sits on the direction (cos e sin a, sin e, cos e cos a) from the object centre.
-    """
-    a, e, r = np.radians([azimuth, elevation, roll])
-    z = np.array([np.cos(e) * np.sin(a), np.sin(e), np.cos(e) * np.cos(a)])
-    x = np.cross([0.0, 1.0, 0.0], z)
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    rot = np.stack([x, y, z])
-    c, s = np.cos(r), np.sin(r)
-    roll_m = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
-    return roll_m @ rot
-
-
 class ViewGeometry:
     """Object frame -> voxel frame for one view: ``v = ((R p) - centre) * scale + res/2`` (GL axes)."""
 
-    def __init__(self, shape: Shape, rot: np.ndarray, res: int, margin: float = 1.0):
+    def __init__(self, shape: Shape, rot: np.ndarray, res: int, margin: float = GRID_MARGIN):
         self.rot, self.res = rot, res
         verts = shape.vertices() @ rot.T
         lo, hi = verts.min(0), verts.max(0)
@@ -126,8 +113,6 @@ def solid_occupancy(shape: Shape, geom: ViewGeometry, pad: float = 0.5) -> np.nd
 def mesh_solid(shape: MeshShape, geom: ViewGeometry, spacing: float = 0.5) -> np.ndarray:
     """(res, res, res) bool solid of a real mesh on the view grid (:mod:`lit3d.geometry.solid_voxels`);
     ``spacing``: the surface samples' largest gap in voxels (0.5 / f mimics a grid f times finer)."""
-    from lit3d.geometry.solid_voxels import solid_voxels  # noqa: PLC0415
-
     h = geom.res / 2
     gl = geom.to_voxel(shape.points)
     index_coords = np.stack([gl[:, 0] + h, gl[:, 1] + h, h - gl[:, 2]], axis=1)
@@ -165,17 +150,17 @@ def max_pool(grid: np.ndarray, factor: int) -> np.ndarray:
 
 
 def make_sample(shape: Shape | MeshShape, view: tuple[float, float, float], target_res: int = 64, input_factor: int = 4,
-                render_factor: int = 2, margin: float = 1.0, pad: float = 0.5, push: float = 0.25,
+                render_factor: int = 2, margin: float = GRID_MARGIN, pad: float = 0.5, push: float = SURFACE_PUSH,
                 sensor: Sensor | str | dict | None = None, rng: np.random.Generator | None = None,
                 with_target: bool = True) -> dict[str, np.ndarray]:
     """One view of ``shape`` -> dict(input=(r,r,r) bool, target=(R,R,R) bool, surface=(R,R,R) bool).
 
     ``R = target_res``, ``r = R / input_factor``; ``surface`` is the partial grid before pooling.
-    ``sensor`` (:mod:`datamodules.synth.sensor`: a name, a dict or a Sensor; default the
+    ``sensor`` (:mod:`lit3d.sensing.sensor`: a name, a dict or a Sensor; default the
     orthographic, noise-free one) decides the camera, handedness and noise; ``rng`` draws the
     noise (required when the sensor is noisy). ``with_target=False`` leaves ``target`` None.
     With a raw-resolution sensor a real mesh's target is made on the target grid directly
-    (:mod:`datamodules.synth.mesh_shapes`); a procedural one's at the raw grid, then pooled.
+    (:mod:`datamodules.completion.mesh_shapes`); a procedural one's at the raw grid, then pooled.
     """
     if target_res % input_factor:
         raise ValueError(f"target_res={target_res} is not divisible by input_factor={input_factor}")

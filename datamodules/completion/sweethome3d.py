@@ -20,7 +20,7 @@ import zlib
 from pathlib import Path
 
 from datamodules.cache import DataError
-from datamodules.readers.cad_models import CadModel
+from datamodules.completion.cad_models import CadModel
 
 DEFAULT_ROOT = "/usr/share/sweethome3d/furniture"
 APT_PACKAGE = "sweethome3d-furniture"

@@ -12,7 +12,7 @@ A stimulus is named ``<cloud>_<code>`` (``phil_G_01``); its reference is
 ``Original/<cloud>.zip``. MOS is on 1..5, higher = better. A row whose ``file`` cell is
 empty and whose stimulus has no file under ROOT is a stimulus of the study that this copy
 does not hold: it is left out and listed in ``skipped`` (no warning). Everything else that
-is wrong is one :class:`datamodules.readers.mos.MosDataError` naming the file and row
+is wrong is one :class:`datamodules.quality.mos.MosDataError` naming the file and row
 (``on_error="skip"`` turns bad rows into warnings). The clouds themselves are read when
 the features are computed (:func:`lit3d.render.points.load_points`).
 """
@@ -23,7 +23,7 @@ import re
 import warnings
 from pathlib import Path
 
-from datamodules.readers.mos import MosDataError, MosDataset, MosItem, MosLayout
+from datamodules.quality.mos import MosDataError, MosDataset, MosItem, MosLayout
 
 CLOUD_EXTS = (".zip", ".ply")
 SCORE_RANGE = (1.0, 5.0)

@@ -1,7 +1,7 @@
-"""How the 2.5D input of a synthetic completion sample is sensed: camera, handedness, noise.
+"""How the 2.5D input of a completion sample is sensed: camera, handedness, noise.
 
 Two cameras, both looking along ``+k`` of the view-aligned grid of
-:mod:`datamodules.synth.depth_voxels` (``[i, j, k]`` = ``[x, y up, depth]``):
+:mod:`lit3d.sensing.views` (``[i, j, k]`` = ``[x, y up, depth]``):
 
 - ``ortho``: the project's original orthographic camera (rays parallel to ``k``).
 - ``perspective``: 3D-RecGAN++'s pinhole camera (``Data_preprocess/depth_2_pc_2_vox.py`` of its
@@ -24,7 +24,7 @@ Noise, in voxels of a 256 grid (the release's resolution; scaled to the grid bei
 - ``misregistration``: one shift per sample, uniform in ``[-m, m]`` per axis, of the sensed
   points against the target. In the release every 2.5D voxel outside its target lies one
   voxel (at 256^3) from it: a sub-voxel misregistration, not range noise
-  (:mod:`datamodules.synth.input_stats` measures it).
+  (:mod:`lit3d.cli.input_stats` measures it).
 - ``depth_noise``: standard deviation of independent per-pixel range noise.
 - ``hole_fraction``: share of foreground pixels dropped in blobs of about ``hole_size`` pixels
   (a smoothed random field thresholded at the matching quantile).
@@ -39,6 +39,8 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
+
+from lit3d.render.camera import look_at, render_pinhole_depth
 
 RECGAN_FOV_DEG = 49.124
 RAW_RES = 256  # the resolution the noise figures refer to
@@ -83,7 +85,7 @@ class Sensor:
 
 SENSORS = {
     "ortho": Sensor(),
-    # calibrated at 64^3 on ../shared/data/recgan_sample (python -m datamodules.synth.input_stats;
+    # calibrated at 64^3 on ../shared/data/recgan_sample (python -m lit3d.cli.input_stats;
     # README "Synthetic data in the 3D-RecGAN++ geometry"): made at 256^3 and pooled, as the release
     "recgan": Sensor(camera="perspective", mirror_x=True, misregistration=0.75, depth_noise=0.25,
                      hole_fraction=0.15, hole_size=8.0, raw_res=RAW_RES, pixels_per_voxel=1.0),
@@ -123,8 +125,6 @@ def render_perspective(verts_gl: np.ndarray, faces: np.ndarray, sensor: Sensor, 
 
     The camera sits at GL ``(0, 0, distance)`` looking along ``-z`` (towards ``+k``).
     """
-    from lit3d.render.camera import look_at, render_pinhole_depth
-
     dist, focal, side = pinhole_geometry(sensor, res, render_factor)
     return render_pinhole_depth(verts_gl, faces, look_at([0.0, 0.0, dist]), side, side, focal, focal,
                                 side / 2, side / 2, znear=0.1 * res, zfar=dist + 2 * res)
@@ -150,7 +150,7 @@ def sensed_points(depth: np.ndarray, sensor: Sensor, res: int, render_factor: in
 
     Args:
         depth: ``(S, S)`` eye depth in voxels from :func:`render_perspective` (perspective) or
-            the orthographic pass of :func:`datamodules.synth.depth_voxels.render_depth`.
+            the orthographic pass of :func:`datamodules.completion.depth_voxels.render_depth`.
     """
     h = res / 2
     fg = depth > 0

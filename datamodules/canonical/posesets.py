@@ -22,7 +22,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from datamodules.readers.tosca import MeshReadError
+from datamodules.canonical.tosca import MeshReadError
 
 FAUST_EXTS = (".off", ".ply", ".obj")
 _FAUST_NAMED = re.compile(r"^subject(\d+)_pose(\d+)$", re.IGNORECASE)
