@@ -33,6 +33,7 @@ def bin_path(name: str) -> str:
     return str(Path(sys.executable).parent / name)
 
 
+@pytest.mark.slow  # 20 s; the wheel test trains debug=fdr and test_train_then_eval a whole run in the default suite
 def test_fast_dev_run(compose_cfg, data_dir):
     cfg = compose_cfg([*TINY, "debug=fdr"], data_dir=data_dir)
     train(cfg)
@@ -149,6 +150,7 @@ def test_multirun_sweep_collects_table(data_dir, tmp_path):
     assert "task.nets.classifier=true" in table and "task.nets.classifier=false" in table
 
 
+@pytest.mark.slow  # 21 s; DDP stays in the default suite through tests/test_ddp_equivalence.py
 def test_ddp_cpu_fast_dev_run(data_dir, tmp_path):
     out = tmp_path / "ddp"
     res = _run([bin_path("lit3d-train"), *TINY, "trainer=ddp_cpu", "trainer.fast_dev_run=2",

@@ -63,7 +63,8 @@ def _bin(name: str) -> str:
     return str(Path(sys.executable).parent / name)
 
 
-@pytest.mark.parametrize("task,overrides", [("completion", COMPLETION), ("canonical", CANONICAL)])
+@pytest.mark.parametrize("task,overrides", [pytest.param("completion", COMPLETION, marks=pytest.mark.slow),  # 17 s
+                                            ("canonical", CANONICAL)])
 def test_train_console_is_quiet(task, overrides, tmp_path):
     run = tmp_path / "run"
     out = _console([_bin("lit3d-train"), *overrides, f"hydra.run.dir={run}", f"paths.data_dir={tmp_path / 'data'}"],
