@@ -54,7 +54,6 @@ def test_early_stopping_is_off_by_default_and_watches_the_monitor():
     assert isinstance(stop, EarlyStopping) and stop.monitor == "val/iou" and stop.mode == "max" and stop.patience == 3
 
 
-@pytest.mark.slow  # 12 s: two whole trials through the Optuna sweeper
 def test_two_optuna_trials_of_a_tiny_config(tmp_path):
     sweep = tmp_path / "sweep"
     env = {**os.environ, "OMP_NUM_THREADS": "1", "HYDRA_FULL_ERROR": "1", "WANDB_MODE": "offline"}
