@@ -132,8 +132,8 @@ def build_datamodule(data_cfg: DictConfig | dict):
     return _construct("data", lambda: _instantiate_plain(data_cfg))
 
 
-def read_checkpoint_meta(ckpt_path: str | Path) -> dict:
-    """The lit3d metadata stored in a checkpoint (task, data config, W&B id).
+def read_checkpoint(ckpt_path: str | Path) -> tuple[dict, dict]:
+    """``(checkpoint dict, its lit3d metadata)`` (task, data config, W&B id).
 
     Loads with ``weights_only=True`` (see :func:`lit3d.utils.checkpoints.load_checkpoint`): a
     checkpoint that pickles arbitrary objects is refused, never executed.
@@ -144,7 +144,12 @@ def read_checkpoint_meta(ckpt_path: str | Path) -> dict:
     meta = ckpt.get(META_KEY) if isinstance(ckpt, dict) else None
     if not isinstance(meta, dict):
         raise UserError(f"{Path(ckpt_path)}: not a lit3d checkpoint (no '{META_KEY}' metadata)")
-    return meta
+    return ckpt, meta
+
+
+def read_checkpoint_meta(ckpt_path: str | Path) -> dict:
+    """The lit3d metadata stored in a checkpoint (:func:`read_checkpoint`)."""
+    return read_checkpoint(ckpt_path)[1]
 
 
 # ------------------------------------------------------------------ command line

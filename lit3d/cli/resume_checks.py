@@ -146,19 +146,17 @@ def _differs_from(saved: dict, key: str, value: Any) -> bool:
     return not _same(node, value)
 
 
-def check_weights_fit(ckpt_path: str | Path, task) -> None:
-    """Refuse a checkpoint whose weights do not fit ``task``'s nets (another size or layout) before
-    any data is prepared, instead of Lightning's ``Error(s) in loading state_dict`` traceback.
+def check_weights_fit(ckpt_path: str | Path, task, state: dict) -> None:
+    """Refuse a checkpoint (named ``ckpt_path``, its ``state_dict`` ``state``) whose weights do not fit
+    ``task``'s nets (another size or layout) before any data is prepared, instead of Lightning's
+    ``Error(s) in loading state_dict`` traceback.
 
     Compared: the shapes of the entries both have; the parameters of ``task`` the checkpoint lacks;
     the entries of the checkpoint ``task`` lacks. A module whose nets are built only when a
     checkpoint is loaded (an empty state dict) is left to its own ``on_load_checkpoint``."""
-    from lit3d.utils.checkpoints import load_checkpoint
-
     own = task.state_dict()
     if not own:
         return
-    state = (load_checkpoint(ckpt_path, UserError).get("state_dict") or {})
     problems = [f"{k}: {tuple(state[k].shape)} in the checkpoint, {tuple(v.shape)} here"
                 for k, v in own.items() if k in state and tuple(getattr(state[k], "shape", ())) != tuple(v.shape)]
     problems += [f"{k}: not in the checkpoint" for k, _ in task.named_parameters() if k not in state]

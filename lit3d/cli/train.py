@@ -25,7 +25,7 @@ from lit3d.cli.common import (
     build_datamodule,
     build_task,
     cli_main,
-    read_checkpoint_meta,
+    read_checkpoint,
     run_cli,
     run_evaluation,
     scalar_metrics,
@@ -162,7 +162,7 @@ def train(cfg: DictConfig) -> float | None:
     pl.seed_everything(cfg.seed, workers=True)
     torch.set_float32_matmul_precision(cfg.matmul_precision)
     ckpt_path = resolve_ckpt_path(cfg.get("ckpt_path"), output_dir)
-    meta = read_checkpoint_meta(ckpt_path) if ckpt_path else {}
+    ckpt, meta = read_checkpoint(ckpt_path) if ckpt_path else ({}, {})  # read once for every check below
     if ckpt_path:  # its task, data and architecture against this config (lit3d.cli.resume_checks)
         check_resume_config(ckpt_path, meta, cfg, output_dir)
     wandb_id = meta.get("wandb_id") or uuid.uuid4().hex[:8]
@@ -170,7 +170,8 @@ def train(cfg: DictConfig) -> float | None:
     datamodule = build_datamodule(cfg.data)
     task = build_task(cfg.task)
     if ckpt_path:  # before the data is prepared: weights of another size are one line, not Lightning's traceback
-        check_weights_fit(ckpt_path, task)
+        check_weights_fit(ckpt_path, task, ckpt.get("state_dict") or {})
+    del ckpt  # Lightning reads the checkpoint itself to resume
     atomic_write_text(output_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))  # once every check passed
     loggers = with_csv_logger(build_loggers(cfg, wandb_id), output_dir)  # the CSV log is always on (curves.png)
     callbacks = [instantiate(c) for c in (cfg.get("callbacks") or {}).values() if c is not None]
