@@ -8,7 +8,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 export VENV TORCH_SPEC
 
-.PHONY: demo test test-all bench install clean lint
+.PHONY: demo test test-all bench bench-gpu install clean lint
 
 $(STAMP): pyproject.toml scripts/bootstrap.sh
 	bash scripts/bootstrap.sh
@@ -30,6 +30,10 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks.run
+
+# On a CUDA machine: only the GPU rows, into benchmarks/gpu_rows.json (the next `make bench` shows them)
+bench-gpu: $(STAMP)
+	$(BIN)/python -m benchmarks.run --gpu
 
 clean:
 	rm -rf logs outputs multirun .pytest_cache

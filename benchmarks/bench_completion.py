@@ -32,8 +32,8 @@ from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 from omegaconf import open_dict
 
-from benchmarks.common import (SavedTensorMeter, current_rss_mb, default_threads, isolated, num_threads, peak_rss_mb,
-                               row, target_note, trainer_step_times)
+from benchmarks.common import (GPU_CMD, SavedTensorMeter, current_rss_mb, default_threads, isolated, num_threads,
+                               peak_rss_mb, row, target_note, trainer_step_times)
 from lit3d.cli.common import CONF_DIR, build_datamodule, build_task
 from lit3d.utils.shapenet_categories import SEEN_CATEGORIES
 
@@ -164,8 +164,12 @@ def run() -> list[dict]:
         dm, dt, n = _prepare(paper)
         rows.append(_gen_row("paper", int(paper.data.target_res), n, dt))
         rows.append(_loading_row(dm, paper, tmp, "paper", GPU_TARGET_SPS, "the paper-scale GPU step target"))
-    rows += paper_gpu_rows() if torch.cuda.is_available() else [_gpu_placeholder()]
-    return rows
+    return rows + gpu_rows()
+
+
+def gpu_rows() -> list[dict]:
+    """The paper-scale GPU step rows (``python -m benchmarks.run --gpu``); a placeholder row without CUDA."""
+    return paper_gpu_rows() if torch.cuda.is_available() else [_gpu_placeholder()]
 
 
 # ---------------------------------------------------------------------------------- GPU
@@ -181,7 +185,7 @@ GPU_VARIANTS = (
 
 def _gpu_placeholder() -> dict:
     return row("completion train step, paper 64^3->256^3, batch 3, GPU: fp32 vs bf16-mixed, channels_last_3d on/off, "
-               "torch.compile on/off", CMD, None, None, unit="s/step",
+               "torch.compile on/off", GPU_CMD, None, None, unit="s/step",
                note="not measured: no CUDA device on this machine. On a GPU `make bench` runs "
                     "`paper_gpu_rows()`: samples/s, peak GPU memory per sample and the projected time of 20 epochs x "
                     f"26,000 samples per variant, fp32 as the baseline; target >= {GPU_TARGET_SPS:g} samples/s")
@@ -222,13 +226,14 @@ def paper_gpu_rows(experiment: str = "completion_paper", device: str = "cuda", b
                     + (f"peak GPU memory {mem:.0f} MiB/sample; " if mem is not None else "")
                     + target_note("samples/s", sps, GPU_TARGET_SPS, True)
                     + ("" if name == variants[0][0] else f"; baseline = {variants[0][0]} of this run"))
-            rows.append(row(f"completion train step, paper 64^3->256^3, batch {batch}, {name}", CMD, t,
+            rows.append(row(f"completion train step, paper 64^3->256^3, batch {batch}, {name}", GPU_CMD, t,
                             None if name == variants[0][0] else base_t, unit="s/step",
                             baseline_name="" if name == variants[0][0] else variants[0][0], note=note,
                             device=device))
+            print(f"[bench-gpu] {rows[-1]['name']}: {note}", flush=True)
             del task, batches
         except Exception as exc:  # one failing variant (OOM, compiler) must not hide the others
-            rows.append(row(f"completion train step, paper, batch {batch}, {name}", CMD, None, None, unit="s/step",
+            rows.append(row(f"completion train step, paper, batch {batch}, {name}", GPU_CMD, None, None, unit="s/step",
                             note=f"failed: {type(exc).__name__}: {str(exc).splitlines()[0][:200]}", device=device))
         if cuda:
             torch.cuda.empty_cache()

@@ -26,7 +26,7 @@ import time
 import numpy as np
 import torch
 
-from benchmarks.common import default_threads, median_time, num_threads, row, target_note
+from benchmarks.common import GPU_CMD, default_threads, median_time, num_threads, row, target_note
 
 CMD = "make bench"
 TABLE_TARGET_S, TABLE_TARGET_RATIO = 10.0, 10.0
@@ -139,15 +139,31 @@ def run() -> list[dict]:
                     note=f"{ms['n'] / ms['ours']:.0f} pairs/s vs {ms['n'] / ms['base']:.0f} pairs/s; both 1 thread; "
                          f"scikit-image timed on 24 pairs and scaled to {ms['n']}; ours with {default_threads()} "
                          f"threads: {ms2:.2f} s"))
-    if torch.cuda.is_available():  # pragma: no cover - GPU only
-        cfg512 = FeatureConfig(render=RenderConfig(size=512))
-        gpu = median_time(lambda: feature_table(ref, dist, cfg512, device="cuda"), repeats=2)
-        rows.append(row(f"quality feature table, {nf}-face pair, 512^2, measures on GPU", CMD, gpu, None,
-                        note="per pair", device="cuda"))
-    else:
-        rows.append(row(f"quality feature table, {nf}-face pair, 512^2, measures on GPU", CMD, None, None,
-                        note="not measured: no CUDA device on this machine"))
-    return rows + point_rows()
+    return rows + gpu_rows(ref, dist) + point_rows()
+
+
+def gpu_rows(ref=None, dist=None) -> list[dict]:
+    """The feature table at 512^2 with the measures on the GPU, against the same table with the measures
+    on the CPU in the same run (``python -m benchmarks.run --gpu``); a placeholder row without CUDA."""
+    from lit3d.features.table import FeatureConfig, feature_table
+    from lit3d.render.gbuffer import RenderConfig
+
+    if ref is None:
+        ref, dist = _pair()
+    name = f"quality feature table, {len(ref.faces)}-face pair, 30 styles x 2 shadings x 12 views, 512^2, measures on GPU"
+    if not torch.cuda.is_available():
+        return [row(name, GPU_CMD, None, None, note="not measured: no CUDA device on this machine")]
+    cfg512 = FeatureConfig(render=RenderConfig(size=512))
+    with num_threads(default_threads()):
+        on_gpu = feature_table(ref, dist, cfg512, device="cuda")
+        gpu = median_time(lambda: feature_table(ref, dist, cfg512, device="cuda"), repeats=3, warmup=0)
+        on_cpu = feature_table(ref, dist, cfg512)
+        cpu = median_time(lambda: feature_table(ref, dist, cfg512), repeats=2, warmup=0)
+    shared = sorted(set(on_gpu.features) & set(on_cpu.features))
+    worst = float(np.nanmax([abs(on_gpu.features[k] - on_cpu.features[k]) for k in shared]))
+    return [row(name, GPU_CMD, gpu, cpu, baseline_name="measures on the CPU", device="cuda",
+                note=f"per pair, rendering included (pyrender, EGL); {len(shared)} features, largest GPU-CPU "
+                     f"difference {worst:.2g}; {target_note('time', gpu, TABLE_TARGET_S, False, ' s')}")]
 
 
 def _cloud_zip(path, n: int, seed: int, noise: float) -> None:

@@ -23,6 +23,8 @@ from collections.abc import Callable
 
 import torch
 
+GPU_CMD = "make bench-gpu"  # the GPU rows alone (benchmarks.run --gpu), on a CUDA machine
+
 
 def cpu_model() -> str:
     model = platform.processor() or platform.machine()

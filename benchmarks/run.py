@@ -5,11 +5,15 @@ that fails is reported in the file with its error instead of silently vanishing.
 
     python -m benchmarks.run                 # everything, rewrites BENCHMARKS.md
     python -m benchmarks.run quality canon   # only matching modules, printed (add --write to save)
+    python -m benchmarks.run --gpu [--out F] # only the modules' gpu_rows(), on a CUDA machine: writes F
+                                             # (default benchmarks/gpu_rows.json), which a later CPU run
+                                             # copies into BENCHMARKS.md as its GPU section
 """
 from __future__ import annotations
 
 import datetime
 import importlib
+import json
 import os
 import pkgutil
 import sys
@@ -20,10 +24,11 @@ from pathlib import Path
 import torch
 
 import benchmarks
-from benchmarks.common import cpu_model, default_threads, load_avg
+from benchmarks.common import GPU_CMD, cpu_model, default_threads, load_avg
 from lit3d.utils.tables import markdown_table
 
 OUT = Path(__file__).resolve().parents[1] / "BENCHMARKS.md"
+GPU_ROWS = Path(__file__).resolve().with_name("gpu_rows.json")  # written by --gpu on a CUDA machine
 
 
 def _num(v, unit: str) -> str:
@@ -47,15 +52,67 @@ def _load_line(before: tuple | None, after: tuple | None, peak: float | None) ->
     return text + "\n"
 
 
+def _table(rows: list[dict]) -> str:
+    return markdown_table(
+        ["benchmark", "machine", "ours", "baseline (same run)", "ratio", "note", "command"],
+        [[r["name"], r["machine"], _num(r["ours"], r["unit"]),
+          (f"{r['baseline_name']}: " if r.get("baseline_name") else "") + _num(r["baseline"], r["unit"]),
+          "–" if r["ratio"] is None else f"{r['ratio']:.2f}x", r["note"], f"`{r['command']}`"] for r in rows],
+    )
+
+
+def _modules(selected: list[str]) -> list[str]:
+    """The ``bench_*`` modules, all in name order, or those matching ``selected`` in the order given."""
+    names = sorted(m.name for m in pkgutil.iter_modules(benchmarks.__path__) if m.name.startswith("bench_"))
+    if not selected:
+        return names
+    return [n for s in selected for n in names if s in n]
+
+
+def run_gpu(selected: list[str], out: Path = GPU_ROWS) -> dict:
+    """Run each module's ``gpu_rows()`` (CUDA only) and write them, with the machine, to ``out`` (JSON)."""
+    if not torch.cuda.is_available():
+        raise SystemExit("error: benchmarks.run --gpu: no CUDA device on this machine")
+    rows, failures, t0 = [], [], time.perf_counter()
+    data = {"date": str(datetime.date.today()), "gpu": torch.cuda.get_device_name(0), "cpu": cpu_model(),
+            "cores": os.cpu_count(), "torch": torch.__version__, "rows": rows, "failures": failures}
+    for name in _modules(selected):
+        print(f"[bench-gpu] {name} ...", flush=True)
+        try:
+            module = importlib.import_module(f"benchmarks.{name}")
+            rows += module.gpu_rows() if hasattr(module, "gpu_rows") else []
+        except Exception as exc:  # keep the other rows
+            failures.append((name, f"{type(exc).__name__}: {exc}"))
+            traceback.print_exc()
+        data["minutes"] = (time.perf_counter() - t0) / 60
+        out.write_text(json.dumps(data, indent=1) + "\n")  # after each module: a run cut short keeps its rows
+    print(_table(rows))
+    return data
+
+
+def gpu_section(path: Path = GPU_ROWS) -> str:
+    """BENCHMARKS.md's section of GPU rows measured earlier by ``--gpu`` ('' when there are none)."""
+    if not path.exists():
+        return ""
+    data = json.loads(path.read_text())
+    text = (f"\n## GPU rows\n\nMeasured by `make bench-gpu` (`python -m benchmarks.run --gpu`) on {data['date']} in "
+            f"{data['minutes']:.1f} min on an {data['gpu']} (CPU {data['cpu']}, {data['cores']} cores), torch "
+            f"{data['torch']}; each baseline in the same run on that machine. Copied from `benchmarks/gpu_rows.json`, "
+            "not measured by this run.\n\n" + _table(data["rows"]) + "\n")
+    if data["failures"]:
+        text += "\nFailed there: " + "; ".join(f"`{n}`: {e}" for n, e in data["failures"]) + "\n"
+    return text
+
+
 def main(argv: list[str] | None = None) -> str:
     argv = list(sys.argv[1:] if argv is None else argv)
     write = "--write" in argv
-    selected = [a for a in argv if not a.startswith("--")]
-    names = sorted(m.name for m in pkgutil.iter_modules(benchmarks.__path__) if m.name.startswith("bench_"))
-    if selected:
-        names = [n for n in names if any(s in n for s in selected)]
-    else:
-        write = True
+    out = Path(argv[argv.index("--out") + 1]) if "--out" in argv else GPU_ROWS
+    selected = [a for a in argv if not a.startswith("--") and a != str(out)]
+    if "--gpu" in argv:
+        return json.dumps(run_gpu(selected, out))
+    names = _modules(selected)
+    write = write or not selected
     rows, failures, durations = [], [], []
     before, peak = (os.getloadavg() if hasattr(os, "getloadavg") else None), load_avg()
     t_start = time.perf_counter()
@@ -73,19 +130,16 @@ def main(argv: list[str] | None = None) -> str:
         print(f"[bench] {name}: {durations[-1][1]:.0f} s (load {la})", flush=True)
     total = time.perf_counter() - t_start
     after = os.getloadavg() if hasattr(os, "getloadavg") else None
-    table = markdown_table(
-        ["benchmark", "machine", "ours", "baseline (same run)", "ratio", "note", "command"],
-        [[r["name"], r["machine"], _num(r["ours"], r["unit"]),
-          (f"{r['baseline_name']}: " if r.get("baseline_name") else "") + _num(r["baseline"], r["unit"]),
-          "–" if r["ratio"] is None else f"{r['ratio']:.2f}x", r["note"], f"`{r['command']}`"] for r in rows],
-    )
     gpu = torch.cuda.is_available()
+    gpu_text = "" if gpu else gpu_section()
+    if gpu_text:  # the GPU rows come from the section, not from this run's placeholders
+        rows = [r for r in rows if not (r["command"] == GPU_CMD and r["ours"] is None)]
+    table = _table(rows)
     gpu_note = ("" if gpu else
-                "\n**No NVIDIA GPU on this machine: the paper-scale GPU rows (completion at 64^3 -> 256^3, batch 3, "
+                "\n**No NVIDIA GPU on this machine**: the paper-scale GPU rows (completion at 64^3 -> 256^3, batch 3, "
                 "bf16-mixed vs fp32, channels_last_3d, torch.compile; the quality table with measures on the GPU) "
-                "were not measured.** Their code runs when CUDA is available "
-                "(`benchmarks/bench_completion.py::paper_gpu_rows`, `benchmarks/bench_quality.py`); on CPU they "
-                "appear below as rows without figures.\n")
+                + ("are those of the section 'GPU rows' at the end, measured on a GPU by `make bench-gpu`.\n"
+                   if gpu_text else "were not measured; on CPU they appear below as rows without figures.\n"))
     text = (f"# Benchmarks\n\nWritten by `make bench` (`.venv/bin/python -m benchmarks.run`) on "
             f"{datetime.date.today()} in {total / 60:.1f} min — CPU {cpu_model()}, {os.cpu_count()} cores, "
             f"torch {torch.__version__} (default {default_threads()} intra-op threads)"
@@ -95,7 +149,7 @@ def main(argv: list[str] | None = None) -> str:
             "ours / baseline for rates (samples/s). Each row's note gives its target where the issue sets one "
             "(met, or MISSED by how much).\n"
             f"{_load_line(before, after, peak)}{gpu_note}\n{table}\n\n"
-            "Per module: " + ", ".join(f"`{n}` {d:.0f} s" for n, d in durations) + ".\n")
+            "Per module: " + ", ".join(f"`{n}` {d:.0f} s" for n, d in durations) + ".\n" + gpu_text)
     if failures:
         text += "\n## Benchmarks that failed\n\n" + "\n".join(f"- `{n}`: {e}" for n, e in failures) + "\n"
     if write:
