@@ -168,8 +168,11 @@ def run() -> list[dict]:
 
 
 def gpu_rows() -> list[dict]:
-    """The paper-scale GPU step rows (``python -m benchmarks.run --gpu``); a placeholder row without CUDA."""
-    return paper_gpu_rows() if torch.cuda.is_available() else [_gpu_placeholder()]
+    """The paper-scale GPU step rows (``python -m benchmarks.run --gpu``): the thesis's batch of 3 in every
+    variant, then batch 12 in fp32 and bf16 + channels_last_3d; a placeholder row without CUDA."""
+    if not torch.cuda.is_available():
+        return [_gpu_placeholder()]
+    return paper_gpu_rows() + paper_gpu_rows(batch=12, steps=4, warmup=2, variants=(GPU_VARIANTS[0], GPU_VARIANTS[2]))
 
 
 # ---------------------------------------------------------------------------------- GPU

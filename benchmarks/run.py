@@ -98,7 +98,8 @@ def gpu_section(path: Path = GPU_ROWS) -> str:
     text = (f"\n## GPU rows\n\nMeasured by `make bench-gpu` (`python -m benchmarks.run --gpu`) on {data['date']} in "
             f"{data['minutes']:.1f} min on an {data['gpu']} (CPU {data['cpu']}, {data['cores']} cores), torch "
             f"{data['torch']}; each baseline in the same run on that machine. Copied from `benchmarks/gpu_rows.json`, "
-            "not measured by this run.\n\n" + _table(data["rows"]) + "\n")
+            "not measured by this run." + (f" {data['note']}" if data.get("note") else "") + "\n\n"
+            + _table(data["rows"]) + "\n")
     if data["failures"]:
         text += "\nFailed there: " + "; ".join(f"`{n}`: {e}" for n, e in data["failures"]) + "\n"
     return text

@@ -50,6 +50,22 @@ def test_poses_are_seeded_within_limits_and_mirrored():
     np.testing.assert_allclose(half["upperleg01.L"], 0.5 * full["upperleg01.L"])
 
 
+def test_per_subject_poses_are_each_subjects_own_and_change_the_cache(tmp_path):
+    own = [bodies.sample_pose(0, 3, subject=i) for i in (1, 2)]
+    assert all(np.array_equal(own[0][k], bodies.sample_pose(0, 3, subject=1)[k]) for k in own[0])  # seeded
+    assert any(not np.array_equal(own[0][k], own[1][k]) for k in own[0])  # two people, two poses
+    assert any(not np.array_equal(own[0][k], bodies.sample_pose(0, 3)[k]) for k in own[0])  # not the shared draw
+    kw = dict(source="anny", n_subjects=4, n_poses=4, image_size=48)
+    shared = CanonicalDataModule(str(tmp_path / "a"), **kw)
+    assert shared.config_hash() == CanonicalDataModule(str(tmp_path / "a"), pose_draw="shared", **kw).config_hash()
+    assert "pose_draw" not in shared.cache_config()  # old caches keep their hash
+    assert CanonicalDataModule(str(tmp_path / "a"), pose_draw="per_subject", **kw).config_hash() != shared.config_hash()
+    from datamodules.canonical.sources import AnnySource
+
+    with pytest.raises(DataError, match="unknown pose_draw 'each'"):
+        AnnySource(4, 4, 0, 0, 15.0, 1.0, pose_draw="each")
+
+
 # ------------------------------------------------------------------ Anny bodies (the real model)
 @pytest.fixture(scope="module")
 def body_model():

@@ -108,11 +108,15 @@ def sample_phenotype(seed: int, index: int, mode: str = "uniform", model=None) -
     return {k: float(pheno[k][0]) for k in PHENOTYPE_RANGES}
 
 
-def sample_pose(pose_seed: int, index: int, strength: float = 1.0, yaw_range: float = 15.0) -> dict[str, np.ndarray]:
+def sample_pose(pose_seed: int, index: int, strength: float = 1.0, yaw_range: float = 15.0,
+                subject: int | None = None) -> dict[str, np.ndarray]:
     """Pose ``index`` of the draw ``pose_seed``: ``{bone: rotation vector (3,) float64}`` in Anny's
     rest axes, each joint's angles uniform within its limits times ``strength``; the ``root`` entry
-    turns the body by U(-yaw_range, yaw_range) degrees about the vertical."""
-    rng = np.random.default_rng([int(pose_seed), int(index), 53])
+    turns the body by U(-yaw_range, yaw_range) degrees about the vertical. ``subject`` (an index):
+    that subject's own pose ``index``, a draw no other subject shares (None: pose ``index`` of every
+    subject, the shared draw)."""
+    key = [int(pose_seed), int(index), 53] if subject is None else [int(pose_seed), int(subject), int(index), 59]
+    rng = np.random.default_rng(key)
     out: dict[str, np.ndarray] = {}
     for j in JOINT_LIMITS:
         sides = [(j.bone, 1.0), (right_of(j.bone), -1.0)] if j.bone.endswith(".L") else [(j.bone, 1.0)]

@@ -25,6 +25,7 @@ from datamodules.canonical.posesets import index_faust, index_sumner
 
 CANONICAL_SOURCES = ("synth", "tosca", "shrec14", "anny", "faust", "sumner")
 ROOTLESS = ("synth", "anny")  # sources that need no root folder
+POSE_DRAWS = ("shared", "per_subject")  # Anny: pose p the same for every subject, or each subject's own
 
 
 class _Source:
@@ -145,14 +146,17 @@ class Shrec14Source(_MeshFileSource):
 
 class AnnySource(_Source):
     """``n_subjects`` Anny bodies (``anny<i>``, phenotypes drawn with ``seed``) x ``n_poses`` poses
-    (drawn with ``pose_seed``; pose p is the same for every subject). One subject's poses are posed
+    drawn with ``pose_seed``: pose p is the same for every subject (``pose_draw="shared"``) or each
+    subject's own (``"per_subject"``: no two subjects share a pose). One subject's poses are posed
     in one batch and kept until another subject is asked for."""
 
     kind = "anny"
     BATCH = 16
 
     def __init__(self, n_subjects: int, n_poses: int, seed: int, pose_seed: int, yaw_range: float,
-                 pose_strength: float, phenotypes: str = "uniform"):
+                 pose_strength: float, phenotypes: str = "uniform", pose_draw: str = "shared"):
+        if pose_draw not in POSE_DRAWS:
+            raise DataError(f"unknown pose_draw '{pose_draw}' ({', '.join(POSE_DRAWS)})")
         self.b = bodies
         self.model = bodies.BodyModel()
         self.n_subjects, self.n_poses, self.seed = n_subjects, n_poses, seed
@@ -160,6 +164,7 @@ class AnnySource(_Source):
         if phenotypes not in bodies.PHENOTYPE_MODES:
             raise DataError(f"unknown phenotypes '{phenotypes}' ({', '.join(bodies.PHENOTYPE_MODES)})")
         self.phenotypes = phenotypes
+        self.pose_draw = pose_draw
         self._memo: tuple[str, dict] | None = None
 
     def subjects(self):
@@ -174,10 +179,11 @@ class AnnySource(_Source):
     def category(self, subject):
         return "human"
 
-    def _pose(self, pose):
+    def _pose(self, subject, pose):
         if pose == "canonical":
             return None
-        return self.b.sample_pose(self.pose_seed, int(pose), self.strength, self.yaw_range)
+        own = int(subject[len("anny"):]) if self.pose_draw == "per_subject" else None
+        return self.b.sample_pose(self.pose_seed, int(pose), self.strength, self.yaw_range, subject=own)
 
     def phenotype(self, subject) -> dict[str, float]:
         """The subject's Anny phenotype ``{label: value in [0, 1]}``."""
@@ -190,7 +196,7 @@ class AnnySource(_Source):
             verts = {}
             for i in range(0, len(keys), self.BATCH):
                 chunk = keys[i:i + self.BATCH]
-                verts.update(zip(chunk, self.model.vertices(pheno, [self._pose(k) for k in chunk])))
+                verts.update(zip(chunk, self.model.vertices(pheno, [self._pose(subject, k) for k in chunk])))
             self._memo = (subject, verts)
         key = pose if pose == "canonical" else int(pose)
         return self._memo[1][key].astype(np.float64), self.model.faces
@@ -235,7 +241,7 @@ def make_source(hp) -> _Source:
         return Shrec14Source(hp.root, hp.cla, hp.canonical_pose, hp.up_axis)
     if hp.source == "anny":
         return AnnySource(hp.n_subjects, hp.n_poses, hp.body_seed, hp.pose_seed, hp.yaw_range, hp.pose_strength,
-                          hp.get("phenotypes", "uniform"))
+                          hp.get("phenotypes", "uniform"), hp.get("pose_draw", "shared"))
     if hp.source == "faust":
         return FaustSource(hp.root, hp.canonical_pose)
     if hp.source == "sumner":

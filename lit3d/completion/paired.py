@@ -57,7 +57,7 @@ class PairedSamples(torch.nn.Module):
         """``test/<split>/paired/...`` keys: ``n``, ``model``/``<baseline>`` means, the model's mean
         with its interval (``model_lo``/``model_hi``), and per baseline ``margin_<b>`` with
         ``_lo``/``_hi``, for all samples of the split and per category (``.../<category>``)."""
-        got = self.samples.compute()
+        got = {k: v.cpu() for k, v in self.samples.compute().items()}  # the states live on the task's device
         out: dict[str, float] = {}
         if not got:
             return out

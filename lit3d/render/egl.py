@@ -2,7 +2,8 @@
 
 pyrender picks its platform from ``PYOPENGL_PLATFORM`` at import time, so
 :func:`import_pyrender` sets it to ``egl`` (unless the user chose one) before
-the first import. EGL works on CPU machines through Mesa (llvmpipe) and on
+the first import, and pyglet (which pyrender's viewer imports) to headless,
+so no X11 library is needed. EGL works on CPU machines through Mesa (llvmpipe) and on
 NVIDIA GPUs through the driver.
 """
 from __future__ import annotations
@@ -36,6 +37,11 @@ def import_pyrender():
         raise RenderBackendError(
             f"EGL library not found: install it with `apt-get install {EGL_PACKAGES}`"
         )
+    if os.environ["PYOPENGL_PLATFORM"] == "egl":
+        # pyrender imports its pyglet viewer; headless pyglet needs EGL only, not X11 (absent on GPU servers)
+        import pyglet  # noqa: PLC0415
+
+        pyglet.options["headless"] = True
     import pyrender  # noqa: PLC0415  (platform must be set first)
 
     return pyrender
