@@ -39,7 +39,6 @@ import json
 import logging
 import os
 import shutil
-import tempfile
 import threading
 import zlib
 from collections.abc import Callable, Iterable, Iterator
@@ -49,7 +48,10 @@ from typing import Any
 import numpy as np
 
 from datamodules.cache_guard import changed, config_difference, manifest_problem, watch
-from lit3d.utils.io import TMP_SUFFIX, atomic_write_bytes, file_mode, file_sha256, remove_temp_files, write_json
+from datamodules.cache_lock import flock_waiting, funlock
+from lit3d.utils.errors import Lit3dError
+from lit3d.utils.io import atomic_file, atomic_write_bytes, file_sha256, remove_temp_files, write_json
+from lit3d.utils.stops import StopRequested, check_stop
 
 log = logging.getLogger("lit3d.data")
 
@@ -67,7 +69,7 @@ __all__ = [
 _REBUILD: dict = {"on": False, "done": set()}
 
 
-class DataError(ValueError):
+class DataError(Lit3dError, ValueError):
     """A bad data file or data setting; the message names the file (or setting) and the problem."""
 
 
@@ -114,23 +116,15 @@ def stable_int_seed(*parts: object) -> int:
 
 
 def atomic_save_npz(path: str | os.PathLike, compress: bool = True, **arrays: np.ndarray) -> Path:
-    """Save ``arrays`` as ``path`` (.npz) via a temp file in the same folder + ``os.replace``.
+    """Save ``arrays`` as ``path`` (.npz) via a temp file in the same folder + ``os.replace``
+    (:func:`lit3d.utils.io.atomic_file`: an OSError, a full disk's included, names ``path``).
 
     An interrupted write leaves only a ``.<name>.*.tmp`` file, which
     :func:`clean_temp_files` removes; ``path`` is either absent or complete.
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=TMP_SUFFIX)
-    try:
-        os.fchmod(fd, file_mode())  # the umask's mode (0644 under 022), not mkstemp's 0600
-        with os.fdopen(fd, "wb") as f:
-            (np.savez_compressed if compress else np.savez)(f, **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    with atomic_file(path) as f:
+        (np.savez_compressed if compress else np.savez)(f, **arrays)
+    return Path(path)
 
 
 clean_temp_files = remove_temp_files  # leftover ``.*.tmp`` files of interrupted writes
@@ -175,6 +169,7 @@ class CacheBuilder:
         self.config = config
         self.config_hash = stable_hash({"generator": generator, "version": self.version, "config": config})
         self.items_dir = items_dir
+        self.total_items: int | None = None  # the planned items, when a preparation says (its stop line)
 
     # ---------------------------------------------------------------- state
     def _matches(self, info: dict | None) -> bool:
@@ -208,10 +203,15 @@ class CacheBuilder:
         return self._matches(m) and all((self.root / it["file"]).is_file() for it in m["items"])
 
     def path(self, rel: str) -> Path:
+        """``root / rel``; a stop point (:func:`lit3d.utils.stops.check_stop`): a preparation asks for
+        each item's path before it writes the item, so Ctrl-C or SIGTERM stops it at the next item."""
+        check_stop()
         return self.root / rel
 
     def has(self, rel: str) -> bool:
-        """An item file is complete when it exists (it only ever appears through ``os.replace``)."""
+        """An item file is complete when it exists (it only ever appears through ``os.replace``); a
+        stop point like :meth:`path`."""
+        check_stop()
         p = self.root / rel
         return p.is_file() and p.stat().st_size > 0
 
@@ -236,7 +236,7 @@ class CacheBuilder:
         self.root.mkdir(parents=True, exist_ok=True)
         path = self.root / LOCK
         with open(path, "a+") as f:
-            _flock_waiting(f, path)
+            flock_waiting(f, path)
             with self._held_guard:
                 self._held[key] = 1
             try:
@@ -248,7 +248,7 @@ class CacheBuilder:
             finally:
                 with self._held_guard:
                     del self._held[key]
-                _funlock(f)
+                funlock(f)
 
     def prepare_once(self, write_items: Callable[[CacheBuilder], tuple[list[dict], dict | None]],
                      before: Callable[[], object] | None = None) -> bool:
@@ -256,17 +256,23 @@ class CacheBuilder:
         when the cache is complete; else, holding :meth:`locked` (multirun jobs take turns), check
         again (another process may have finished it meanwhile), then ``before()`` (e.g. removing an
         older layout), :meth:`begin`, ``write_items(self) -> (items, extra)``, :meth:`finish`.
-        Returns True when this process prepared the cache."""
+        Returns True when this process prepared the cache. A stop (Ctrl-C or SIGTERM under
+        :func:`lit3d.utils.stops.on_signals`) comes out as :class:`~lit3d.utils.stops.StopRequested`
+        naming ``root`` and the items on disk; a rerun makes only the missing ones."""
         if self.is_complete():
             return False
-        with self.locked():
-            if self.is_complete():  # another process prepared it while this one waited
-                return False
-            if before is not None:
-                before()
-            self.begin()
-            items, extra = write_items(self)
-            self.finish(items, extra)
+        try:
+            with self.locked():
+                if self.is_complete():  # another process prepared it while this one waited
+                    return False
+                if before is not None:
+                    before()
+                self.begin()
+                items, extra = write_items(self)
+                self.finish(items, extra)
+        except StopRequested as stop:
+            stop.where, stop.done, stop.total = self.root, self._items_on_disk(), self.total_items
+            raise
         return True
 
     def begin(self) -> None:
@@ -325,6 +331,10 @@ class CacheBuilder:
         d = self.root / self.items_dir
         return d.is_dir() and any(p.is_file() for p in d.rglob("*"))
 
+    def _items_on_disk(self) -> int:
+        d = self.root / self.items_dir
+        return sum(p.is_file() and not p.name.startswith(".") for p in d.rglob("*")) if d.is_dir() else 0
+
     def finish(self, items: list[dict], extra: dict | None = None) -> dict:
         """Check every item file exists, record its sha256, then write the manifest atomically
         (the marker stays)."""
@@ -353,40 +363,6 @@ def _read_json(path: Path) -> dict | bool | None:
     except (OSError, json.JSONDecodeError):
         return False
     return obj if isinstance(obj, dict) else False
-
-
-def _flock_waiting(f, path: Path) -> None:
-    """Exclusive ``flock`` on the open file ``f``; logs once when it has to wait. Without
-    ``fcntl`` (Windows) or on a file system that refuses locks: a warning, no lock."""
-    try:
-        import fcntl  # noqa: PLC0415
-    except ImportError:  # pragma: no cover - not POSIX
-        log.warning("%s: no fcntl here: preparing without the inter-process lock", path)
-        return
-    try:
-        fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-        return
-    except BlockingIOError:
-        f.seek(0)
-        holder = f.read().strip() or "?"
-        log.info("%s: another process (pid %s) is preparing this data; waiting for it", path.parent, holder)
-    except OSError as exc:  # e.g. ENOLCK on some network file systems
-        log.warning("%s: cannot lock (%s): preparing without the inter-process lock", path, exc)
-        return
-    fcntl.flock(f.fileno(), fcntl.LOCK_EX)
-    log.info("%s: the other preparation is done; going on", path.parent)
-
-
-def _funlock(f) -> None:
-    """Forget the holder's pid, then release (closing the file would release it too)."""
-    try:
-        f.truncate(0)
-        f.flush()
-        import fcntl  # noqa: PLC0415
-
-        fcntl.flock(f.fileno(), fcntl.LOCK_UN)
-    except (ImportError, OSError):
-        pass
 
 
 def bytes_on_disk(root: str | os.PathLike, files: Iterable[str]) -> int:

@@ -16,12 +16,14 @@ from pathlib import Path
 
 import numpy as np
 
+from lit3d.utils.errors import Lit3dError
+
 TOSCA_CLASSES = ("cat", "centaur", "david", "dog", "gorilla", "horse", "michael", "victoria", "wolf")
 EXTS = (".mat", ".vert", ".off", ".ply", ".obj")
 _NAME = re.compile(r"^([A-Za-z_]+?)_?(\d+)$")
 
 
-class MeshReadError(ValueError):
+class MeshReadError(Lit3dError, ValueError):
     """A mesh file that cannot be used: the message names the file and the problem."""
 
 

@@ -30,6 +30,7 @@ from datamodules.completion.plan import ItemSpec, synth_pair, view_pair
 from datamodules.completion.sweethome3d import credits_markdown, index_sweethome3d
 from datamodules.completion.voxel_cache import save_pair
 from lit3d.sensing.sensor import make_sensor
+from lit3d.utils.stops import check_stop
 
 log = logging.getLogger("lit3d.data")
 
@@ -145,8 +146,11 @@ def _run_jobs(jobs: list[dict], workers: int):
             yield make_pairs(job)
         return
     with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
-        for fut in as_completed([pool.submit(make_pairs, job) for job in jobs]):
-            yield fut.result()
+        try:
+            for fut in as_completed([pool.submit(make_pairs, job) for job in jobs]):
+                yield fut.result()
+        finally:  # a stop (or an error): the jobs not started are dropped, not waited for
+            pool.shutdown(cancel_futures=True)
 
 
 def prepare_mesh_items(builder: CacheBuilder, spec: ItemSpec, mesh: MeshSpec, skip_bad: bool = False,
@@ -178,6 +182,7 @@ def prepare_mesh_items(builder: CacheBuilder, spec: ItemSpec, mesh: MeshSpec, sk
     jobs = [{**base, "items": c, "models": {it["model_id"]: model_fields(by_id[it["model_id"]])
                                             for it in c if it.get("model_id")}} for c in jobs]
     bad: dict[str, str] = {}
+    builder.total_items = len(items)
     bar = tqdm(total=len(todo), desc=f"completion {mesh.source}", unit="item", disable=not progress, dynamic_ncols=True)
     for results in _run_jobs(jobs, workers):
         for file, error in results:
@@ -186,6 +191,7 @@ def prepare_mesh_items(builder: CacheBuilder, spec: ItemSpec, mesh: MeshSpec, sk
                     raise DataError(error)
                 bad[file] = error
         bar.update(len(results))
+        check_stop()  # Ctrl-C or SIGTERM: stop after this job (lit3d.utils.stops)
     bar.close()
     if bad:
         log.warning("skipped %d item(s) of unreadable models (data.skip_bad=true)", len(bad))

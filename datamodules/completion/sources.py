@@ -11,7 +11,9 @@ never the DataModule:
   sweethome3d``): real CAD models behind the plan's items.
 
 Every item is written with :func:`~datamodules.completion.voxel_cache.save_pair` (atomic); items
-already on disk are kept, so an interrupted preparation resumes where it stopped.
+already on disk are kept, so an interrupted preparation resumes where it stopped. Ctrl-C or SIGTERM
+stops a preparation at the next item (the builder's ``path()``/``has()`` are stop points,
+:mod:`lit3d.utils.stops`).
 """
 from __future__ import annotations
 
@@ -37,6 +39,7 @@ def progress_bar(iterable: Iterable, total: int, desc: str, on: bool = True):
 def prepare_synth_items(builder: CacheBuilder, spec: ItemSpec, progress: bool = True) -> tuple[list[dict], dict]:
     """Generate the planned procedural items still missing from ``builder``; (items, manifest extra)."""
     items = spec.items()
+    builder.total_items = len(items)  # named by the stop line of a Ctrl-C (each builder.path() is a stop point)
     todo = [it for it in items if not builder.has(it["file"])]
     if len(todo) < len(items):
         log.info("%s: %d of %d items already prepared", builder.root, len(items) - len(todo), len(items))
@@ -55,6 +58,7 @@ def prepare_recgan_items(builder: CacheBuilder, spec: ItemSpec, root: Path, raw_
     pairs, problems = index_recgan(root, skip_bad=skip_bad)
     planned = assign_splits(pairs, spec.categories, spec.unseen_categories, val_fraction, spec.seed)
     input_res = spec.target_res // spec.input_factor
+    builder.total_items = len(planned)  # each builder.has() below is a stop point (Ctrl-C, SIGTERM)
     items = []
     for split, p in progress_bar(planned, len(planned), "completion recgan", progress):
         it = {"name": p.name, "split": split, "category": p.category, "view_set": p.view_set,

@@ -71,6 +71,7 @@ from datamodules.quality.quality_shapes import (  # noqa: F401  (re-exported)
 )
 from lit3d.features.matrix import FeatureMatrix, TargetScaling, clip_nonfinite
 from lit3d.utils.io import atomic_write_bytes
+from lit3d.utils.stops import check_stop
 
 GENERATOR = "quality"
 GENERATOR_VERSION = "quality-synth-3"
@@ -188,6 +189,7 @@ class QualityDataModule(pl.LightningDataModule):
             for kind, vals in levels.items():
                 for level in range(len(vals)):
                     path = mesh_dir / shape / f"{kind}_{level + 1}.ply"
+                    check_stop()  # Ctrl-C or SIGTERM: stop before the next mesh (lit3d.utils.stops)
                     if not path.is_file():
                         out = distort(ref, kind, level, stable_int_seed(hp.seed, shape, kind, level), levels)
                         atomic_write_bytes(path, trimesh.exchange.ply.export_ply(out, encoding="binary"))
@@ -228,6 +230,7 @@ class QualityDataModule(pl.LightningDataModule):
         else:
             pairs, scaling = self._real_pairs()
         hp = self.hparams
+        builder.total_items = len(pairs)  # feature tables: what a Ctrl-C's stop line counts
         tables, pairs, skipped = write_feature_tables(builder.root, pairs, hp.feature_fn, hp.feature_options,
                                                       int(hp.feature_workers), bool(hp.skip_bad))
         self.skipped += skipped

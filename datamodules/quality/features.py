@@ -3,7 +3,8 @@
 :func:`resolve_feature_fn` picks the feature function (the renderer's
 ``lit3d.features.table.feature_table`` by default, or a dotted path); :func:`write_feature_tables`
 computes the tables still missing (in ``workers`` processes), each written atomically as soon as
-it is done, so an interrupted preparation resumes with the pairs still missing.
+it is done, so an interrupted preparation resumes with the pairs still missing (Ctrl-C or SIGTERM
+stops an in-process preparation before the next pair, :mod:`lit3d.utils.stops`).
 """
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from datamodules.cache import DataError
 from lit3d.features.table import feature_config, feature_table
 from lit3d.utils.io import atomic_write_text
 from lit3d.utils.progress import progress
+from lit3d.utils.stops import check_stop
 
 FeatureFn = Callable[[Path, Path], Mapping[str, float]]
 
@@ -72,7 +74,10 @@ def write_feature_tables(root: Path, pairs: Sequence[dict], spec: str | None, op
         with ProcessPoolExecutor(workers) as ex:
             results = list(progress(ex.map(_feature_job, jobs), "quality feature tables", total=len(jobs)))
     else:
-        results = [_feature_job(j) for j in progress(jobs, "quality feature tables")]
+        results = []
+        for job in progress(jobs, "quality feature tables"):
+            check_stop()  # Ctrl-C or SIGTERM: stop before the next pair (lit3d.utils.stops)
+            results.append(_feature_job(job))
     errors = {i: f"{i}: {e}" for i, e in results if e}
     if errors and not skip_bad:
         raise DataError(f"feature extraction failed for {len(errors)} pair(s); first: {next(iter(errors.values()))}")

@@ -11,10 +11,12 @@ from collections.abc import Mapping
 
 import torch
 
+from lit3d.utils.errors import Lit3dError
+
 MODES = ("raise", "skip")
 
 
-class NonFiniteLossError(FloatingPointError):
+class NonFiniteLossError(Lit3dError, FloatingPointError):
     """A loss became NaN/Inf: the message names the step and the loss term(s)."""
 
 

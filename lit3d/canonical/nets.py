@@ -129,7 +129,8 @@ class MSFE(nn.Module):
                                    nn.Linear(fuser_hidden, fuser_out), nn.LeakyReLU(0.2))
         dec, prev = [], fuser_out
         chans = list(dec_channels) + [out]
-        assert len(chans) == len(MSFE_KERNELS), f"msfe_dec_channels needs {len(MSFE_KERNELS) - 1} entries"
+        if len(chans) != len(MSFE_KERNELS):
+            raise ValueError(f"msfe_dec_channels needs {len(MSFE_KERNELS) - 1} entries, got {len(dec_channels)}")
         size = 1
         for i, (k, ch) in enumerate(zip(MSFE_KERNELS, chans)):
             # stride 2 while the map is smaller than the image, then stride 1 (no wasted work

@@ -14,6 +14,7 @@ wrong type/range of a config value (ConfigValueError)      2      ``error: <key>
 unwritable output (run dir, data_dir: a file, read-only)   2      ``error: <path>: <problem>``
 NaN/Inf loss (FloatingPointError)                          1      ``error: non-finite loss at ... step``
 SIGTERM or Ctrl-C during training (last.ckpt saved)        143    ``error: <run dir>: stopped by SIGTERM``
+SIGTERM or Ctrl-C while preparing data / evaluating        143    ``error: <data_dir|run dir>: stopped by ...``
 ========================================================  =====  =========================================
 
 ``--debug`` on the command line or ``HYDRA_FULL_ERROR=1`` shows the traceback instead.
@@ -32,11 +33,13 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from lit3d.cli.about import EXIT_USER, about_flags
-from lit3d.cli.config_checks import ConfigValueError, check_config_values
+from lit3d.cli.config_checks import ConfigValueError, check_config_values, config_problem
+from lit3d.cli.evaluation import run_evaluation, scalar_metrics  # noqa: F401  (re-exported)
 from lit3d.cli.rundir import claim_run_dir, hold_output_dir
 from lit3d.utils import quiet
 from lit3d.utils.checkpoints import first_line
 from lit3d.utils.config_dir import config_dir
+from lit3d.utils.errors import Lit3dError
 from lit3d.utils.io import OutputError
 
 log = logging.getLogger("lit3d")
@@ -48,7 +51,7 @@ EXIT_DIVERGED = 1    # training stopped on a NaN/Inf loss
 EXIT_SIGTERM = 128 + signal.SIGTERM
 
 
-class UserError(Exception):
+class UserError(Lit3dError):
     """A problem the user can fix (bad path, missing option): printed as one line."""
 
 
@@ -93,11 +96,13 @@ def task_meta(cfg: DictConfig) -> dict:
 
 
 def _construct(group: str, make: Callable[[], Any]) -> Any:
-    """``make()``; a ValueError/TypeError from a constructor's argument checks (a bad option
-    value, an unknown keyword) becomes a one-line :class:`UserError` naming the config group."""
+    """``make()``; a config problem (:func:`config_problem`: a bad option value, an unknown keyword)
+    becomes a one-line :class:`UserError` naming the config group; anything else is passed on."""
     try:
         return make()
-    except (ValueError, TypeError) as exc:
+    except (Lit3dError, ValueError, TypeError) as exc:
+        if not config_problem(exc):
+            raise
         raise UserError(f"{group} config: {first_line(exc, type(exc).__name__)}") from exc
 
 
@@ -357,42 +362,3 @@ def run_cli(fn: Callable[[DictConfig], Any], cfg: DictConfig) -> Any:
             exc = UserError(f"missing value for {key}: set {key}=... on the command line")
         fail(_as_user_error(exc), code)
 
-
-def scalar_metrics(metrics: dict) -> dict[str, float]:
-    """The one-number entries of Lightning's ``callback_metrics`` as floats."""
-    import torch
-
-    return {k: float(v) for k, v in metrics.items() if torch.as_tensor(v).numel() == 1}
-
-
-def run_evaluation(trainer, task, datamodule, task_name: str, out_dir: Path, *, ckpt_path: str | None = None,
-                   validate: bool = False, n_figures: int = 0, extra: dict | None = None) -> dict[str, float]:
-    """Test ``task`` (after validating it when ``validate``: the completion threshold is chosen there),
-    run the task room's evaluator on the result, and on rank 0 write ``metrics.json``, ``results.md``
-    and ``n_figures`` figures per split into ``out_dir``. Used by ``lit3d-eval`` and, after fitting,
-    by ``lit3d-train``. ``extra``: entries written first into ``metrics.json`` (not returned)."""
-    from lit3d.cli.registry import evaluator_module
-    from lit3d.utils.io import write_json
-
-    evaluator = evaluator_module(task_name)
-    metrics: dict[str, float] = {}
-    if validate:
-        trainer.validate(task, datamodule=datamodule, ckpt_path=ckpt_path, weights_only=True)
-        metrics.update({k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("val/")})
-    trainer.test(task, datamodule=datamodule, ckpt_path=ckpt_path, weights_only=True)
-    metrics.update({k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("test/")})
-    evaluation = evaluator.protocol(task, datamodule)  # on every rank: it may synchronise states
-    protocol_metrics = evaluation.metrics
-    metrics.update(protocol_metrics)
-    if trainer.is_global_zero:
-        for logger in trainer.loggers:  # the module logged its own metrics; these come after the test
-            if protocol_metrics:
-                logger.log_metrics(protocol_metrics, step=trainer.global_step)
-        out_dir.mkdir(parents=True, exist_ok=True)
-        write_json(out_dir / "metrics.json", {**(extra or {}), **metrics})
-        evaluator.write_artefacts(evaluation, out_dir)
-        evaluator.write_results(metrics, out_dir)
-        figures = (evaluator.write_figures(task, datamodule, out_dir, n=n_figures, evaluation=evaluation)
-                   if n_figures > 0 else [])
-        log.info("wrote %s, results.md and %d figures", out_dir / "metrics.json", len(figures))
-    return metrics

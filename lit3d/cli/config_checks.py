@@ -20,11 +20,14 @@ from __future__ import annotations
 
 import math
 import operator
+import os
 import re
 from fnmatch import fnmatchcase
 from typing import Any, NamedTuple
 
 from omegaconf import DictConfig, ListConfig, OmegaConf
+
+from lit3d.utils.errors import Lit3dError
 
 
 class Rule(NamedTuple):
@@ -151,7 +154,7 @@ _BOUND = re.compile(r"^(>=|>|<=|<|==)\s*(-?[\d.]+(?:e-?\d+)?)$")
 _INTERVAL = re.compile(r"^([\[(])\s*(-?[\d.]+)\s*,\s*(-?[\d.]+)\s*([\])])$")
 
 
-class ConfigValueError(ValueError):
+class ConfigValueError(Lit3dError, ValueError):
     """A config value of the wrong type or out of range: ``<key>=<value>: expected <what>``."""
 
 
@@ -278,3 +281,33 @@ def check_config_values(cfg: DictConfig | None) -> None:
     if found:
         more = f" (and {len(found) - 1} more)" if len(found) > 1 else ""
         raise ConfigValueError(found[0] + more)
+
+
+# the folders of lit3d's own code, lit3d/ and datamodules/ side by side (in the checkout and in a wheel):
+# errors raised there are its argument checks (config_problem)
+_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.realpath(__file__))))
+PROJECT_DIRS = tuple(os.path.join(_ROOT, name) + os.sep for name in ("lit3d", "datamodules"))
+_SIGNATURE_ERRORS = ("unexpected keyword argument", "required positional argument", "required keyword-only argument",
+                     "got multiple values for argument")
+
+
+def _raised_by(exc: BaseException) -> str:
+    """The file of the frame that raised ``exc`` (the innermost of its traceback; '' without one)."""
+    tb, name = exc.__traceback__, ""
+    while tb is not None:
+        name, tb = tb.tb_frame.f_code.co_filename, tb.tb_next
+    return name
+
+
+def config_problem(exc: BaseException) -> bool:
+    """True when ``exc``, raised while building a task or DataModule from its config, is the config's
+    fault: a :class:`Lit3dError`, a ValueError raised by lit3d's own argument checks, or a TypeError of
+    the call itself (an unknown or missing keyword). A ValueError or TypeError raised inside a library
+    (torch, numpy...) or a TypeError inside lit3d's code is a bug, and keeps its traceback."""
+    if isinstance(exc, Lit3dError):
+        return True
+    where = _raised_by(exc)
+    ours = bool(where) and os.path.realpath(where).startswith(PROJECT_DIRS)
+    if isinstance(exc, TypeError):
+        return not ours and any(s in str(exc) for s in _SIGNATURE_ERRORS)
+    return isinstance(exc, ValueError) and ours

@@ -4,7 +4,9 @@ Generates the synthetic set (or indexes and converts a real one) into
 ``paths.data_dir``, prints counts per split and category, sizes and the
 manifest hash; ``--show N`` writes a PNG of N samples into the run dir. A ``data_dir`` holding
 data of another config is refused (nothing deleted); ``--rebuild`` deletes it and prepares it
-again (the only command that deletes prepared data; see docs/resuming.md).
+again (the only command that deletes prepared data; see docs/resuming.md). Ctrl-C or SIGTERM stops
+the preparation at the next item, exit 143 with one line; the same command again resumes
+(:mod:`lit3d.cli.stops`).
 """
 from __future__ import annotations
 
@@ -16,11 +18,13 @@ import hydra
 from omegaconf import DictConfig
 
 from lit3d.cli.common import CONF_DIR, build_datamodule, cli_main, run_cli
+from lit3d.cli.stops import preparing
 
 
 def prepare(cfg: DictConfig) -> dict:
     dm = build_datamodule(cfg.data)
-    dm.prepare_data()
+    with preparing(cfg.data.get("data_dir") or cfg.paths.data_dir):  # Ctrl-C: stop at the next item
+        dm.prepare_data()
     dm.setup("fit")
     info = dm.describe()
     print(json.dumps(info, indent=2, sort_keys=True, default=str))

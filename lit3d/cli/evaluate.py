@@ -4,8 +4,10 @@
     lit3d-eval task=completion ckpt_path=... data=recgan data.root=../shared/data/recgan_sample
 
 Writes into the run dir: metrics.json, results.md (the thesis's table layout,
-with the thesis's figures beside ours) and PNG figures. Validation runs first
-when the task picks a threshold there (completion), then test.
+with the thesis's figures beside ours), config.yaml and PNG figures, as one set (staged, then moved
+in with metrics.json last: :mod:`lit3d.cli.evaluation`). Validation runs first
+when the task picks a threshold there (completion), then test. Ctrl-C or SIGTERM stops it with exit
+143 and one line; nothing is written then (:mod:`lit3d.cli.stops`).
 """
 from __future__ import annotations
 
@@ -27,7 +29,8 @@ from lit3d.cli.common import (
     to_plain,
 )
 from lit3d.cli.resume_checks import check_eval_data
-from lit3d.utils.provenance import add_to_metrics, provenance
+from lit3d.cli.stops import evaluating
+from lit3d.utils.provenance import provenance
 
 
 def checkpoint_meta_for(cfg: DictConfig) -> dict:
@@ -43,11 +46,20 @@ def checkpoint_meta_for(cfg: DictConfig) -> dict:
 
 
 def evaluate(cfg: DictConfig) -> dict[str, float]:
+    """Test ``cfg.ckpt_path`` and write its outputs into the run dir as one set; Ctrl-C or SIGTERM
+    stops it with one line and nothing written (:func:`lit3d.cli.stops.evaluating`)."""
+    out_dir = Path(cfg.paths.output_dir)
+    with evaluating(out_dir):
+        return _evaluate(cfg, out_dir)
+
+
+def _evaluate(cfg: DictConfig, out_dir: Path) -> dict[str, float]:
     meta = checkpoint_meta_for(cfg)  # before the heavy imports: a wrong checkpoint fails fast
     import lightning.pytorch as pl
     import torch
 
-    out_dir = Path(cfg.paths.output_dir)
+    from lit3d.callbacks.stop_points import StopPoints
+
     out_dir.mkdir(parents=True, exist_ok=True)
     pl.seed_everything(cfg.seed, workers=True)
     torch.set_float32_matmul_precision(cfg.matmul_precision)
@@ -59,14 +71,16 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
         data_cfg = task.adapt_data_config(data_cfg)
     datamodule = build_datamodule(data_cfg)
     trainer: pl.Trainer = instantiate(cfg.trainer, logger=False, enable_checkpointing=False,
-                                      callbacks=[pl.callbacks.RichProgressBar()])
-    metrics = run_evaluation(trainer, task, datamodule, task_cfg["name"], out_dir,
-                             validate=getattr(task, "validate_before_test", False), n_figures=cfg.n_figures,
-                             extra={"ckpt_path": str(cfg.ckpt_path)})
-    if trainer.is_global_zero:  # this code and the data evaluated; the checkpoint's own: its training run's
-        add_to_metrics(out_dir / "metrics.json", {**provenance(datamodule), "checkpoint": meta.get("provenance")})
-        OmegaConf.save(OmegaConf.create({"task": task_cfg, "data": data_cfg}), out_dir / "config.yaml")
-    return metrics
+                                      callbacks=[pl.callbacks.RichProgressBar(), StopPoints()])
+
+    def record() -> dict:  # after the test: this code and the data evaluated; the checkpoint's own provenance
+        return {"ckpt_path": str(cfg.ckpt_path),
+                "provenance": {**provenance(datamodule), "checkpoint": meta.get("provenance")}}
+
+    config = OmegaConf.to_yaml(OmegaConf.create({"task": task_cfg, "data": data_cfg}))
+    return run_evaluation(trainer, task, datamodule, task_cfg["name"], out_dir,
+                          validate=getattr(task, "validate_before_test", False), n_figures=cfg.n_figures,
+                          extra=record, files={"config.yaml": config})
 
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="eval")

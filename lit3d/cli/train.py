@@ -34,6 +34,7 @@ from lit3d.cli.common import (
 )
 from lit3d.cli.resume_checks import check_resume_config, check_weights_fit
 from lit3d.cli.run_log import with_csv_logger, write_run_curves
+from lit3d.cli.stops import preparing
 from lit3d.utils.io import atomic_write_text, write_json
 from lit3d.utils.log_images import WANDB, logger_kind
 from lit3d.utils.provenance import provenance
@@ -97,8 +98,23 @@ def checkpoint_plugins(trainer_cfg: DictConfig) -> dict:
     return {"plugins": [AtomicCheckpointIO()]}
 
 
-def fit(trainer, task, datamodule, ckpt_path: str | None, output_dir: Path) -> None:
-    """``trainer.fit``; SIGTERM or Ctrl-C (SIGINT) becomes :class:`Interrupted` after ``last.ckpt`` is saved.
+def prepare(trainer, datamodule, data_dir: str | Path) -> None:
+    """The data preparation, before ``trainer.fit`` (where Lightning's call then finds the data ready).
+
+    Inside ``trainer.fit`` a Ctrl-C was lost: :func:`fit`'s handler raises Lightning's SIGTERM flag,
+    which Lightning resets when training starts, so the run trained every epoch and then printed a
+    resume line. Here Ctrl-C or SIGTERM stops the preparation at the next item
+    (:func:`lit3d.cli.stops.preparing`: exit 143, one line, the finished items kept), before anything
+    is trained. On the local rank 0 of each node only, as Lightning does.
+    """
+    if trainer.local_rank == 0:
+        with preparing(data_dir):
+            datamodule.prepare_data()
+
+
+def fit(trainer, task, datamodule, ckpt_path: str | None, output_dir: Path, data_dir: str | Path = "") -> None:
+    """:func:`prepare` (``data_dir``: the folder its stop line names), then ``trainer.fit``; SIGTERM or
+    Ctrl-C (SIGINT) becomes :class:`Interrupted` after ``last.ckpt`` is saved.
 
     Lightning stops on SIGTERM after the current batch (``SIGTERMException``; ``ResumeState`` saves
     ``last.ckpt``). Ctrl-C is made to take the same path: the first SIGINT only raises Lightning's
@@ -118,6 +134,7 @@ def fit(trainer, task, datamodule, ckpt_path: str | None, output_dir: Path) -> N
         got.append("SIGINT (Ctrl-C)")
         trainer._signal_connector.received_sigterm = True  # noqa: SLF001 (Lightning's SIGTERM flag)
 
+    prepare(trainer, datamodule, data_dir)  # Ctrl-C here: one line, nothing trained (lit3d.cli.stops)
     main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGINT, on_sigint) if main_thread else None
     try:
@@ -181,7 +198,7 @@ def train(cfg: DictConfig) -> float | None:
     for lg in loggers:
         lg.log_hyperparams(to_plain(cfg))
     try:
-        fit(trainer, task, datamodule, ckpt_path, output_dir)
+        fit(trainer, task, datamodule, ckpt_path, output_dir, data_dir=cfg.data.get("data_dir") or cfg.paths.data_dir)
         fit_metrics = scalar_metrics(trainer.callback_metrics)
         monitored = _monitored_value(trainer, cfg.task_info.monitor, fit_metrics)
         run_info = {"monitor": cfg.task_info.monitor, "monitored_value": monitored,

@@ -28,12 +28,13 @@ from lit3d.features.common import FeatureConfig, feature_config
 from lit3d.quality.nets import QualityMLP
 from lit3d.quality.protocol import TargetScaling
 from lit3d.utils.checkpoints import META_KEY, first_line, load_checkpoint
+from lit3d.utils.errors import Lit3dError
 
 CKPT_KEY = "quality"
 QUALITY_TARGET = "lit3d.quality.module.QualityTask"
 
 
-class QualityCheckpointError(ValueError):
+class QualityCheckpointError(Lit3dError, ValueError):
     """The file is not a usable quality checkpoint, or the features do not fit it."""
 
 

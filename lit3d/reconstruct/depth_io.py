@@ -28,12 +28,14 @@ from pathlib import Path
 
 import numpy as np
 
+from lit3d.utils.errors import Lit3dError
+
 DEPTH_SUFFIXES = (".png", ".tif", ".tiff", ".npy", ".npz", ".exr")
 MASK_SUFFIXES = (".png", ".tif", ".tiff", ".npy", ".npz", ".bmp", ".jpg")
 FAR_BACKGROUND = 1e4
 
 
-class InputError(ValueError):
+class InputError(Lit3dError, ValueError):
     """A bad input file or option: the message is one line naming the file and the problem."""
 
 

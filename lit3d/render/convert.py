@@ -27,13 +27,14 @@ from typing import Any
 import numpy as np
 
 from lit3d.geometry.normalise import normalise_vertices
+from lit3d.utils.errors import Lit3dError
 
 MESH_SUFFIXES = {".obj", ".off", ".ply", ".stl", ".glb", ".gltf"}
 POINT_SUFFIXES = {".xyz", ".pts", ".txt"}
 GRID_SUFFIXES = {".npz", ".npy"}
 
 
-class ShapeError(ValueError):
+class ShapeError(Lit3dError, ValueError):
     """A shape input that cannot be turned into a usable mesh (message names the file)."""
 
 

@@ -12,10 +12,12 @@ import ctypes.util
 import functools
 import os
 
+from lit3d.utils.errors import Lit3dError
+
 EGL_PACKAGES = "libegl1 libgl1 libgl1-mesa-dri libegl-mesa0"
 
 
-class RenderBackendError(RuntimeError):
+class RenderBackendError(Lit3dError, RuntimeError):
     """Raised when no headless OpenGL context can be created."""
 
 

@@ -10,20 +10,23 @@ point.
 """
 from __future__ import annotations
 
+import contextlib
 import errno
 import hashlib
 import json
 import os
 import shutil
 import tempfile
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
+
+from lit3d.utils.errors import Lit3dError
 
 TMP_SUFFIX = ".tmp"
 
 
-class OutputError(ValueError):
+class OutputError(Lit3dError, ValueError):
     """An output path that cannot be written (or would replace an input): ``<path>: <problem>``."""
 
 
@@ -52,21 +55,35 @@ def output_error(path: str | os.PathLike, exc: OSError) -> OutputError:
     return OutputError(f"{path}: cannot write here ({_problem(exc)})")
 
 
+@contextlib.contextmanager
+def atomic_file(path: str | os.PathLike) -> Iterator[BinaryIO]:
+    """An open binary file whose bytes replace ``path`` when the block ends without an error: a temp
+    file in the same folder (the umask's mode, see :func:`file_mode`) + ``os.replace``; on any error
+    the temp file is removed and ``path`` is left as it was. An OSError that names no file or only the
+    temp file (``write()`` on a full disk names none) is raised again naming ``path``, so the entry
+    points can say which file could not be written (``<path>: cannot write here (no space ...)``)."""
+    path, tmp = Path(path), None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=TMP_SUFFIX)
+        with os.fdopen(fd, "wb") as f:
+            os.fchmod(f.fileno(), file_mode())
+            yield f
+        os.replace(tmp, path)
+    except BaseException as exc:
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
+        if isinstance(exc, OSError) and exc.errno is not None and exc.filename in (None, tmp):
+            raise OSError(exc.errno, exc.strerror or os.strerror(exc.errno), str(path)) from exc
+        raise
+
+
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` through a temp file in the same folder + ``os.replace``
-    (the file gets the umask's mode, see :func:`file_mode`)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=TMP_SUFFIX)
-    try:
-        os.fchmod(fd, file_mode())
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    (:func:`atomic_file`: the umask's mode; an OSError names ``path``)."""
+    with atomic_file(path) as f:
+        f.write(data)
+    return Path(path)
 
 
 def remove_temp_files(root: str | os.PathLike) -> int:

@@ -64,7 +64,8 @@ def pytest_filters() -> list[str]:
     they hold in every test's setup, call and teardown, module-scoped fixtures included)."""
     lines = []
     for message, category, _why in WARNING_FILTERS:
-        assert ":" not in message, "pytest splits filterwarnings lines at ':'"
+        if ":" in message:
+            raise ValueError(f"warning filter {message!r}: pytest splits filterwarnings lines at ':'")
         name = category.__name__ if category.__module__ == "builtins" else f"{category.__module__}.{category.__qualname__}"
         lines.append(f"ignore:{message}:{name}")
     return lines

@@ -1,0 +1,144 @@
+"""Issue 35, fault 10: Ctrl-C (SIGINT) or SIGTERM while data is prepared stops at the next item.
+
+Real ``lit3d-data`` / ``lit3d-train`` processes on a small synthetic completion set, the signal sent
+once the first item is on disk:
+
+- ``lit3d-data`` ran to the end (or ended in a traceback): now it stops at the next item with exit
+  143 (as a stopped training) and one line ``error: <data_dir>: stopped by SIGINT (Ctrl-C) while
+  preparing data (N of M items done); the same command again resumes``; the N items on disk are
+  whole, no manifest is written, and the same command again makes only the missing ones;
+- ``lit3d-train`` lost the Ctrl-C (Lightning resets its SIGTERM flag when training starts), trained
+  every epoch and then printed a resume line for a stale ``last.ckpt``; two Ctrl-C ended in a
+  traceback, SIGTERM killed it without a word. Now the preparation stops the same way: nothing is
+  trained, no checkpoint, no resume line.
+
+The signal is acted on also where the process was started with SIGINT ignored (a background job of a
+non-interactive shell, as a test runner started with ``&``: there the old ``lit3d-data`` ran to the end
+and exited 0), as ``lit3d-train``'s training handler always did. The stop points themselves
+(:mod:`lit3d.utils.stops`) are checked in-process at the end.
+"""
+from __future__ import annotations
+
+import re
+import signal
+import subprocess
+from pathlib import Path
+
+import pytest
+from test_cache_policy import TINY_NETS
+from signal_helpers import signal_when, stop_line
+from test_interrupt_resume import BIN, REPO, _env, _start
+
+from datamodules.cache import MANIFEST, CacheBuilder
+from datamodules.completion.voxel_cache import load_pair
+from lit3d.utils.stops import StopRequested, check_stop, on_signals, pending
+
+DATA = ["experiment=completion_demo", "data.progress=false"]
+
+
+def _sizes(train: int, rest: int = 0) -> str:
+    return f"data.sizes={{train:{train},val:{rest},test_same:{rest},test_cross:{rest},test_unseen:{rest}}}"
+
+
+def _items(data: Path) -> list[Path]:
+    return sorted((data / "completion_demo" / "items").rglob("*.npz"))
+
+
+def _stop_during_preparation(proc: subprocess.Popen, data: Path, log: Path, signals: list[int]) -> int:
+    """Send ``signals`` (0.2 s apart) once the first item is on disk; the exit status."""
+    return signal_when(proc, lambda: _items(data), log, signals)
+
+
+def _line_pattern(data: Path, what: str, total: int) -> str:
+    return (rf"error: {re.escape(str(data / 'completion_demo'))}: stopped by {re.escape(what)} while preparing "
+            rf"data \((\d+) of {total} items done\); the same command again resumes")
+
+
+def test_ctrl_c_stops_lit3d_data_at_the_next_item_and_the_same_command_resumes(tmp_path):
+    data, log = tmp_path / "data", tmp_path / "data_cli"
+    args = ["lit3d-data", *DATA, _sizes(10), f"paths.data_dir={data}", f"hydra.run.dir={tmp_path}/run"]
+    rc = _stop_during_preparation(_start(args, log), data, log, [signal.SIGINT])
+    line = stop_line(log, rc)
+    m = re.fullmatch(_line_pattern(data, "SIGINT (Ctrl-C)", 10), line)
+    assert m, line
+    done = _items(data)
+    assert int(m.group(1)) == len(done) and 1 <= len(done) < 10, "stopped at the next item, the count is true"
+    assert not (data / "completion_demo" / MANIFEST).exists(), "a stopped preparation wrote a manifest"
+    assert not list(data.rglob("*.tmp")), "a half-written item was left"
+    for p in done:
+        load_pair(p)  # each item on disk is whole
+    mtimes = {p: p.stat().st_mtime_ns for p in done}
+
+    res = subprocess.run([str(BIN / args[0]), *args[1:]], cwd=REPO, env=_env(), capture_output=True, text=True,
+                         timeout=600)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert f"{len(done)} of 10 items already prepared" in res.stdout  # Hydra's log lines go to stdout
+    assert {p: p.stat().st_mtime_ns for p in done} == mtimes, "the finished items were made again"
+    assert len(_items(data)) == 10 and (data / "completion_demo" / MANIFEST).is_file()
+
+
+@pytest.mark.parametrize("signals, what", [([signal.SIGINT, signal.SIGINT], "SIGINT (Ctrl-C)"),
+                                           ([signal.SIGTERM], "SIGTERM")], ids=["two_ctrl_c", "sigterm"])
+def test_lit3d_train_stops_while_preparing_without_training(tmp_path, signals, what):
+    data, run, log = tmp_path / "data", tmp_path / "run", tmp_path / "train"
+    args = ["lit3d-train", *DATA, _sizes(24, 2), "data.batch_size=4", *TINY_NETS, "trainer.max_epochs=1", "logger=csv",
+            "callbacks.progress_bar=null", f"paths.data_dir={data}", f"hydra.run.dir={run}"]
+    rc = _stop_during_preparation(_start(args, log), data, log, signals)
+    line = stop_line(log, rc)
+    m = re.fullmatch(_line_pattern(data, what, 32), line)
+    assert m and int(m.group(1)) == len(_items(data)) < 32, line
+    err = log.with_suffix(".err").read_text()
+    assert "ckpt_path=last" not in err and "resume with" not in err, "a resume line for a run that trained nothing"
+    assert not (run / "checkpoints").exists(), "a checkpoint of an untrained run was written"
+    assert not (run / "metrics.json").exists()
+    assert not list(data.rglob("*.tmp"))
+
+
+# ----------------------------------------------------------------------------- stop points, in-process
+def test_stop_points_act_on_the_first_signal_and_name_the_folder(tmp_path):
+    """The first signal is only recorded; the builder's next ``path()`` raises :class:`StopRequested`,
+    which :meth:`CacheBuilder.prepare_once` labels with the folder and the items on disk; outside
+    :func:`on_signals` nothing is recorded and the old handlers are back."""
+    b = CacheBuilder(tmp_path / "cache", "test", "1", {"n": 3})
+    written = []
+
+    def write_items(builder):
+        builder.total_items = 3
+        for i in range(3):
+            path = builder.path(f"items/{i}.bin")  # a stop point
+            path.parent.mkdir(parents=True, exist_ok=True)
+            if i == 1 and not written[2:]:  # the first run only
+                signal.raise_signal(signal.SIGINT)  # a Ctrl-C while item 1 is made
+                assert pending() == "SIGINT"
+            path.write_bytes(b"x")
+            written.append(i)
+        return [{"file": f"items/{i}.bin"} for i in range(3)], {}
+
+    before = signal.getsignal(signal.SIGINT)
+    with on_signals(), pytest.raises(StopRequested) as info:
+        b.prepare_once(write_items)
+    assert written == [0, 1] and info.value.signame == "SIGINT"  # item 1 finished, item 2 never begun
+    assert (info.value.where, info.value.done, info.value.total) == (b.root, 2, 3)
+    assert not (b.root / MANIFEST).exists()
+    assert signal.getsignal(signal.SIGINT) is before and pending() is None
+    check_stop()  # outside on_signals: no stop pending, nothing raised
+    assert b.prepare_once(write_items) and (b.root / MANIFEST).is_file()  # the rerun finishes it
+    assert written == [0, 1, 0, 1, 2]
+
+
+def test_a_second_signal_stops_at_once_and_later_ones_are_ignored():
+    """A second signal raises :class:`StopRequested` where the program is; with ``ignore_after_stop``
+    (the entry points) the signals are ignored after the stop, so a third Ctrl-C cannot break off the
+    command's exit with a traceback."""
+    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with pytest.raises(StopRequested) as info, on_signals(ignore_after_stop=True):
+            signal.raise_signal(signal.SIGTERM)  # recorded
+            signal.raise_signal(signal.SIGINT)  # a second one: at once
+            pytest.fail("the second signal did not stop at once")
+        assert info.value.signame == "SIGTERM"  # the stop is named after the first signal
+        assert signal.getsignal(signal.SIGINT) == signal.getsignal(signal.SIGTERM) == signal.SIG_IGN
+        signal.raise_signal(signal.SIGINT)  # ignored: no KeyboardInterrupt
+    finally:
+        for s, handler in before.items():
+            signal.signal(s, handler)
