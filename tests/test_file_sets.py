@@ -29,7 +29,8 @@ NEW = {k: v.replace(b"old", b"new") for k, v in OLD.items()}
 
 # writes OLD, then NEW with os.replace (or the staging writes) slowed down after the first call
 WRITER = """
-import json, os, sys, time
+import json, os, signal, sys, time
+signal.signal(signal.SIGINT, signal.default_int_handler)  # Ctrl-C even where the suite runs as a background job
 import lit3d.utils.io as io
 out, where = sys.argv[1], sys.argv[2]
 old = {k: v.encode() for k, v in json.loads(sys.argv[3]).items()}
