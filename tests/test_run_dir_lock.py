@@ -54,7 +54,9 @@ def test_second_training_into_a_busy_run_dir_is_refused(tmp_path):
     common = [*CANONICAL, "logger=none", f"paths.data_dir={tmp_path}/data", f"hydra.run.dir={run}"]
     first = _start(["lit3d-train", *common, "trainer.max_epochs=500", "task.lr=0.001"], tmp_path / "first")
     try:
-        _wait_for(lambda: (run / ".hydra" / "config.yaml").is_file(), first, tmp_path / "first")
+        # Hydra writes config.yaml, hydra.yaml, then overrides.yaml (not atomically): wait until all are written
+        written = [run / ".hydra" / n for n in ("config.yaml", "overrides.yaml")]
+        _wait_for(lambda: all(f.is_file() and f.stat().st_size > 0 for f in written), first, tmp_path / "first")
         hydra_cfg = (run / ".hydra" / "config.yaml").read_bytes()
         res = _run(["lit3d-train", *common, "trainer.max_epochs=1", "task.lr=0.05"])
         assert res.returncode == 2, res.stderr[-3000:]
