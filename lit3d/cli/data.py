@@ -23,7 +23,7 @@ from lit3d.cli.stops import preparing
 
 def prepare(cfg: DictConfig) -> dict:
     dm = build_datamodule(cfg.data)
-    with preparing(cfg.data.get("data_dir") or cfg.paths.data_dir):  # Ctrl-C: stop at the next item
+    with preparing(dm.data_dir):  # Ctrl-C: stop at the next item
         dm.prepare_data()
     dm.setup("fit")
     info = dm.describe()

@@ -98,7 +98,7 @@ def checkpoint_plugins(trainer_cfg: DictConfig) -> dict:
     return {"plugins": [AtomicCheckpointIO()]}
 
 
-def prepare(trainer, datamodule, data_dir: str | Path) -> None:
+def prepare(trainer, datamodule) -> None:
     """The data preparation, before ``trainer.fit`` (where Lightning's call then finds the data ready).
 
     Inside ``trainer.fit`` a Ctrl-C was lost: :func:`fit`'s handler raises Lightning's SIGTERM flag,
@@ -108,12 +108,12 @@ def prepare(trainer, datamodule, data_dir: str | Path) -> None:
     is trained. On the local rank 0 of each node only, as Lightning does.
     """
     if trainer.local_rank == 0:
-        with preparing(data_dir):
+        with preparing(datamodule.data_dir):
             datamodule.prepare_data()
 
 
-def fit(trainer, task, datamodule, ckpt_path: str | None, output_dir: Path, data_dir: str | Path = "") -> None:
-    """:func:`prepare` (``data_dir``: the folder its stop line names), then ``trainer.fit``; SIGTERM or
+def fit(trainer, task, datamodule, ckpt_path: str | None, output_dir: Path) -> None:
+    """:func:`prepare`, then ``trainer.fit``; SIGTERM or
     Ctrl-C (SIGINT) becomes :class:`Interrupted` after ``last.ckpt`` is saved.
 
     Lightning stops on SIGTERM after the current batch (``SIGTERMException``; ``ResumeState`` saves
@@ -134,7 +134,7 @@ def fit(trainer, task, datamodule, ckpt_path: str | None, output_dir: Path, data
         got.append("SIGINT (Ctrl-C)")
         trainer._signal_connector.received_sigterm = True  # noqa: SLF001 (Lightning's SIGTERM flag)
 
-    prepare(trainer, datamodule, data_dir)  # Ctrl-C here: one line, nothing trained (lit3d.cli.stops)
+    prepare(trainer, datamodule)  # Ctrl-C here: one line, nothing trained (lit3d.cli.stops)
     main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGINT, on_sigint) if main_thread else None
     try:
@@ -198,7 +198,7 @@ def train(cfg: DictConfig) -> float | None:
     for lg in loggers:
         lg.log_hyperparams(to_plain(cfg))
     try:
-        fit(trainer, task, datamodule, ckpt_path, output_dir, data_dir=cfg.data.get("data_dir") or cfg.paths.data_dir)
+        fit(trainer, task, datamodule, ckpt_path, output_dir)
         fit_metrics = scalar_metrics(trainer.callback_metrics)
         monitored = _monitored_value(trainer, cfg.task_info.monitor, fit_metrics)
         run_info = {"monitor": cfg.task_info.monitor, "monitored_value": monitored,
