@@ -126,9 +126,9 @@ def test_split_functions_cover_every_fold():
 
 def test_bad_config_is_named(tmp_path):
     with pytest.raises(DataError, match="needs root"):
-        CanonicalDataModule(str(tmp_path), source="tosca")
+        CanonicalDataModule(str(tmp_path), image_size=32, source="tosca")
     with pytest.raises(DataError, match="unknown canonical data source"):
-        CanonicalDataModule(str(tmp_path), source="nope")
+        CanonicalDataModule(str(tmp_path), image_size=32, source="nope")
 
 
 def test_tosca_source_on_written_files(tmp_path):
@@ -252,7 +252,7 @@ def test_eval_views_train_on_every_azimuth_and_evaluate_the_chosen_ones(tmp_path
             seen.add((r["view"], mirrored))
     assert (1, True) in seen and (1, False) in seen
     with pytest.raises(DataError, match="eval_views"):
-        CanonicalDataModule(str(tmp_path / "x"), azimuths=[0.0, 30.0], eval_views=[2])
+        CanonicalDataModule(str(tmp_path / "x"), image_size=32, azimuths=[0.0, 30.0], eval_views=[2])
 
 
 def test_roll_turns_the_input_only_and_keeps_depth_inside_the_mask(tmp_path):

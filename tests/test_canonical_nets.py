@@ -28,12 +28,12 @@ def small(compose_cfg) -> dict:
 def test_blocks_return_input_size(size, small):
     x = torch.rand(2, 2, size, size)
     assert LFE(2, 3, (4, 8, 8))(x).shape == (2, 3, size, size)
-    m = MSFE(2, 2, (4, 4, 2), grid=4, fuser_hidden=16, fuser_out=8, dec_channels=(8, 8, 4, 4, 4, 4))
+    m = MSFE(2, 2, (4, 4, 2), grid=4, fuser_hidden=16, fuser_out=8, dec_channels=(8, 8, 4, 4, 4, 4), image_size=size)
     assert m(x).shape == (2, 2, size, size)
     out = CanonicalNet(**small)(x[:, :1], x[:, 1:])
     assert out.depth.shape == out.mask.shape == (2, 1, size, size)
     assert 0 <= out.depth.min() and out.depth.max() <= 1 and 0 <= out.mask.min() and out.mask.max() <= 1
-    assert UNet((4, 8))(x[:, :1], x[:, 1:]).depth.shape == (2, 1, size, size)
+    assert UNet((4, 8), size)(x[:, :1], x[:, 1:]).depth.shape == (2, 1, size, size)
 
 
 def test_non_square_input(small):
@@ -67,7 +67,7 @@ def test_paper_sizes_at_500(compose_cfg):
 
 
 def test_build_from_plain_dict(small):
-    assert isinstance(build_canonical_net({"kind": "unet", "channels": [4, 8]}), UNet)
+    assert isinstance(build_canonical_net({"kind": "unet", "channels": [4, 8], "image_size": 32}), UNet)
     assert isinstance(build_canonical_net({"kind": "canonical", **small}), CanonicalNet)
     with pytest.raises(ValueError, match="unknown"):
         build_canonical_net({"kind": "nope"})
@@ -98,6 +98,10 @@ def test_he_init_keeps_the_global_path_alive(compose_cfg, size):
         build_canonical_net({**net_cfg, "init": "xavier"})
 
 
+# make test-all: 30-90 s, and its margin depends on the thread count (measured with OMP_NUM_THREADS=1: IoU
+# he .68, torch .83; with 2 threads he > .9). The cheap check of the init stays in the default suite
+# (test_he_init_keeps_the_global_path_alive).
+@pytest.mark.slow
 def test_he_init_fits_training_pairs_that_the_default_init_does_not(compose_cfg, tmp_path):
     """The training claim behind the init: on 6 rendered pairs (64^2, the demo net, full batch, Adam 1e-3,
     150 steps) the He-initialised net fits the canonical masks (measured IoU .94); PyTorch's default

@@ -62,7 +62,7 @@ def test_recall_learns_the_subjects_and_draws_their_canonical_images():
 
 def test_recall_settings_and_templates_are_checked():
     with pytest.raises(ValueError, match="n_subjects >= 2"):
-        CanonicalTask(net={"image_size": SIZE}, arch="recall", identity_classes=0)
+        CanonicalTask(net={"image_size": SIZE, "recall_channels": [8]}, arch="recall", identity_classes=0)
     net = SubjectRecallNet(K, SIZE, (8,))
     with pytest.raises(ValueError, match=r"depth has shape \(3, 1, 32, 32\), expected \(4, 1, 32, 32\)"):
         net.set_templates(torch.zeros(3, 1, SIZE, SIZE), torch.zeros(3, 1, SIZE, SIZE))

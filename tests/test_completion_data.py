@@ -237,23 +237,23 @@ def test_corrupt_cached_item_names_the_file(tmp_path):
 
 
 def test_recgan_without_root_says_how_to_fix(tmp_path):
-    dm = CompletionDataModule(source="recgan", data_dir=str(tmp_path), root=None, progress=False)
+    dm = CompletionDataModule(target_res=64, source="recgan", data_dir=str(tmp_path), root=None, progress=False)
     with pytest.raises(DataError, match=r"data\.root=PATH"):
         dm.prepare_data()
     with pytest.raises(DataError, match="source"):
-        CompletionDataModule(source="shapnet", data_dir=str(tmp_path))
+        CompletionDataModule(target_res=64, source="shapnet", data_dir=str(tmp_path))
 
 
 def test_categories_are_the_one_list_and_are_checked(tmp_path):
     # every category has a synthetic generator, and only those
     assert set(GENERATORS) == set(SEEN_CATEGORIES) | set(UNSEEN_CATEGORIES)
-    dm = CompletionDataModule(data_dir=str(tmp_path), progress=False)  # null in the configs: all of them
+    dm = CompletionDataModule(target_res=64, data_dir=str(tmp_path), progress=False)  # null in the configs: all of them
     assert dm.categories == SEEN_CATEGORIES and dm.unseen_categories == UNSEEN_CATEGORIES
-    assert CompletionDataModule(data_dir=str(tmp_path), categories=["chair"]).categories == ("chair",)
+    assert CompletionDataModule(target_res=64, data_dir=str(tmp_path), categories=["chair"]).categories == ("chair",)
     with pytest.raises(DataError, match=r"data\.categories: unknown categories \['chiar'\]"):
-        CompletionDataModule(data_dir=str(tmp_path), categories=["chiar"])
+        CompletionDataModule(target_res=64, data_dir=str(tmp_path), categories=["chiar"])
     with pytest.raises(DataError, match=r"data\.unseen_categories: unknown categories \['chair'\]"):
-        CompletionDataModule(data_dir=str(tmp_path), unseen_categories=["chair"])
+        CompletionDataModule(target_res=64, data_dir=str(tmp_path), unseen_categories=["chair"])
 
 
 @pytest.mark.parametrize("res,factor", [(32, 2), (32, 4), (64, 8), (64, 16), (48, 3), (48, 12)])

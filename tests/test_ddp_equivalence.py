@@ -51,7 +51,9 @@ def _same(a, b) -> bool:
     return abs(a - b) <= 1e-5 * max(1.0, abs(a))
 
 
-@pytest.mark.parametrize("task", sorted(CASES))
+# completion (about 20 s, the costliest case) runs in make test-all; canonical and quality stay in the default suite
+@pytest.mark.parametrize("task", [pytest.param(t, marks=pytest.mark.slow) if t == "completion" else t
+                                  for t in sorted(CASES)])
 def test_two_processes_give_the_test_metrics_of_one(task, compose_cfg, tmp_path):
     cfg = compose_cfg([*CASES[task], *COMMON], data_dir=tmp_path / "data")
     train(cfg)  # (tests/ is on sys.path under pytest: the quality case's stand-in feature function)

@@ -13,6 +13,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 import yaml
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
@@ -52,6 +53,7 @@ def test_slurm_and_local_share_everything_but_the_cluster_keys():
     assert local["tasks_per_node"] == "${trainer.devices}" and local["timeout_min"] == 1440
 
 
+@pytest.mark.slow  # about 15 s; the launcher is Hydra's plugin (make test-all runs it)
 def test_two_job_multirun_through_submitit_local(tmp_path, compose_cfg):
     data = tmp_path / "data"
     build_datamodule(compose_cfg(TINY, data_dir=data).data).prepare_data()  # once, before the jobs

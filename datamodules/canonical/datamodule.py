@@ -87,9 +87,9 @@ class CanonicalDataModule(pl.LightningDataModule):
     def __init__(
         self,
         data_dir: str,
+        image_size: int,
         source: str = "synth",
         root: str | None = None,
-        image_size: int = 128,
         seed: int = 42,
         batch_size: int = 8,
         num_workers: int = 0,

@@ -26,6 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from datamodules.cache import DataError, stable_int_seed
+from datamodules.completion.ac3d import read_ac
+from datamodules.completion.md2 import read_md2
 from lit3d.utils.shapenet_categories import CATEGORY_ALIASES, SEEN_CATEGORIES, UNSEEN_CATEGORIES
 
 MESH_EXTS = (".obj", ".off", ".ply", ".stl", ".glb", ".gltf")
@@ -136,6 +138,11 @@ def _read_part(spec: str):
     """One part file (or ``archive::member``) -> trimesh.Trimesh (materials skipped)."""
     import trimesh  # noqa: PLC0415
 
+    suffix = spec.rsplit(".", 1)[-1].lower()
+    if suffix in ("ac", "acc"):  # formats trimesh does not read: the project's readers
+        return read_ac(spec)
+    if suffix == "md2":
+        return read_md2(spec)
     if "::" in spec:
         archive, member = spec.split("::", 1)
         with zipfile.ZipFile(archive) as z:

@@ -5,7 +5,7 @@ bench, chair, couch, table) and unseen categories (car, faucet, firearm, guitar,
 monitor, plane), renders one depth view per sample and voxelises it like
 3D-RecGAN++ (see :mod:`datamodules.completion.depth_voxels`).
 ``CompletionDataModule(source="recgan", root=PATH)`` converts the real release
-(see :mod:`datamodules.completion.recgan`). ``source="meshes" | "shapenet" | "sweethome3d"`` renders
+(see :mod:`datamodules.completion.recgan`). ``source="meshes" | "shapenet" | "sweethome3d" | "installed"`` renders
 real CAD models the procedural way (:mod:`datamodules.completion.meshes`). All write the same packed-bit cache
 (:mod:`datamodules.completion.voxel_cache`) with a ``manifest.json`` into ``data_dir``; the item plan is
 :mod:`datamodules.completion.plan`, each source's preparation :mod:`datamodules.completion.sources`.
@@ -28,8 +28,10 @@ import torch
 from torch.utils.data import DataLoader
 
 from datamodules.cache import CacheBuilder, DataError, bytes_on_disk
+from datamodules.completion.catalogues import present_packages
 from datamodules.completion.meshes import MESH_SOURCES, MeshSpec, prepare_mesh_items
 from datamodules.completion.plan import DEFAULT_SIZES, DataConfigError, ItemSpec, check_sizes
+from datamodules.completion.recgan import RECGAN_RAW_RES
 from datamodules.completion.sources import prepare_recgan_items, prepare_synth_items
 from datamodules.completion.voxel_cache import DATA_SPLITS, TEST_SPLITS, VoxelPairDataset, load_pair
 from datamodules.loaders import evaluation_loader
@@ -71,7 +73,8 @@ class CompletionDataModule(pl.LightningDataModule):
         views_per_shape: synthetic views per shape instance.
         unseen_view_set: view set of synthetic test_unseen ("same" or "cross").
         val_fraction: recgan: share of train shape ids held out as val.
-        raw_res: recgan: grids are centre-padded/cropped to raw_res^3 (256).
+        raw_res: recgan: grids are centre-padded/cropped to raw_res^3 (null: the release's 256,
+            ``RECGAN_RAW_RES``).
         skip_bad: recgan: skip bad files with a warning (count in describe()) instead of raising.
         compress: zlib-compress the packed bits (smaller; measured about as fast to load).
         render_factor: synth depth image size = render_factor * target_res.
@@ -83,12 +86,12 @@ class CompletionDataModule(pl.LightningDataModule):
 
     test_split_names: list[str]
 
-    def __init__(self, source: str = "synth", data_dir: str = "data/completion_synth", root: str | None = None,
-                 target_res: int = 64, input_factor: int = 4, sizes: dict | None = None,
+    def __init__(self, *, target_res: int, source: str = "synth", data_dir: str = "data/completion_synth",
+                 root: str | None = None, input_factor: int = 4, sizes: dict | None = None,
                  categories: Sequence[str] | None = None, unseen_categories: Sequence[str] | None = None,
                  batch_size: int = 4, num_workers: int = 0, seed: int = 0, skip_bad: bool = False,
                  pin_memory: bool = False, views_per_shape: int = 4, unseen_view_set: str = "same",
-                 val_fraction: float = 0.1, raw_res: int = 256, compress: bool = True, render_factor: int = 2,
+                 val_fraction: float = 0.1, raw_res: int | None = None, compress: bool = True, render_factor: int = 2,
                  progress: bool = True, sensor: str | dict = "ortho", model_split: dict | None = None,
                  min_models: int = 8, up_axis: str = "y", prepare_workers: int = 0):
         super().__init__()
@@ -109,7 +112,7 @@ class CompletionDataModule(pl.LightningDataModule):
         self.batch_size, self.num_workers = int(batch_size), int(num_workers)
         self.seed, self.skip_bad, self.pin_memory = int(seed), bool(skip_bad), bool(pin_memory)
         self.views_per_shape, self.unseen_view_set = int(views_per_shape), unseen_view_set
-        self.val_fraction, self.raw_res = float(val_fraction), int(raw_res)
+        self.val_fraction, self.raw_res = float(val_fraction), int(raw_res or RECGAN_RAW_RES)
         self.compress, self.render_factor, self.progress = bool(compress), int(render_factor), bool(progress)
         if source == "recgan" and self.raw_res % self.target_res:
             raise DataConfigError(f"data.target_res={target_res} must divide data.raw_res={raw_res}")
@@ -140,6 +143,8 @@ class CompletionDataModule(pl.LightningDataModule):
         if self.source in MESH_SOURCES:
             cfg.update(root=str(self.root.resolve()) if self.root else None, model_split=self.model_split,
                        min_models=self.min_models, up_axis=self.up_axis, skip_bad=self.skip_bad)
+            if self.source == "installed":  # another package unpacked later makes another cache
+                cfg.update(catalogues=present_packages(self.root))
         else:
             cfg.update(root=str(self.root.resolve()) if self.root else None, raw_res=self.raw_res,
                        val_fraction=self.val_fraction, skip_bad=self.skip_bad)

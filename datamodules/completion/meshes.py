@@ -1,4 +1,4 @@
-"""Completion items from real CAD models (``data.source=meshes | shapenet | sweethome3d``).
+"""Completion items from real CAD models (``data.source=meshes | shapenet | sweethome3d | installed``).
 
 The plan is the procedural one (:func:`datamodules.completion.plan.synth_items`: the same splits,
 view sets, views per shape and names) with a real model behind every item of a category that
@@ -25,6 +25,7 @@ from tqdm.auto import tqdm
 
 from datamodules.cache import CacheBuilder, DataError
 from datamodules.completion.cad_models import CadModel, index_mesh_folder, index_shapenet, split_models
+from datamodules.completion.catalogues import index_installed
 from datamodules.completion.mesh_shapes import mesh_shape
 from datamodules.completion.plan import ItemSpec, synth_pair, view_pair
 from datamodules.completion.sweethome3d import credits_markdown, index_sweethome3d
@@ -34,7 +35,7 @@ from lit3d.utils.stops import check_stop
 
 log = logging.getLogger("lit3d.data")
 
-MESH_SOURCES = ("meshes", "shapenet", "sweethome3d")
+MESH_SOURCES = ("meshes", "shapenet", "sweethome3d", "installed")
 SPLIT_GROUP = {"train": "train", "val": "val", "test_same": "test", "test_cross": "test"}
 
 
@@ -52,9 +53,12 @@ class MeshSpec:
 
 
 def index_models(source: str, root: str | Path | None) -> tuple[list[CadModel], list[dict]]:
-    """(models, dropped) of a mesh source; ``root`` None means the installed catalogues (sweethome3d)."""
+    """(models, dropped) of a mesh source; ``root`` None means the installed catalogues (sweethome3d;
+    installed: the unpacked Debian packages of :mod:`datamodules.completion.catalogues`)."""
     if source == "sweethome3d":
         return index_sweethome3d(root)
+    if source == "installed":
+        return index_installed(root)
     if root is None:
         raise DataError(f"data.source={source} needs a folder: set data.root=PATH")
     return (index_mesh_folder if source == "meshes" else index_shapenet)(root)
@@ -198,7 +202,7 @@ def prepare_mesh_items(builder: CacheBuilder, spec: ItemSpec, mesh: MeshSpec, sk
     items = [it for it in items if it["file"] not in bad]
     used = sorted({it["model_id"] for it in items if it.get("model_id")})
     kept = [by_id[i] for i in used]
-    if mesh.source == "sweethome3d":
+    if mesh.source in ("sweethome3d", "installed"):
         (builder.root / "CREDITS.md").write_text(credits_markdown(kept))
     extra = {"skipped": sorted(set(bad.values())), "fallback": fallback, "dropped": dropped,
              "models": [m.record() for m in kept], **summary(models, items)}

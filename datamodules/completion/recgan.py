@@ -47,6 +47,8 @@ DIR_RE = re.compile(r"^(?P<split>train|val|test)(?:_(?P<views>125|216))?_(?P<kin
 FILE_RE = re.compile(r"^(?P<id>.+)_(?P<a>\d+)_(?P<b>\d+)_(?P<c>\d+)\.npz$")
 VIEW_SETS = {"125": "same", "216": "cross"}
 
+RECGAN_RAW_RES = 256  # the release's grids: the longest side about 256 voxels
+
 
 @dataclass(frozen=True)
 class RecganPair:
@@ -197,7 +199,7 @@ def max_pool(grid: np.ndarray, out_res: int) -> np.ndarray:
     return max_pool_bool(grid, r // out_res)
 
 
-def convert_pair(pair: RecganPair, raw_res: int = 256, target_res: int = 256,
+def convert_pair(pair: RecganPair, raw_res: int = RECGAN_RAW_RES, target_res: int = 256,
                  input_res: int = 64) -> tuple[np.ndarray, np.ndarray]:
     """Load, check, pad/crop and pool one pair -> (input (input_res^3) bool, target (target_res^3) bool).
 

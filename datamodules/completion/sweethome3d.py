@@ -142,8 +142,9 @@ def index_sweethome3d(root: str | Path | None = None) -> tuple[list[CadModel], l
 
 def credits_markdown(models: list[CadModel]) -> str:
     """CREDITS.md text: every kept model with its author and licence (CC-BY asks for credit)."""
-    lines = ["# Credits: Sweet Home 3D furniture used as completion data", "",
-             "Models from the Sweet Home 3D furniture catalogues (package sweethome3d-furniture), by licence.", ""]
+    lines = ["# Credits: real models used as completion data", "",
+             "Models from the Sweet Home 3D furniture catalogues and the Debian packages of "
+             "datamodules/completion/catalogues.py, by licence.", ""]
     by_licence: dict[str, list[CadModel]] = {}
     for m in models:
         by_licence.setdefault(m.licence or "licence not stated", []).append(m)

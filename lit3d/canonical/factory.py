@@ -62,8 +62,10 @@ def build_canonical_net(net: dict) -> nn.Module:
             keep["channels"] = net["unet_channels"]
         model = UNet(**keep)
     elif kind == "recall":
-        model = SubjectRecallNet(int(net.get("n_subjects", 0)), int(net.get("image_size", 128)),
-                                 net.get("recall_channels", (16, 32, 64, 128)))
+        missing = [k for k in ("image_size", "recall_channels") if k not in net]
+        if missing:
+            raise ValueError(f"the recall net needs task.net.{' and task.net.'.join(missing)}")
+        model = SubjectRecallNet(int(net.get("n_subjects", 0)), int(net["image_size"]), net["recall_channels"])
     else:
         raise ValueError(f"unknown canonical net kind '{kind}' (canonical, unet, recall)")
     if init == "he":

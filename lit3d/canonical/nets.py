@@ -84,7 +84,7 @@ class DownUp(nn.Module):
 class LFE(DownUp):
     """Local feature extractor: ``(B, 2, H, W)`` depth+mask -> ``(B, out, H, W)`` local features."""
 
-    def __init__(self, cin: int = 2, out: int = 1, channels: Sequence[int] = (32, 64, 128)):
+    def __init__(self, cin: int, out: int, channels: Sequence[int]):
         super().__init__(cin, out, channels, up_act="leaky", final_act=True)
 
 
@@ -118,10 +118,8 @@ class MSFE(nn.Module):
     then resized to H x W (at 500^2: seven stride-2 layers give 289^2, resized to 500^2).
     """
 
-    def __init__(self, cin: int, out: int = 1, channels: Sequence[int] = (16, 16, 10), grid: int = 40,
-                 fuser_hidden: int = 500, fuser_out: int = 500,
-                 dec_channels: Sequence[int] = (256, 128, 64, 32, 16, 8), dilations: Sequence[int] = DILATIONS,
-                 image_size: int = 500):
+    def __init__(self, cin: int, out: int, channels: Sequence[int], grid: int, fuser_hidden: int, fuser_out: int,
+                 dec_channels: Sequence[int], image_size: int, dilations: Sequence[int] = DILATIONS):
         super().__init__()
         self.encoders = nn.ModuleList(DilatedEncoder(cin, channels, d, grid) for d in dilations)
         self.latent_dim = sum(e.latent_dim for e in self.encoders)
@@ -173,16 +171,18 @@ class CanonicalNet(nn.Module):
     def __init__(self, image_size: int, lfe_channels: Sequence[int], lfe_out: int, msfe_channels: Sequence[int],
                  msfe_grid: int, fuser_hidden: int, fuser_out: int, msfe_dec_channels: Sequence[int], msfe_out: int,
                  rec_channels: Sequence[int], use_lfe: bool = True, use_msfe: bool = True, head: str = "redraw",
-                 warp_hidden: int = 32, warp_normalise_depth: bool = False, warp_depth: str = "offset",
+                 warp_hidden: int | None = None, warp_normalise_depth: bool = False, warp_depth: str = "offset",
                  warp_affine_cell: int = 8):
         super().__init__()
         if head not in HEADS:
             raise ValueError(f"unknown canonical net head '{head}' ({', '.join(HEADS)})")
+        if head == "warp" and warp_hidden is None:
+            raise ValueError("the warp head needs its width: set task.net.warp_hidden")
         self.image_size = image_size
         self.lfe = LFE(2, lfe_out, lfe_channels) if use_lfe else None
         c = 2 + (lfe_out if use_lfe else 0)
         self.msfe = MSFE(c, msfe_out, msfe_channels, msfe_grid, fuser_hidden, fuser_out, msfe_dec_channels,
-                         image_size=image_size) if use_msfe else None
+                         image_size) if use_msfe else None
         c += msfe_out if use_msfe else 0
         hidden = max(rec_channels[0] // 2, 4)
         self.reconstruction = DownUp(c, hidden, rec_channels, up_act="leaky", final_act=True)
@@ -212,7 +212,7 @@ class UNet(nn.Module):
     Pads the input to a multiple of ``2**len(channels)`` and crops back (size-agnostic).
     """
 
-    def __init__(self, channels: Sequence[int] = (16, 32, 64, 128), image_size: int = 128):
+    def __init__(self, channels: Sequence[int], image_size: int):
         super().__init__()
         self.image_size = image_size
         ch = list(channels)

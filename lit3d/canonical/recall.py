@@ -32,7 +32,7 @@ class SubjectRecallNet(nn.Module):
     checkpoint carries them; :meth:`set_templates` fills them from the training data before fitting.
     """
 
-    def __init__(self, n_subjects: int, image_size: int, channels: Sequence[int] = (16, 32, 64, 128)):
+    def __init__(self, n_subjects: int, image_size: int, channels: Sequence[int]):
         super().__init__()
         if int(n_subjects) < 2:
             raise ValueError(f"the recall net needs n_subjects >= 2 (got {n_subjects}): set task.identity_classes")

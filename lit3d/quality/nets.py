@@ -37,7 +37,7 @@ class ResidualBlock(nn.Module):
 class QualityMLP(nn.Module):
     """(B, in_features) float32 -> (B,) float32 in (0, 1)."""
 
-    def __init__(self, in_features: int, hidden: int = 32, blocks: int = 2, dropout: float = 0.1,
+    def __init__(self, in_features: int, hidden: int, blocks: int, dropout: float = 0.1,
                  batch_norm: bool = True):
         super().__init__()
         if in_features < 1:
@@ -72,7 +72,7 @@ class BatchedQualityMLP(nn.Module):
     (momentum 0.1, unbiased running variance, like ``nn.BatchNorm1d``) in eval.
     """
 
-    def __init__(self, n_models: int, in_features: int, hidden: int = 32, blocks: int = 2,
+    def __init__(self, n_models: int, in_features: int, hidden: int, blocks: int,
                  dropout: float = 0.1, batch_norm: bool = True, seed: int = 0, eps: float = 1e-5,
                  momentum: float = 0.1):
         super().__init__()

@@ -138,7 +138,10 @@ def _load(path: str, _resolved: str, _mtime: int) -> QualityPredictor:
     if not isinstance(meta, dict) or not meta.get("features"):
         raise QualityCheckpointError(f"{p}: not a lit3d quality checkpoint (no '{CKPT_KEY}' entry with selected "
                                      "features; train one with lit3d-train task=quality)")
-    net = QualityMLP(len(meta["features"]), **dict(meta.get("net") or {}))
+    if not isinstance(meta.get("net"), dict) or not {"hidden", "blocks"} <= set(meta["net"]):
+        raise QualityCheckpointError(f"{p}: the quality checkpoint does not say its MLP's sizes ('{CKPT_KEY}.net' "
+                                     "with hidden and blocks)")
+    net = QualityMLP(len(meta["features"]), **dict(meta["net"]))
     state = {k[len("net."):]: v for k, v in ckpt.get("state_dict", {}).items() if k.startswith("net.")}
     try:
         net.load_state_dict(state)

@@ -13,3 +13,25 @@ def config_dir() -> Path:
     if (repo / "pyproject.toml").is_file() and (repo / "conf").is_dir():
         return repo / "conf"
     return package / "conf"
+
+
+def exact_quotient(numerator, denominator) -> int:
+    """``${lit3d.div:a,b}`` in the configs: ``a / b`` for integers that divide exactly (e.g. the completion
+    input grid ``${lit3d.div:${data.target_res},${data.input_factor}}``), so a size written once in the
+    data config is read by the nets instead of being repeated."""
+    a, b = int(numerator), int(denominator)
+    if b <= 0 or a % b:
+        raise ValueError(f"lit3d.div: {a} is not a whole multiple of {b}")
+    return a // b
+
+
+def register_resolvers() -> None:
+    """Register the configs' resolvers with OmegaConf (idempotent; done when this module is imported,
+    which every entry point does before composing a config)."""
+    from omegaconf import OmegaConf
+
+    if not OmegaConf.has_resolver("lit3d.div"):
+        OmegaConf.register_new_resolver("lit3d.div", exact_quotient)
+
+
+register_resolvers()
