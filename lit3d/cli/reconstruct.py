@@ -7,6 +7,7 @@ Examples::
     lit3d-reconstruct d.npy --ckpt CKPT --out out/ --far 2.0 --remove-plane --format ply
     lit3d-reconstruct d.png --ckpt CKPT --out out/ --reference chair.obj --quality-ckpt Q.ckpt
     lit3d-reconstruct d.png --ckpt CKPT --out out/ --canonical logs/canonical/.../best.ckpt
+    lit3d-reconstruct person.png --body --out out/     # Anny body fit (lit3d.reconstruct.body)
 
 Inputs: 16-bit PNG/TIFF and integer .npy/.npz (depth units x --depth-scale metres, default
 millimetres), float .npy/.npz metres, .exr metres; 0 and an integer type's maximum (65535:
@@ -26,6 +27,7 @@ or Ctrl-C ends with one line saying which sets were kept (exit 143 or 130); a re
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import sys
 import time
@@ -39,7 +41,8 @@ def _parser() -> argparse.ArgumentParser:
                                 epilog="\n\n".join(__doc__.split("\n\n")[1:]).replace("``", "'"),
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("depth", nargs="+", help="depth image(s) or folder(s) of them")
-    p.add_argument("--ckpt", required=True, help="completion checkpoint (lit3d-train task=completion)")
+    p.add_argument("--ckpt", help="completion checkpoint (lit3d-train task=completion; not with --body)")
+    p.add_argument("--body", action="store_true", help="fit the Anny body model instead (a person; no checkpoint)")
     p.add_argument("--out", required=True, help="output folder")
     cam = p.add_argument_group("camera")
     cam.add_argument("--fov", type=float, default=None, help="field of view in degrees (default 49.124)")
@@ -109,6 +112,8 @@ def _check_args(args) -> None:
         raise InputError(f"--fov {args.fov:g}: expected a field of view in (0, 180) degrees")
     if not args.depth_scale > 0 or args.depth_scale != args.depth_scale or args.depth_scale == float("inf"):
         raise InputError(f"--depth-scale {args.depth_scale:g}: expected a positive number of metres per unit")
+    if bool(args.ckpt) == bool(args.body) or (args.body and (args.canonical or args.reference)):
+        raise InputError("give --ckpt CKPT (completion) or --body (Anny fit; not with --canonical/--reference)")
     if args.quality_ckpt and not args.reference:
         raise InputError("--quality-ckpt needs --reference (the shape to score against)")
     if not 64 <= args.size <= 2048:
@@ -233,7 +238,7 @@ def _protected(args, inputs: list[Path]) -> list[Path]:
 def _plan_outputs(args, inputs: list[Path]) -> tuple[list[str], list[Path]]:
     """Output names per input and the files no output may replace; checks --out and every
     planned output path before anything expensive runs (raises OutputError, exit 2)."""
-    from lit3d.reconstruct.outputs import output_files
+    from lit3d.reconstruct.body import planned_files
     from lit3d.utils.io import check_output_dir, check_targets, unique_names
 
     _check_out_is_no_input_folder(args)
@@ -242,7 +247,7 @@ def _plan_outputs(args, inputs: list[Path]) -> tuple[list[str], list[Path]]:
         _say(f"note: {note}")
     protected = _protected(args, inputs)
     out = Path(args.out)
-    planned = [out / f for n in names for f in output_files(n, args.format, not args.no_figure)]
+    planned = [out / f for n in names for f in planned_files(args, n)]
     check_targets(planned, protected)  # before --out is created: a refused run leaves nothing
     check_output_dir(out)
     return names, protected
@@ -288,10 +293,12 @@ def _run(args) -> int:
         return 0
     from tqdm import tqdm
 
+    from lit3d.reconstruct.body import Body, body_one
     from lit3d.reconstruct.pipeline import load_completer
 
-    completer = load_completer(args.ckpt, args.device)
-    for note in completer.notes:
+    completer = None if args.body else load_completer(args.ckpt, args.device)
+    body = functools.cache(Body) if args.body else None  # anny loads at the first image that gets to the fit
+    for note in [] if args.body else completer.notes:
         _say(f"note: {note}")
     mapper = None
     if args.canonical:
@@ -309,9 +316,16 @@ def _run(args) -> int:
         for k, (path, name) in enumerate(zip(bar, names), 1):
             current = (k, path, name)
             try:
-                s = _one(args, path, name, completer, mapper, scorer, protected)
+                if body is not None:
+                    s = body_one(args, path, name, body, protected, lambda w, h, lb: _intrinsics(args, w, h, lb),
+                                 _camera_source(args), _say)
+                else:
+                    s = _one(args, path, name, completer, mapper, scorer, protected)
                 done.append(name)
-                if len(inputs) < 2:
+                if len(inputs) < 2 and body is not None:
+                    _say(f"wrote {Path(args.out) / name}_body{{.{args.format},_canonical.{args.format},"
+                         f"_canonical_depth.npy,.png,.json}} ({s['timings_s']['total']:.1f} s)")
+                elif len(inputs) < 2:
                     _say(f"wrote {Path(args.out) / name}.{{{args.format},png,json}} and "
                          f"{name}_occupancy.npz ({s['timings_s']['total']:.1f} s)")
             except Exception as exc:
@@ -343,13 +357,14 @@ def _stopped(args, exc: KeyboardInterrupt, total: int, done: list[str], current,
     whose renames had begun, and writes nothing of one still being made) and that a rerun skips them.
     ``current``: ``(1-based position, input, output name)`` of the image being made, or None."""
     from lit3d.cli.about import Stopped
-    from lit3d.reconstruct.outputs import finished_set, request_key
+    from lit3d.reconstruct.body import is_finished
+    from lit3d.reconstruct.outputs import request_key
 
     at, busy = "before the first image", ""
     if current is not None:
         k, path, name = current
         at = f"at image {k} of {total}"
-        whole = name in done or finished_set(args.out, name, args.format, not args.no_figure, request_key(args, path))
+        whole = name in done or is_finished(args, name, request_key(args, path))
         if name not in done and whole:
             done = [*done, name]  # stopped during its renames, which were finished
         busy = "" if whole else f"; {path} (in progress) was not written"
@@ -364,7 +379,8 @@ def _stopped(args, exc: KeyboardInterrupt, total: int, done: list[str], current,
 def _to_do(args, inputs: list[Path], names: list[str]) -> list[tuple[Path, str]]:
     """Settle the sets an interrupted run left in --out, then the (input, name) pairs whose set is
     not already whole with the same input and options (all of them with --overwrite)."""
-    from lit3d.reconstruct.outputs import finished_set, request_key
+    from lit3d.reconstruct.body import is_finished
+    from lit3d.reconstruct.outputs import request_key
     from lit3d.utils.io import repair_sets
 
     for note in repair_sets(args.out):
@@ -372,7 +388,7 @@ def _to_do(args, inputs: list[Path], names: list[str]) -> list[tuple[Path, str]]
     if args.overwrite:
         return list(zip(inputs, names))
     return [(p, n) for p, n in zip(inputs, names)
-            if not finished_set(args.out, n, args.format, not args.no_figure, request_key(args, p))]
+            if not is_finished(args, n, request_key(args, p))]
 
 
 if __name__ == "__main__":

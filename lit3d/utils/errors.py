@@ -13,6 +13,7 @@ their older built-in bases (``ValueError`` mostly), so code that caught those st
     │   └── MosDataError       datamodules.quality.mos
     ├── MeshReadError          datamodules.canonical.tosca
     ├── InputError             lit3d.reconstruct.depth_io: a depth image or mask lit3d-reconstruct cannot use
+    ├── BodyFitError           lit3d.body.errors: a depth image a body cannot be fitted to (too few points)
     ├── ShapeError             lit3d.render.convert: a mesh, cloud or grid that cannot be rendered
     ├── OutputError            lit3d.utils.io: an output path that cannot be written
     │   └── LockBusy           lit3d.utils.locks

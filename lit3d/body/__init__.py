@@ -1,0 +1,12 @@
+"""Fit the Anny body model (:mod:`datamodules.canonical.bodies`) to one depth image of a person.
+
+    points.py   depth + intrinsics -> camera-frame foreground points, silhouette distance map
+    model.py    differentiable Anny: phenotype, joint-limited bone rotations, global similarity
+                -> camera-frame vertices
+    fit.py      the optimisation (point-to-surface, silhouette, priors) from the mean body
+    results.py  what a fit gives: posed and rest-pose meshes, the canonical depth image (rendered
+                as the canonical task renders its targets), fit quality, the parameters as JSON
+
+A task room beside :mod:`lit3d.canonical` (it imports datamodules and the shared rooms only);
+``lit3d-reconstruct --body`` (:mod:`lit3d.reconstruct.body`) is its user.
+"""
