@@ -54,8 +54,8 @@ def test_installed_trees_under_a_root_and_absent_packages_named(tmp_path, monkey
                                                                              for z in (0, 1)], CUBE_QUADS)))
     (tree / "objects" / "hut.ac").write_text(ac_file(ac_object("hut", [(0, 0, 0), (1, 0, 0), (0, 1, 0)], [(0, 1, 2)])))
     (tree / "models" / "glider.xml").write_text('<graphics model="glider.ac"/>')
-    if package_tree(tmp_path, "sweethome3d", CATALOGUES["sweethome3d"][0]) is None:  # not installed system-wide
-        assert present_packages() == ["crrcsim-data"]
+    system_wide = [p for p in CATALOGUES if p != "crrcsim-data" and package_tree(tmp_path, p, CATALOGUES[p][0])]
+    assert present_packages() == sorted(["crrcsim-data", *system_wide], key=list(CATALOGUES).index)
     models, dropped = index_installed(packages=["crrcsim-data"])
     assert [(m.model_id, m.category, m.licence) for m in models] == [("crrcsim/glider", "plane", "GPL-2")]
     assert [d["reason"] for d in dropped] == ["scenery (no airplane description names it)"]
@@ -67,6 +67,7 @@ def test_installed_trees_under_a_root_and_absent_packages_named(tmp_path, monkey
 EXPECTED = {  # package -> categories it must give (at least one model each) when unpacked
     "flightgear-data-ai": {"plane"}, "crrcsim-data": {"plane"}, "ufoai-data": {"firearm", "car", "chair", "table"},
     "sweethome3d": {"chair", "table", "couch", "monitor"}, "minetest-mod-homedecor": {"faucet", "bench", "monitor"},
+    "sweethome3d-furniture": {"chair", "table", "couch", "car"},
 }
 
 

@@ -23,6 +23,8 @@ ufoai-data                  GPL/CC-BY-SA ``base/0models.pk3``: gun-shaped weapon
 sweethome3d                 GPL-2+      the default catalogue inside ``sweethome3d.jar``
                                         (Sweet Home 3D's own rules, its size and modelRotation)
 minetest-mod-homedecor      CC-BY-SA-4.0 named OBJ models (:data:`HOMEDECOR_RULES`); y-up
+sweethome3d-furniture       CC0/CC-BY   the ``*.sh3f`` catalogues of ``data.source=sweethome3d`` (installed by
+                                        apt, the demo's data; ids prefixed ``sweethome3d-furniture/``)
 ==========================  ==========  ====================================================
 
 Every model is returned as a :class:`~datamodules.completion.cad_models.CadModel` in the
@@ -32,6 +34,7 @@ ids are ``<package>/<name>``, stable across machines, so the split by model id i
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 import zipfile
@@ -42,7 +45,7 @@ import numpy as np
 
 from datamodules.cache import DataError
 from datamodules.completion.cad_models import CadModel
-from datamodules.completion.sweethome3d import assign_category, parse_properties
+from datamodules.completion.sweethome3d import assign_category, index_sweethome3d, parse_properties
 
 DEFAULT_ROOT = "~/.cache/lit3d/catalogues"
 ROOT_ENV = "LIT3D_CATALOGUES"
@@ -259,7 +262,19 @@ def index_homedecor(tree: Path) -> tuple[list[CadModel], list[dict]]:
 
 
 # package -> (path inside the unpacked tree, indexer, download MB)
+# ---------------------------------------------------------------- Sweet Home 3D furniture (the demo's data)
+SH3F_REL = "usr/share/sweethome3d/furniture"
+
+
+def index_sh3d_furniture(folder: Path) -> tuple[list[CadModel], list[dict]]:
+    """The ``sweethome3d-furniture`` catalogues (``*.sh3f``; ``data.source=sweethome3d`` alone), ids prefixed
+    ``sweethome3d-furniture/`` so that they never meet the default catalogue's ``sweethome3d/`` ids."""
+    models, dropped = index_sweethome3d(folder)
+    return [dataclasses.replace(m, model_id=f"sweethome3d-furniture/{m.model_id}") for m in models], dropped
+
+
 CATALOGUES: dict[str, tuple[str, Callable[[Path], tuple[list[CadModel], list[dict]]], int]] = {
+    "sweethome3d-furniture": (SH3F_REL, index_sh3d_furniture, 120),
     "flightgear-data-ai": (FG_REL, index_flightgear, 287),
     "crrcsim-data": (CRRC_REL, index_crrcsim, 5),
     "torcs-data": (TORCS_REL, index_torcs, 333),
