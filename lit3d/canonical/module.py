@@ -50,6 +50,7 @@ from lit3d.callbacks.nonfinite import guard_step, validate_mode
 from lit3d.canonical.figures import validation_panel
 from lit3d.canonical.loss_phases import THESIS_FRACTIONS, LossPhases
 from lit3d.canonical.factory import build_canonical_net, summarize
+from lit3d.canonical.recall import RecallTemplates
 from lit3d.canonical.losses import canonical_loss, flow_loss, flow_smoothness, visibility_loss
 from lit3d.canonical.warp import pixels_to_grid
 from lit3d.metrics.depth import MaskedDepthMSE, MaskIoU
@@ -157,26 +158,21 @@ class CanonicalTask(pl.LightningModule):
                 have = "missing" if k not in net else f"shape {tuple(net[k].shape)}"
                 raise ValueError(f"{path}: not a pretrained net for this one (net.{k}: {have}, "
                                  f"expected {tuple(v.shape)}; same task.arch and task.net sizes?)")
-        self.net.load_state_dict({k: net[k] for k in own})
+        data_made = {k for k in own if k.startswith("template_")}  # recall templates: this run's training data
+        self.net.load_state_dict({k: own[k] if k in data_made else net[k] for k in own})
 
     def on_fit_start(self) -> None:
-        """``init_weights``: a fresh fit (not a resume) starts from that checkpoint's net.
-        ``arch=recall``: the templates are the training data's canonical images, seen from the first
-        evaluation view (the view every test target is drawn in)."""
+        """``init_weights``: a fresh fit (not a resume) starts from that checkpoint's net (``arch=recall``:
+        its templates come from this run's training data, :class:`~lit3d.canonical.recall.RecallTemplates`)."""
         if self.hparams.init_weights and getattr(self.trainer, "ckpt_path", None) is None:
             self.load_initial_weights(self.hparams.init_weights)
-        if self.hparams.arch != "recall":
-            return
-        dm = getattr(self.trainer, "datamodule", None)
-        if dm is None or not hasattr(dm, "views"):
-            raise ValueError("arch=recall fills its templates from a canonical DataModule; fit with datamodule=...")
-        depth, mask = dm.datasets["train"].canonical_templates(dm.views("test")[0])
-        self.net.set_templates(depth.to(self.device), mask.to(self.device))
 
     def configure_callbacks(self):
-        if not self.hparams.use_phases:
-            return []
-        return [LossPhases(self.hparams.phases or THESIS_FRACTIONS, unit=self.hparams.phase_unit)]
+        """The loss phases (``use_phases``) and, for ``arch=recall``, the templates from the training data."""
+        callbacks = [RecallTemplates()] if self.hparams.arch == "recall" else []
+        if self.hparams.use_phases:
+            callbacks.append(LossPhases(self.hparams.phases or THESIS_FRACTIONS, unit=self.hparams.phase_unit))
+        return callbacks
 
     def configure_optimizers(self):
         return torch.optim.Adam(self.parameters(), lr=self.hparams.lr, betas=tuple(self.hparams.betas))

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import lightning.pytorch as pl
 import torch
 import torch.nn as nn
 
@@ -71,3 +72,17 @@ class SubjectRecallNet(nn.Module):
         d = torch.einsum("bk,kchw->bchw", p, self.template_depth * self.template_mask) / m.clamp_min(MASK_EPS)
         m = m.clamp(MASK_EPS, 1 - MASK_EPS)
         return CanonicalOutput(depth=d.clamp(0, 1), mask=m, mask_logits=torch.logit(m), latent=logits)
+
+
+class RecallTemplates(pl.Callback):
+    """Before fitting, fills a recall module's templates with the training data's canonical images, seen
+    from the first evaluation view (the view every test target is drawn in), through the canonical
+    DataModule's interface (``views("test")`` and the training dataset's ``canonical_templates(view)``);
+    the module (``net.set_templates``) only holds them. Added by the module itself for ``arch=recall``."""
+
+    def on_fit_start(self, trainer: pl.Trainer, pl_module: pl.LightningModule) -> None:
+        dm = getattr(trainer, "datamodule", None)
+        if dm is None or not hasattr(dm, "views"):
+            raise ValueError("arch=recall fills its templates from a canonical DataModule; fit with datamodule=...")
+        depth, mask = dm.datasets["train"].canonical_templates(dm.views("test")[0])
+        pl_module.net.set_templates(depth.to(pl_module.device), mask.to(pl_module.device))

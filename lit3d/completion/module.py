@@ -30,7 +30,7 @@ from lit3d.metrics.voxel import VoxelSweepMetrics, best_threshold, default_thres
 from lit3d.completion.nets import build_completion_nets, validate_net_config
 from lit3d.completion.paired import PairedSamples, extrude_silhouette
 from lit3d.completion.previews import log_validation_previews
-from lit3d.completion.prior import mean_training_target
+from lit3d.completion.prior import OccupancyPrior
 from lit3d.completion.split_metrics import split_values, threshold_index
 from lit3d.completion.summary import summarize_completion
 from lit3d.completion.surface_eval import SurfaceTestMetrics
@@ -248,33 +248,20 @@ class CompletionTask(pl.LightningModule):
         return torch.stack([weighted_bce_with_logits(lg, small, self.hparams.alpha) for lg in stage_logits]).mean()
 
     # ------------------------------------------------------------------ prior
-    def on_fit_start(self) -> None:
-        """Average the training targets into the ``prior`` buffer once, before the first step
-        (a resumed fit has it from its checkpoint)."""
-        if int(self.prior_items) == 0:
-            self._compute_prior()
+    def configure_callbacks(self):
+        """The per-voxel prior comes from the training data through a callback
+        (:class:`~lit3d.completion.prior.OccupancyPrior`): the module only holds it."""
+        return [OccupancyPrior(self.hparams.prior_samples)]
 
-    def _ensure_prior(self) -> None:
-        """Evaluating a checkpoint saved before the prior was kept: compute it now."""
-        if int(self.prior_items) == 0:
-            log.info("no occupancy prior in this model: averaging up to %d training targets", self.hparams.prior_samples)
-            self._compute_prior()
-
-    def _compute_prior(self) -> None:
-        """``prior`` = per-voxel mean of the first ``prior_samples`` training targets, in index order
-        (the same items on every rank); 0.5 everywhere when there is no training data."""
-        dm = getattr(self.trainer, "datamodule", None)
-        prior, n = None, 0
-        if dm is not None:
-            loader = dm.train_dataloader()
-            prior, n = mean_training_target(loader.dataset, self.hparams.prior_samples,
-                                            loader.batch_size or 1, loader.num_workers)
+    def set_prior(self, prior: torch.Tensor | None, n_items: int) -> None:
+        """Keep ``prior`` ((1, 1, R, R, R) float32 in [0, 1], the mean of ``n_items`` training targets);
+        None: no training data, the prior baseline predicts 0.5 everywhere."""
         if prior is None:
             log.warning("no training data: the prior baseline predicts 0.5 everywhere")
             self.prior.fill_(0.5)
         else:
             self.prior.copy_(prior)
-        self.prior_items.fill_(n)
+        self.prior_items.fill_(int(n_items))
 
     def _predictions(self, batch: dict) -> dict[str, torch.Tensor]:
         x, y = batch["input"], batch["target"]
@@ -287,9 +274,6 @@ class CompletionTask(pl.LightningModule):
         }
 
     # ------------------------------------------------------------------ validation
-    def on_validation_epoch_start(self) -> None:
-        self._ensure_prior()
-
     def validation_step(self, batch: dict, batch_idx: int) -> None:
         cats = self._categories(batch)
         preds = self._predictions(batch)
@@ -319,9 +303,6 @@ class CompletionTask(pl.LightningModule):
         return {"model": float(self.threshold), "prior": float(self.prior_threshold), "input": 0.5, "extrusion": 0.5}
 
     # ------------------------------------------------------------------ test
-    def on_test_epoch_start(self) -> None:
-        self._ensure_prior()
-
     def _split_name(self, dataloader_idx: int) -> str:
         dm = getattr(self.trainer, "datamodule", None)
         names = list(getattr(dm, "test_split_names", TEST_SPLITS))
