@@ -101,3 +101,21 @@ def test_staged_outputs_are_moved_as_one_set_metrics_last(tmp_path, monkeypatch)
     assert moved == [["config.yaml", "results.md", "z.png", "metrics.json"]]
     assert sorted(p.name for p in out.iterdir()) == ["config.yaml", "metrics.json", "results.md", "z.png"]
     assert all((out / n).read_text() == "new\n" for n in moved[0])
+
+
+def test_ctrl_c_while_testing_after_training_keeps_the_training_and_says_how_to_test(tmp_path):
+    """lit3d-train's test after fitting: before, Ctrl-C there ended with Lightning's KeyboardInterrupt and exit 1;
+    now one line (exit 143) says the training is complete, names the checkpoint and the lit3d-eval command,
+    and no test output is written."""
+    run, log = tmp_path / "run", tmp_path / "train"
+    proc = _start(["lit3d-train", "experiment=completion_demo", *TINY_NETS, SIZES, "data.batch_size=2",
+                   "data.progress=false", f"paths.data_dir={tmp_path}/data", "trainer.max_epochs=1", "logger=none",
+                   "callbacks.progress_bar=null", f"hydra.run.dir={run}"], log)
+    testing = lambda: "testing " in ((run / "train.log").read_text() if (run / "train.log").is_file() else "")
+    rc = signal_when(proc, testing, log, [signal.SIGINT])
+    line = stop_line(log, rc)
+    assert line.startswith(f"error: {run}: stopped by SIGINT (Ctrl-C) while testing after training; the training is "
+                           "complete and its checkpoints are kept; no test results were written"), line
+    ckpt = Path(line.split("ckpt_path=")[1].split()[0])
+    assert ckpt.is_file() and ckpt.parent == run / "checkpoints"
+    assert not (run / "metrics.json").exists() and not (run / "results.md").exists()

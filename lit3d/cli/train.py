@@ -9,6 +9,7 @@ Returns the monitored metric (``task_info.monitor``) so Hydra sweepers can optim
 """
 from __future__ import annotations
 
+import logging
 import os
 import uuid
 import warnings
@@ -34,10 +35,12 @@ from lit3d.cli.common import (
 )
 from lit3d.cli.resume_checks import check_resume_config, check_weights_fit
 from lit3d.cli.run_log import with_csv_logger, write_run_curves
-from lit3d.cli.stops import preparing
+from lit3d.cli.stops import preparing, testing_after_fit
 from lit3d.utils.io import atomic_write_text, write_json
 from lit3d.utils.log_images import WANDB, logger_kind
 from lit3d.utils.provenance import provenance
+
+log = logging.getLogger("lit3d")
 
 # torch and Lightning are imported inside train(): a bad command line is answered in about a second
 
@@ -172,6 +175,7 @@ def train(cfg: DictConfig) -> float | None:
     import torch
 
     from lit3d.callbacks.metadata import MetadataCallback
+    from lit3d.callbacks.stop_points import StopPoints
 
     check_training_length(cfg.trainer)
     output_dir = Path(cfg.paths.output_dir)
@@ -192,7 +196,7 @@ def train(cfg: DictConfig) -> float | None:
     atomic_write_text(output_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))  # once every check passed
     loggers = with_csv_logger(build_loggers(cfg, wandb_id), output_dir)  # the CSV log is always on (curves.png)
     callbacks = [instantiate(c) for c in (cfg.get("callbacks") or {}).values() if c is not None]
-    callbacks.append(MetadataCallback(task_meta(cfg), to_plain(cfg.data), wandb_id))
+    callbacks += [MetadataCallback(task_meta(cfg), to_plain(cfg.data), wandb_id), StopPoints()]  # StopPoints: the test's
     trainer: pl.Trainer = instantiate(cfg.trainer, callbacks=callbacks, logger=loggers or False,
                                       **checkpoint_plugins(cfg.trainer))
     for lg in loggers:
@@ -205,9 +209,11 @@ def train(cfg: DictConfig) -> float | None:
                     "provenance": provenance(datamodule)}  # lit3d version, git commit, data manifest hash
         if cfg.get("test_after_fit", True):
             best = trainer.checkpoint_callback.best_model_path if trainer.checkpoint_callback else ""
-            run_evaluation(trainer, task, datamodule, cfg.task_info.name, output_dir, ckpt_path=best or None,
-                           n_figures=int(cfg.get("n_figures", 0)),
-                           extra=run_info)
+            with testing_after_fit(output_dir, best or str(output_dir / "checkpoints" / "last.ckpt")):
+                log.info("testing %s", best or "the last weights")
+                run_evaluation(trainer, task, datamodule, cfg.task_info.name, output_dir, ckpt_path=best or None,
+                               n_figures=int(cfg.get("n_figures", 0)),
+                               extra=run_info)
         elif trainer.is_global_zero:
             write_json(output_dir / "metrics.json", run_info)
         if trainer.is_global_zero:
