@@ -212,6 +212,24 @@ def test_model_split_keeps_each_model_in_one_group_and_ignores_order():
     assert fallback == {}
 
 
+def test_procedural_share_mixes_only_training_items_by_a_fixed_draw():
+    models = [CadModel(f"chair/{i}", "chair", ("x",)) for i in range(20)]
+    items = [{"category": "chair", "split": s, "shape_index": i, "name": f"{s}{i}", "file": f"{s}/{i}.npz"}
+             for s in ("train", "val", "test_same") for i in range(400)]
+    fractions = {"train": 0.7, "val": 0.1, "test": 0.2}
+    mixed, _ = attach_models(items, models, ("chair",), fractions, 3, 8, procedural_share=0.25)
+    procedural = [it for it in mixed if it["shape_source"] == "procedural"]
+    assert {it["split"] for it in procedural} == {"train"}  # validation and test stay real
+    assert 80 <= len(procedural) <= 120  # a quarter of the 400 training items (binomial sd 8.7)
+    again, _ = attach_models(items[::-1], models, ("chair",), fractions, 3, 8, procedural_share=0.25)
+    assert sorted(it["file"] for it in again if it["shape_source"] == "procedural") == \
+        sorted(it["file"] for it in procedural)  # fixed by the item and the seed, not by the order
+    plain, _ = attach_models(items, models, ("chair",), fractions, 3, 8)
+    assert all(it["shape_source"] == "model" for it in plain)
+    assert all(it["shape_source"] == "procedural" for it in attach_models(items, models, ("chair",), fractions, 3, 8,
+                                                                           procedural_share=1.0)[0] if it["split"] == "train")
+
+
 def test_datamodule_on_a_mesh_folder(tmp_path):
     write_chairs(tmp_path / "models", 10)
     (tmp_path / "models" / "chair" / "notes.txt").write_text("ignored")

@@ -76,6 +76,8 @@ class CompletionDataModule(pl.LightningDataModule):
         raw_res: recgan: grids are centre-padded/cropped to raw_res^3 (null: the release's 256,
             ``RECGAN_RAW_RES``).
         skip_bad: recgan: skip bad files with a warning (count in describe()) instead of raising.
+        procedural_share: mesh sources: that share of the training items (drawn per item, fixed by the seed)
+            made from procedural shapes instead of real models (a mix); validation and test stay real.
         compress: zlib-compress the packed bits (smaller; measured about as fast to load).
         render_factor: synth depth image size = render_factor * target_res.
         sensor: synth: camera, handedness and noise of the 2.5D input (:mod:`lit3d.sensing.sensor`):
@@ -93,7 +95,8 @@ class CompletionDataModule(pl.LightningDataModule):
                  pin_memory: bool = False, views_per_shape: int = 4, unseen_view_set: str = "same",
                  val_fraction: float = 0.1, raw_res: int | None = None, compress: bool = True, render_factor: int = 2,
                  progress: bool = True, sensor: str | dict = "ortho", model_split: dict | None = None,
-                 min_models: int = 8, up_axis: str = "y", prepare_workers: int = 0):
+                 min_models: int = 8, up_axis: str = "y", prepare_workers: int = 0,
+                 procedural_share: float = 0.0):
         super().__init__()
         if source not in DATA_SOURCES:
             raise DataConfigError(f"data.source={source!r}: expected one of {', '.join(DATA_SOURCES)}")
@@ -124,6 +127,9 @@ class CompletionDataModule(pl.LightningDataModule):
         if set(self.model_split) != set(DEFAULT_MODEL_SPLIT) or min(self.model_split.values()) < 0:
             raise DataConfigError(f"data.model_split={dict(model_split)}: expected fractions >= 0 for train, val and test")
         self.min_models, self.up_axis = int(min_models), str(up_axis)
+        self.procedural_share = float(procedural_share)
+        if not 0.0 <= self.procedural_share <= 1.0:
+            raise DataConfigError(f"data.procedural_share={procedural_share}: expected a share in [0, 1]")
         self.prepare_workers = int(prepare_workers)
         self.manifest: dict | None = None
         self.datasets: dict[str, VoxelPairDataset] = {}
@@ -143,6 +149,8 @@ class CompletionDataModule(pl.LightningDataModule):
         if self.source in MESH_SOURCES:
             cfg.update(root=str(self.root.resolve()) if self.root else None, model_split=self.model_split,
                        min_models=self.min_models, up_axis=self.up_axis, skip_bad=self.skip_bad)
+            if self.procedural_share:  # only when mixing: the caches of unmixed configs keep their hash
+                cfg.update(procedural_share=self.procedural_share)
             if self.source == "installed":  # another package unpacked later makes another cache
                 cfg.update(catalogues=present_packages(self.root))
         else:
@@ -175,7 +183,8 @@ class CompletionDataModule(pl.LightningDataModule):
         if self.source == "synth":
             items, extra = prepare_synth_items(builder, self.spec, self.progress)
         elif self.source in MESH_SOURCES:
-            mesh = MeshSpec(self.source, self.root, self.model_split, self.min_models, self.up_axis)
+            mesh = MeshSpec(self.source, self.root, self.model_split, self.min_models, self.up_axis,
+                            self.procedural_share)
             items, extra = prepare_mesh_items(builder, self.spec, mesh, self.skip_bad, self.prepare_workers,
                                               self.progress)
         else:

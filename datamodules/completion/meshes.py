@@ -23,7 +23,7 @@ from pathlib import Path
 
 from tqdm.auto import tqdm
 
-from datamodules.cache import CacheBuilder, DataError
+from datamodules.cache import CacheBuilder, DataError, stable_int_seed
 from datamodules.completion.cad_models import CadModel, index_mesh_folder, index_shapenet, split_models
 from datamodules.completion.catalogues import index_installed
 from datamodules.completion.mesh_shapes import mesh_shape
@@ -43,13 +43,16 @@ SPLIT_GROUP = {"train": "train", "val": "val", "test_same": "test", "test_cross"
 class MeshSpec:
     """The settings of a mesh source: ``source`` (meshes | shapenet | sweethome3d), ``root`` (None:
     the installed Sweet Home 3D catalogues), ``model_split`` (train/val/test fractions of a seen
-    category's models), ``min_models`` (fewer: the category keeps procedural shapes) and ``up_axis``."""
+    category's models), ``min_models`` (fewer: the category keeps procedural shapes), ``up_axis`` and
+    ``procedural_share`` (that share of the training items, chosen by item, made from procedural shapes
+    instead: a mix of real and procedural training data; validation and test items stay real)."""
 
     source: str
     root: Path | None
     model_split: Mapping[str, float]
     min_models: int
     up_axis: str
+    procedural_share: float = 0.0  # share of the training items drawn from procedural shapes (a mix)
 
 
 def index_models(source: str, root: str | Path | None) -> tuple[list[CadModel], list[dict]]:
@@ -64,9 +67,15 @@ def index_models(source: str, root: str | Path | None) -> tuple[list[CadModel], 
     return (index_mesh_folder if source == "meshes" else index_shapenet)(root)
 
 
+def procedural_draw(item: dict, seed: int) -> float:
+    """A number in [0, 1) fixed by the item's file name and the data seed (the mix's draw per item)."""
+    return stable_int_seed(seed, "procedural_share", item["file"]) / 2**31
+
+
 def attach_models(items: list[dict], models: list[CadModel], seen: tuple[str, ...], fractions: dict[str, float],
-                  seed: int, min_models: int) -> tuple[list[dict], dict[str, str]]:
-    """Give every planned item of a category with enough models a ``model_id``.
+                  seed: int, min_models: int, procedural_share: float = 0.0) -> tuple[list[dict], dict[str, str]]:
+    """Give every planned item of a category with enough models a ``model_id`` (training items whose
+    :func:`procedural_draw` is below ``procedural_share`` stay procedural).
 
     Returns the items (those of fallback categories unchanged: procedural) and
     ``{category: "procedural (N real models < min_models)"}`` for the categories that fell back.
@@ -88,7 +97,8 @@ def attach_models(items: list[dict], models: list[CadModel], seen: tuple[str, ..
     out = []
     for it in items:
         cat = it["category"]
-        if cat in fallback:
+        if cat in fallback or (procedural_share > 0 and it["split"] == "train"
+                                and procedural_draw(it, seed) < procedural_share):
             out.append({**it, "shape_source": "procedural"})
             continue
         group = SPLIT_GROUP.get(it["split"], "unseen")
@@ -167,7 +177,7 @@ def prepare_mesh_items(builder: CacheBuilder, spec: ItemSpec, mesh: MeshSpec, sk
     """
     models, dropped = index_models(mesh.source, mesh.root)
     items, fallback = attach_models(spec.items(), models, spec.categories, dict(mesh.model_split), spec.seed,
-                                    mesh.min_models)
+                                    mesh.min_models, mesh.procedural_share)
     for cat, why in fallback.items():
         log.warning("data.source=%s: %s keeps %s", mesh.source, cat, why)
     by_id = {m.model_id: m for m in models}
