@@ -144,3 +144,23 @@ def test_a_second_signal_stops_at_once_and_later_ones_are_ignored():
     finally:
         for s, handler in before.items():
             signal.signal(s, handler)
+
+
+def test_a_stopped_canonical_preparation_counts_its_subjects(tmp_path, monkeypatch):
+    """The canonical data's stop line says "N of M items done" like the completion data's (M: the subjects)."""
+    from datamodules.canonical import CanonicalDataModule
+
+    dm = CanonicalDataModule(str(tmp_path / "c"), image_size=32, n_subjects=3, n_poses=2, mesh_resolution=16, n_folds=2)
+    render, calls = CanonicalDataModule._render_subject, []
+
+    def render_then_ctrl_c(self, subject):
+        calls.append(subject)
+        if len(calls) == 2:
+            signal.raise_signal(signal.SIGINT)  # a Ctrl-C while the second subject is rendered
+        return render(self, subject)
+
+    monkeypatch.setattr(CanonicalDataModule, "_render_subject", render_then_ctrl_c)
+    with on_signals(), pytest.raises(StopRequested) as info:
+        dm.prepare_data()
+    n = len(dm.source.subjects())
+    assert (info.value.done, info.value.total) == (2, n) and n > 2

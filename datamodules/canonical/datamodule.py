@@ -224,6 +224,7 @@ class CanonicalDataModule(pl.LightningDataModule):
     def _render_subjects(self, builder: CacheBuilder) -> tuple[list[dict], dict]:
         """Render the subjects still missing from ``builder``; (items, manifest extra)."""
         subjects = self.source.subjects()
+        builder.total_items = len(subjects)  # named by a Ctrl-C's stop line (each builder.has() is a stop point)
         items, skipped = [], []
         for s in tqdm(subjects, desc="render canonical pairs", leave=False):
             rel = f"{SUBJECTS_DIR}/{s}.npz"
