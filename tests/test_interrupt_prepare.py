@@ -164,3 +164,15 @@ def test_a_stopped_canonical_preparation_counts_its_subjects(tmp_path, monkeypat
         dm.prepare_data()
     n = len(dm.source.subjects())
     assert (info.value.done, info.value.total) == (2, n) and n > 2
+
+
+@pytest.mark.parametrize("delay", [0.0, 1.0], ids=["at-the-run-dir-lock", "a-second-later"])
+def test_ctrl_c_while_lit3d_train_starts_is_one_line(tmp_path, delay):
+    """A Ctrl-C before any stage with its own stop (while the command claims its run dir, starts Hydra, imports
+    Lightning, builds the model): one line and exit 143, no KeyboardInterrupt traceback (before: Python's)."""
+    run, log = tmp_path / "run", tmp_path / "train"
+    proc = _start(["lit3d-train", "experiment=completion_demo", *TINY_NETS, "data.progress=false", "logger=none",
+                   f"paths.data_dir={tmp_path}/data", f"hydra.run.dir={run}"], log)
+    locked = lambda: (run / ".lit3d.lock").exists() and (delay == 0 or __import__("time").sleep(delay) is None)
+    line = stop_line(log, signal_when(proc, locked, log, [signal.SIGINT]))
+    assert line.startswith("error: ") and "stopped by SIGINT (Ctrl-C)" in line, line

@@ -277,9 +277,24 @@ def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None, c
         if _debug_requested():
             raise
         fail(exc, EXIT_USER)
+    except KeyboardInterrupt:
+        stopped_early()
     sys.argv = [sys.argv[0], *args]
-    with run_dir_lock:
-        return hydra_main()
+    try:
+        with run_dir_lock:
+            return hydra_main()
+    except KeyboardInterrupt:  # in Hydra's start, before run_cli
+        stopped_early()
+
+
+def stopped_early() -> None:
+    """A Ctrl-C where no stage of the command handles it (while it starts, imports or builds its model):
+    one line and exit 143 instead of Python's traceback (``--debug``: the traceback). What earlier stages
+    finished stays (prepared data items, checkpoints); nothing is half-written (every write is atomic)."""
+    if _debug_requested():
+        raise KeyboardInterrupt
+    fail(UserError("stopped by SIGINT (Ctrl-C) before the command's work began or between its stages; files it "
+                   "had finished are kept; the same command again starts over"), EXIT_SIGTERM)
 
 
 def exit_code_for(exc: BaseException) -> int | None:
@@ -353,6 +368,8 @@ def run_cli(fn: Callable[[DictConfig], Any], cfg: DictConfig) -> Any:
         log_once_through_hydra()  # imports Lightning: only once the command line is known to be whole
         with hold_output_dir(cfg):  # a multirun job's dir; a no-op where cli_main holds the run dir
             return fn(cfg)
+    except KeyboardInterrupt:  # the stages with their own stop (data, training, evaluation) raise Interrupted
+        stopped_early()
     except Exception as exc:
         code = exit_code_for(exc)
         if code is None or _debug_requested():
