@@ -23,6 +23,9 @@ Stages: ``global_iters`` steps move the rest-pose mean body (translation and sca
 silhouette term: the mean body's A-pose arms stick out of most silhouettes, and a free rotation
 turns the body sideways to hide them; no Anny forward pass, cheap); then ``full_iters`` steps move everything, the learning rates
 decaying linearly to 10% over the second half.
+
+:func:`fit_best`: the same from several starts (:func:`start_variants`: the mean body, turned
+either way, arms lowered), each probed for a few steps; the lowest loss goes on.
 """
 from __future__ import annotations
 
@@ -136,3 +139,42 @@ def fit_body(body: Body, obs: Observation, cfg: FitConfig | None = None, start: 
         p.phenotype.clamp_(0.0, 1.0)
         verts = body.camera_vertices(p).double().numpy()
     return FitResult(p, verts, history, terms, time.perf_counter() - t0, cfg.global_iters + cfg.full_iters)
+
+
+def start_variants(obs: Observation, cfg: FitConfig, yaw: float = 0.4, arms: float = 0.5) -> list[Params]:
+    """Starts for :func:`fit_best`: the mean body (:func:`start_params`), turned by ``-yaw`` and
+    ``+yaw`` radians about the vertical, and with both arms lowered by ``arms`` radians towards the
+    sides (the shoulders' ``y`` angle; the rest pose is an A-pose)."""
+    from lit3d.body.model import DOFS
+
+    base = start_params(obs, cfg)
+    out = [base]
+    for sign in (-1.0, 1.0):
+        p = base.detached()
+        p.rotation[1] = sign * yaw  # camera y is the vertical
+        out.append(p)
+    p = base.detached()
+    for k, d in enumerate(DOFS):
+        if d.bone.startswith("upperarm01") and abs(d.axis[1]) == 1.0:
+            p.theta[k] = arms  # the right side's axis is mirrored: the same angle lowers it too
+    out.append(p)
+    return out
+
+
+def fit_best(body: Body, obs: Observation, cfg: FitConfig | None = None, probe_iters: int = 40,
+             starts: list[Params] | None = None) -> FitResult:
+    """Fit from several starts (:func:`start_variants`): each runs the rigid stage and ``probe_iters``
+    full steps; the one with the lowest loss goes on with the whole schedule of ``cfg`` (a fresh
+    ``full_iters`` from where its probe ended, no second rigid stage). ``seconds`` and
+    ``iterations`` count every start."""
+    cfg = cfg or FitConfig()
+    t0 = time.perf_counter()
+    probe_cfg = FitConfig(**{**cfg.__dict__, "full_iters": probe_iters})
+    probes = [fit_body(body, obs, probe_cfg, s) for s in (starts or start_variants(obs, cfg))]
+    best = min(range(len(probes)), key=lambda i: probes[i].history[-1])
+    res = fit_body(body, obs, FitConfig(**{**cfg.__dict__, "global_iters": 0}), probes[best].params)
+    res.history = probes[best].history + res.history
+    res.terms = {**res.terms, "start": best, "probe_losses": [p.history[-1] for p in probes]}
+    res.seconds = time.perf_counter() - t0
+    res.iterations = sum(p.iterations for p in probes) + res.iterations
+    return res

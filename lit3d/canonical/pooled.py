@@ -17,8 +17,11 @@ canonical depth rows plus the mesh rows, and with ``data.flow_targets=true`` the
 resolution): the non-learned canonical forms ``task.mesh_baselines`` (landmark geodesics,
 :mod:`lit3d.geometry.canonical_forms`), ShapeDNA of the posed full mesh (the intrinsic ceiling,
 :func:`lit3d.geometry.spectral.shape_dna`; no codebook, so sd 0), and chance (random distances,
-seeded by the codebook seed). Writes ``DIR/pooled_results.md`` (thesis table 5.x layout) and
-``DIR/pooled.json`` (every seed's scores).
+seeded by the codebook seed). ``--depth-row ROW=DIR``: one more depth row, the canonical depth images
+that ``lit3d-reconstruct --body`` wrote for inputs named ``<subject>_pose<pose>``
+(``DIR/<subject>_pose<pose>_body_canonical_depth.npy``, :func:`folder_depths`), e.g.
+``--depth-row body_fit=OUT/faust_canonical`` (:mod:`lit3d.body.evaluate` writes that folder for FAUST).
+Writes ``DIR/pooled_results.md`` (thesis table 5.x layout) and ``DIR/pooled.json`` (every seed's scores).
 """
 from __future__ import annotations
 
@@ -81,6 +84,20 @@ def warp_oracle(items: dict) -> tuple[np.ndarray, np.ndarray]:
     mask = vis * m + (1 - vis) * mean_mask
     depth = vis * d + (1 - vis) * mean_depth
     return depth * mask, mask
+
+
+FOLDER_DEPTH_SUFFIX = "_body_canonical_depth.npy"
+
+
+def folder_depths(items: dict, folder, suffix: str = FOLDER_DEPTH_SUFFIX) -> np.ndarray:
+    """``(N, S, S) float32`` depth images (0 = background) of the items (``subject``, ``pose``) read
+    from ``folder/<subject>_pose<pose><suffix>``; raises FileNotFoundError naming the missing ones."""
+    paths = [Path(folder) / f"{s}_pose{int(p)}{suffix}" for s, p in zip(items["subject"], items["pose"])]
+    missing = [p.name for p in paths if not p.is_file()]
+    if missing:
+        raise FileNotFoundError(f"{folder}: {len(missing)} of {len(paths)} depth images missing, e.g. {missing[:3]}")
+    depths = [np.load(p).astype(np.float32) for p in paths]
+    return np.stack([d.reshape(d.shape[-2:]) for d in depths])
 
 
 def _flat(m) -> np.ndarray:
@@ -175,11 +192,12 @@ def summarise(per_seed: dict[str, dict[str, list[float]]]) -> dict[str, dict[str
     return {row: {k: mean_sd(v) for k, v in sc.items()} for row, sc in per_seed.items()}
 
 
-def study(items: dict, datamodule, settings: dict, seeds, rows=None) -> dict:
+def study(items: dict, datamodule, settings: dict, seeds, rows=None, extra_depths: dict | None = None) -> dict:
     """Every row's per-seed scores on the pooled ``items`` (``subject``, ``pose`` and the depth
     images of :func:`lit3d.canonical.heldout.pool`); ``settings``: the task's ``retrieval``,
     ``mask_threshold``, ``chance_trials``, ``mesh_baselines``, ``baseline_max_vertices``,
-    ``baseline_landmarks``, ``baseline_smacof_eps``. ``rows``: restrict to these row names."""
+    ``baseline_landmarks``, ``baseline_smacof_eps``. ``rows``: restrict to these row names.
+    ``extra_depths``: ``{row: (N, S, S) depth}`` more depth rows (mask: depth > 0; :func:`folder_depths`)."""
     cfg = DescriptorConfig(**(settings.get("retrieval") or {}))
     want = (lambda r: rows is None or r in rows)  # noqa: E731
     labels = np.asarray(items["subject"])
@@ -190,6 +208,11 @@ def study(items: dict, datamodule, settings: dict, seeds, rows=None) -> dict:
             features[row] = mesh_features(meshes, cfg)
             seconds[row] = time.perf_counter() - t0
             log.info("%s: descriptor features of %d items, %.0fs", row, len(meshes), seconds[row])
+    for row, d in (extra_depths or {}).items():
+        if want(row):
+            t0 = time.perf_counter()
+            features[row] = mesh_features(depth_meshes(d, (d > 0).astype(np.float32), cfg), cfg)
+            seconds[row] = time.perf_counter() - t0
     pairs = list(zip(items["subject"], items["pose"]))
     if len(set(pairs)) != len(pairs):  # several views per pose: mesh rows would rank other items
         log.warning("several views per pose: mesh rows skipped (they score one item per subject x pose)")
@@ -227,11 +250,11 @@ def build_datamodule(data: dict):
 
 
 def run(run_dirs, seeds, out_dir, overrides=(), rows=None, strict: bool = True, mesh_baselines=None,
-        fold_test: bool = False) -> Path:
+        fold_test: bool = False, depth_rows: dict | None = None) -> Path:
     """Pool (or, without run dirs, take every held-out item of the composed config; ``fold_test``: only
     the test split of its ``data.fold``), score, write ``pooled_results.md`` and ``pooled.json`` into
     ``out_dir``; returns the .md path. ``mesh_baselines``: the canonical-form rows (default: the task's
-    ``mesh_baselines``)."""
+    ``mesh_baselines``); ``depth_rows``: ``{row: folder}`` more depth rows (:func:`folder_depths`)."""
     from omegaconf import OmegaConf
 
     t0 = time.perf_counter()
@@ -257,7 +280,10 @@ def run(run_dirs, seeds, out_dir, overrides=(), rows=None, strict: bool = True, 
         meta = {"overrides": list(overrides)}
     if mesh_baselines is not None:
         settings["mesh_baselines"] = list(mesh_baselines)
-    result = study(items, dm, settings, seeds, rows)
+    extra = {row: folder_depths(items, folder) for row, folder in (depth_rows or {}).items()}
+    if extra:
+        meta["depth_rows"] = {row: str(folder) for row, folder in depth_rows.items()}
+    result = study(items, dm, settings, seeds, rows, extra)
     result.update(meta, data={k: data.get(k) for k in ("source", "root", "image_size", "azimuths", "view_mode",
                                                        "split", "n_folds", "seed")},
                   settings=settings, wall_seconds=time.perf_counter() - t0)
@@ -313,12 +339,17 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--allow-partial", action="store_true", help="score folds that do not cover every item")
     parser.add_argument("--fold-test", action="store_true",
                         help="without run dirs: only the test split of data.fold (not every fold's held-out items)")
+    parser.add_argument("--depth-row", action="append", default=[], metavar="ROW=DIR",
+                        help="one more depth row: DIR/<subject>_pose<pose>_body_canonical_depth.npy per item")
     args = parser.parse_args(argv)
+    depth_rows = dict(r.split("=", 1) for r in args.depth_row if "=" in r)
+    if len(depth_rows) != len(args.depth_row):
+        parser.error("--depth-row: expected ROW=DIR")
     if not args.runs and not overrides:
         parser.error("give run dirs, or Hydra overrides after -- for the non-learned rows")
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     print(run(args.runs, args.seeds, args.out, overrides, args.rows, strict=not args.allow_partial,
-              mesh_baselines=args.mesh_baselines, fold_test=args.fold_test).read_text())
+              mesh_baselines=args.mesh_baselines, fold_test=args.fold_test, depth_rows=depth_rows).read_text())
 
 
 if __name__ == "__main__":
