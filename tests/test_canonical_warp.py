@@ -54,7 +54,8 @@ def test_zero_flow_reproduces_the_posed_input_exactly():
 
 
 def test_untrained_warp_net_returns_its_input(compose_cfg):
-    net_cfg = OmegaConf.to_container(compose_cfg(["experiment=canonical_tiny", "task.net.head=warp"]).task.net)
+    net_cfg = OmegaConf.to_container(compose_cfg(["experiment=canonical_tiny", "task.net.head=warp"]).task.net,
+                                     resolve=True)
     net = build_canonical_net({"kind": "canonical", **net_cfg})
     assert isinstance(net.head, WarpHead)
     depth = torch.rand(2, 1, 48, 48)

@@ -74,7 +74,7 @@ def _experiments(prefix: str) -> list[str]:
 @pytest.mark.parametrize("experiment", _experiments("canonical"))
 def test_canonical_net_reads_the_data_image_size(compose_cfg, experiment):
     cfg = compose_cfg([f"experiment={experiment}"])
-    assert OmegaConf.to_container(cfg.task.net)["image_size"] == "${data.image_size}"
+    assert OmegaConf.to_container(cfg.task.net)["image_size"] == "${oc.select:data.image_size,null}"
     assert cfg.task.net.image_size == cfg.data.image_size
 
 
@@ -95,3 +95,4 @@ def test_exact_quotient_refuses_a_remainder():
     assert exact_quotient(256, 4) == 64
     with pytest.raises(ValueError, match="63 is not a whole multiple of 4"):
         exact_quotient(63, 4)
+    assert exact_quotient(None, 4) is None  # a config without data (lit3d-eval task=NAME)

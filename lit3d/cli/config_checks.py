@@ -133,7 +133,7 @@ RULES: tuple[Rule, ...] = (
     Rule("task.nets.classifier",               "bool"),
     Rule("task.nets.critic_sigmoid",           "bool"),
     Rule("task.net.*_channels.*",              "int",     ">= 1"),
-    Rule("task.net.image_size",                "int",     ">= 8"),
+    Rule("task.net.image_size",                "int?",    ">= 8"),  # null: no data in the config (lit3d-eval task=NAME)
     Rule("task.net.dropout",                   "number",  "[0, 1)"),
     Rule("task.net.batch_norm",                "bool"),
     Rule("task.net.warp_normalise_depth",      "bool"),

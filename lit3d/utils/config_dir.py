@@ -15,13 +15,16 @@ def config_dir() -> Path:
     return package / "conf"
 
 
-def exact_quotient(numerator, denominator) -> int:
-    """``${lit3d.div:a,b}`` in the configs: ``a / b`` for integers that divide exactly (e.g. the completion
-    input grid ``${lit3d.div:${data.target_res},${data.input_factor}}``), so a size written once in the
-    data config is read by the nets instead of being repeated."""
+def exact_quotient(numerator, denominator) -> int | None:
+    """``${exact_div:a,b}`` in the configs: ``a / b`` for integers that divide exactly (e.g. the completion
+    input grid from ``data.target_res`` and ``data.input_factor``), so a size written once in the data
+    config is read by the nets instead of being repeated; None when either is null (a config without data,
+    e.g. ``lit3d-eval task=NAME``, whose net sizes come from the checkpoint)."""
+    if numerator is None or denominator is None:
+        return None
     a, b = int(numerator), int(denominator)
     if b <= 0 or a % b:
-        raise ValueError(f"lit3d.div: {a} is not a whole multiple of {b}")
+        raise ValueError(f"exact_div: {a} is not a whole multiple of {b}")
     return a // b
 
 
@@ -30,8 +33,8 @@ def register_resolvers() -> None:
     which every entry point does before composing a config)."""
     from omegaconf import OmegaConf
 
-    if not OmegaConf.has_resolver("lit3d.div"):
-        OmegaConf.register_new_resolver("lit3d.div", exact_quotient)
+    if not OmegaConf.has_resolver("exact_div"):
+        OmegaConf.register_new_resolver("exact_div", exact_quotient)
 
 
 register_resolvers()
