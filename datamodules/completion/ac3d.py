@@ -33,13 +33,13 @@ the line and the problem (truncated, bad number, vertex index out of range, unkn
 """
 from __future__ import annotations
 
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from datamodules.cache import DataError
+from datamodules.completion.archives import source_bytes
 
 SURF_POLYGON, SURF_CLOSED_LINE, SURF_LINE, SURF_STRIP = 0, 1, 2, 4
 _SKIPPED_KEYS = {"texture", "texrep", "texoff", "crease", "url", "hidden", "locked", "folded", "subdiv", "shader"}
@@ -202,19 +202,7 @@ def _read_object(lines: _Lines, parent: np.ndarray, parent_path: str, depth: int
 
 def _text(source: str | Path | bytes, where: str | None) -> tuple[str, str]:
     """(text, name for messages) of a path, an ``archive::member`` or bytes."""
-    if isinstance(source, bytes):
-        data, where = source, where or "<bytes>"
-    else:
-        where = where or str(source)
-        try:
-            if "::" in str(source):
-                archive, member = str(source).split("::", 1)
-                with zipfile.ZipFile(archive) as z:
-                    data = z.read(member)
-            else:
-                data = Path(source).read_bytes()
-        except (OSError, KeyError, zipfile.BadZipFile) as exc:
-            raise DataError(f"{where}: cannot read ({type(exc).__name__}: {exc})") from exc
+    data, where = source_bytes(source, where)
     return data.decode("latin-1"), where
 
 

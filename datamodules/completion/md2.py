@@ -21,12 +21,12 @@ the problem (wrong magic or version, counts or offsets outside the file, vertex 
 from __future__ import annotations
 
 import struct
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
 from datamodules.cache import DataError
+from datamodules.completion.archives import source_bytes
 
 MAGIC, VERSION = b"IDP2", 8
 HEADER = struct.Struct("<4s16i")
@@ -76,17 +76,5 @@ def read_md2(source: str | Path | bytes, where: str | None = None):
     """
     import trimesh  # noqa: PLC0415
 
-    if isinstance(source, bytes):
-        data, where = source, where or "<bytes>"
-    else:
-        where = where or str(source)
-        try:
-            if "::" in str(source):
-                archive, member = str(source).split("::", 1)
-                with zipfile.ZipFile(archive) as z:
-                    data = z.read(member)
-            else:
-                data = Path(source).read_bytes()
-        except (OSError, KeyError, zipfile.BadZipFile) as exc:
-            raise DataError(f"{where}: cannot read ({type(exc).__name__}: {exc})") from exc
+    data, where = source_bytes(source, where)
     return trimesh.Trimesh(*read_md2_arrays(data, where), process=False)
