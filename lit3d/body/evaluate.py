@@ -43,6 +43,14 @@ from pathlib import Path
 
 import numpy as np
 
+from datamodules.canonical.bodies import sample_phenotype, sample_pose
+from datamodules.canonical.posesets import index_faust
+from lit3d.body.fit import FitConfig, fit_best, fit_body
+from lit3d.body.model import PHENOTYPES, Body
+from lit3d.body.points import observe
+from lit3d.body.results import fit_outputs
+from lit3d.metrics.mesh import surface_samples
+from lit3d.render.camera import render_pinhole_depth
 from lit3d.sensing.sensor import RAW_RES, RECGAN_FOV_DEG, SENSORS, hole_mask
 
 WIDTH, HEIGHT = 320, 240
@@ -76,7 +84,6 @@ def chamfer_fscore(pred: np.ndarray, truth: np.ndarray, thresholds) -> dict:
 
 def surface_points(verts: np.ndarray, faces: np.ndarray, n: int, seed: int = 0) -> np.ndarray:
     """``(n, 3)`` points uniform by area on the mesh (seeded)."""
-    from lit3d.metrics.mesh import surface_samples
     import trimesh
 
     return surface_samples(trimesh.Trimesh(verts, faces, process=False), n, seed=seed, normalise=False)
@@ -86,7 +93,6 @@ def phenotype_error(fitted, truth: dict) -> dict[str, float]:
     """``{label: |fitted - truth|}`` over ``truth``'s labels; ``fitted``: a dict, or an array in
     :data:`lit3d.body.model.PHENOTYPES` order."""
     if not isinstance(fitted, dict):
-        from lit3d.body.model import PHENOTYPES
 
         fitted = dict(zip(PHENOTYPES, np.asarray(fitted, float).tolist()))
     return {k: abs(float(fitted[k]) - float(v)) for k, v in truth.items()}
@@ -110,7 +116,6 @@ class Camera:
 
 def render(verts_cam: np.ndarray, faces: np.ndarray, cam: Camera, width: int = WIDTH, height: int = HEIGHT) -> np.ndarray:
     """``(H, W) float32`` z-depth (metres, 0 = background) of a camera-frame mesh."""
-    from lit3d.render.camera import render_pinhole_depth
 
     depth = render_pinhole_depth(np.asarray(verts_cam, np.float64) * FLIP, faces, np.eye(4), width, height,
                                  cam.fx, cam.fy, cam.cx + 0.5, cam.cy + 0.5, znear=0.05, zfar=100.0)
@@ -137,8 +142,6 @@ def sensed_depth(verts_cam: np.ndarray, faces: np.ndarray, cam: Camera, rng: np.
 # ------------------------------------------------------------------ fits
 def fit(body, depth: np.ndarray, cam: Camera, label: str, multi_start: bool = False) -> dict:
     """The fit and the mean-body baseline of one depth image, with CPU and wall seconds."""
-    from lit3d.body.fit import FitConfig, fit_best, fit_body
-    from lit3d.body.points import observe
 
     obs = observe(depth, cam, label=label)
     mean = fit_body(body, obs, FitConfig(full_iters=0))
@@ -150,7 +153,6 @@ def fit(body, depth: np.ndarray, cam: Camera, label: str, multi_start: bool = Fa
 def anny_items(body, n: int, body_seed: int, pose_seed: int, cam: Camera, sensor: str, say,
                rows: list | None = None, multi_start: bool = False) -> list[dict]:
     """Fit ``n`` held-out Anny people (module doc); one dict of measures per person, appended to ``rows``."""
-    from datamodules.canonical.bodies import sample_phenotype, sample_pose
 
     rows = [] if rows is None else rows
     for i in range(n):
@@ -176,7 +178,6 @@ def faust_meshes(root: Path) -> list[tuple[str, np.ndarray, np.ndarray]]:
     """``[(stem, camera-frame verts, faces)]`` of every ``subject<S>_pose<P>`` mesh (module doc)."""
     import trimesh
 
-    from datamodules.canonical.posesets import index_faust
 
     index = index_faust(root)
     raw = {k: trimesh.load(p, process=False, force="mesh") for k, p in sorted(index.items(), key=lambda kv: (kv[0][1], kv[0][0]))}
@@ -195,7 +196,6 @@ def faust_items(body, root: Path, cam: Camera, samples: int, canon_dir: Path | N
     """Fit every FAUST mesh seen from the front (module doc), pose by pose (every subject of pose 0,
     then of pose 1...), from the ``first``-th, at most ``limit`` (0: all); one dict of measures per mesh,
     appended to ``rows``."""
-    from lit3d.body.results import fit_outputs
 
     taus = (0.01 * FAUST_HEIGHT, 0.02 * FAUST_HEIGHT)
     rows = [] if rows is None else rows
@@ -235,7 +235,6 @@ def _cell(s: dict, fmt: str = ".0f") -> str:
 
 def summarise(anny: list[dict], faust: list[dict]) -> dict:
     """Spreads of every measure per method."""
-    from lit3d.body.model import PHENOTYPES
 
     out: dict = {}
     if anny:
@@ -254,7 +253,6 @@ def summarise(anny: list[dict], faust: list[dict]) -> dict:
 
 def markdown(summary: dict, meta: dict) -> str:
     """The tables of ``summary`` (medians with [quartiles])."""
-    from lit3d.body.model import PHENOTYPES
 
     lines = [f"# Anny body fit evaluation\n\n`{meta['command']}`\n"]
     if "anny" in summary:
@@ -306,7 +304,6 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--threads", type=int, default=1, help="torch CPU threads")
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
-    from lit3d.body.model import Body
 
     def say(line):
         print(line, file=sys.stderr, flush=True)

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from lit3d.body.model import Body, Params
+from lit3d.body.model import DOFS, Body, Params
 from lit3d.body.points import Observation
 from lit3d.body.surface import point_to_surface, silhouette_excess
 
@@ -145,8 +145,6 @@ def start_variants(obs: Observation, cfg: FitConfig, yaw: float = 0.4, arms: flo
     """Starts for :func:`fit_best`: the mean body (:func:`start_params`), turned by ``-yaw`` and
     ``+yaw`` radians about the vertical, and with both arms lowered by ``arms`` radians towards the
     sides (the shoulders' ``y`` angle; the rest pose is an A-pose)."""
-    from lit3d.body.model import DOFS
-
     base = start_params(obs, cfg)
     out = [base]
     for sign in (-1.0, 1.0):
