@@ -50,6 +50,8 @@ from lit3d.body.model import PHENOTYPES, Body
 from lit3d.body.points import observe
 from lit3d.body.results import fit_outputs
 from lit3d.metrics.mesh import surface_samples
+from lit3d.metrics.pointcloud import nearest
+from lit3d.metrics.surface import fscores
 from lit3d.render.camera import render_pinhole_depth
 from lit3d.sensing.sensor import RAW_RES, RECGAN_FOV_DEG, SENSORS, hole_mask
 
@@ -69,16 +71,11 @@ def chamfer_fscore(pred: np.ndarray, truth: np.ndarray, thresholds) -> dict:
     """Point sets ``pred`` ``(N, 3)`` and ``truth`` ``(M, 3)``: ``chamfer`` = (mean pred->truth +
     mean truth->pred nearest distance) / 2, both directed means, and per threshold ``t``
     ``f@t`` = 2PR / (P + R) with P the share of pred within ``t`` of truth, R of truth within ``t`` of pred."""
-    from scipy.spatial import cKDTree
-
-    d_pt = cKDTree(truth).query(pred)[0]
-    d_tp = cKDTree(pred).query(truth)[0]
+    d_pt, d_tp = nearest(pred, truth)[0], nearest(truth, pred)[0]
     out = {"chamfer": float((d_pt.mean() + d_tp.mean()) / 2), "pred_to_truth": float(d_pt.mean()),
            "truth_to_pred": float(d_tp.mean())}
-    for t in thresholds:
-        p, r = float((d_pt <= t).mean()), float((d_tp <= t).mean())
-        out[f"f@{t:g}"] = 2 * p * r / (p + r) if p + r > 0 else 0.0
-        out[f"precision@{t:g}"], out[f"recall@{t:g}"] = p, r
+    for t, p, r, f in zip(thresholds, *fscores(d_pt, d_tp, np.asarray(thresholds, dtype=np.float64))):
+        out[f"f@{t:g}"], out[f"precision@{t:g}"], out[f"recall@{t:g}"] = float(f), float(p), float(r)
     return out
 
 

@@ -132,6 +132,16 @@ def sample_grids(grids: torch.Tensor | np.ndarray, n: int, seed: int) -> list[Su
     return out
 
 
+def fscores(d_pt: np.ndarray, d_tp: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(precision, recall, fscore)``, each ``(T,)``, at distance thresholds ``tau (T,)`` from the nearest
+    distances ``d_pt`` (each predicted point to the target) and ``d_tp`` (the reverse); F 0 where P + R = 0."""
+    tau = np.asarray(tau, dtype=np.float64)
+    precision = (np.asarray(d_pt)[:, None] <= tau).mean(0)
+    recall = (np.asarray(d_tp)[:, None] <= tau).mean(0)
+    denom = precision + recall
+    return precision, recall, np.where(denom > 0, 2 * precision * recall / np.where(denom > 0, denom, 1), 0.0)
+
+
 def surface_scores(pred: SurfaceSample | None, target: SurfaceSample, fractions: Sequence[float]) -> dict:
     """Chamfer-L1, F-scores and normal consistency of one prediction against its target (module doc).
 
@@ -146,11 +156,7 @@ def surface_scores(pred: SurfaceSample | None, target: SurfaceSample, fractions:
     # one thread per query: the queries are short, and thread start-up dominated on a busy 2-core machine
     d_pt, i_pt = nearest(pred.points, target.points, target.tree(), workers=1)
     d_tp, i_tp = nearest(target.points, pred.points, pred.tree(), workers=1)
-    tau = np.asarray(fractions, dtype=np.float64) * target.diagonal
-    precision = (d_pt[:, None] <= tau).mean(0)
-    recall = (d_tp[:, None] <= tau).mean(0)
-    denom = precision + recall
-    fscore = np.where(denom > 0, 2 * precision * recall / np.where(denom > 0, denom, 1), 0.0)
+    precision, recall, fscore = fscores(d_pt, d_tp, np.asarray(fractions, dtype=np.float64) * target.diagonal)
     nc_pt = np.abs(np.einsum("ij,ij->i", pred.normals, target.normals[i_pt])).mean()
     nc_tp = np.abs(np.einsum("ij,ij->i", target.normals, pred.normals[i_tp])).mean()
     return {"chamfer_l1": float(0.5 * (d_pt.mean() + d_tp.mean())), "fscore": fscore, "precision": precision,
