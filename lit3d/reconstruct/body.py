@@ -28,7 +28,7 @@ from lit3d.body.points import observe
 from lit3d.body.results import BodyOutputs, fit_outputs
 from lit3d.reconstruct.depth_io import find_mask, read_depth_info, read_mask
 from lit3d.reconstruct.figure import LABEL_PX, mesh_panels, points_panels
-from lit3d.reconstruct.outputs import finished_set, output_files, request_key, write_outputs
+from lit3d.reconstruct.outputs import finished_set, mesh_bytes, output_files, request_key, write_outputs
 from lit3d.reconstruct.pipeline import Options, cut_object
 from lit3d.utils.figures import font
 
@@ -64,8 +64,7 @@ def is_finished(args, name: str, key: str) -> bool:
 def _mesh_bytes(verts: np.ndarray, faces: np.ndarray, fmt: str) -> bytes:
     import trimesh
 
-    data = trimesh.Trimesh(verts, faces, process=False).export(file_type=fmt)
-    return data.encode("utf-8") if isinstance(data, str) else bytes(data)
+    return mesh_bytes(trimesh.Trimesh(verts, faces, process=False), fmt)
 
 
 def _npy_bytes(arr: np.ndarray) -> bytes:
