@@ -19,6 +19,7 @@ import trimesh
 
 from datamodules.completion.cad_models import load_model_mesh
 from datamodules.completion.meshes import index_models
+from lit3d.geometry.normalise import normalise_vertices
 from lit3d.render.shaded import shaded_views
 from lit3d.utils.figures import labelled_grid
 
@@ -27,9 +28,7 @@ VIEWS = {"front": (0.0, 0.0, 1.0), "side": (1.0, 0.0, 0.0), "three-quarter": (0.
 
 def unit_box(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     """The mesh centred and scaled so that its longest side spans 1.6 (inside the renders' +-0.9 extent)."""
-    v = np.asarray(mesh.vertices, float)
-    lo, hi = v.min(0), v.max(0)
-    return trimesh.Trimesh((v - (lo + hi) / 2) / max(float((hi - lo).max()), 1e-9) * 1.6, mesh.faces, process=False)
+    return trimesh.Trimesh(normalise_vertices(mesh.vertices, None)[0] * 1.6, mesh.faces, process=False)
 
 
 def wrapped(text: str, width: int = 44) -> list[str]:

@@ -26,6 +26,7 @@ from lit3d.body.fit import fit_body
 from lit3d.body.model import Body  # noqa: F401 (re-exported for lit3d.cli.reconstruct)
 from lit3d.body.points import observe
 from lit3d.body.results import BodyOutputs, fit_outputs
+from lit3d.geometry.normalise import bounding_frame
 from lit3d.reconstruct.depth_io import find_mask, read_depth_info, read_mask
 from lit3d.reconstruct.figure import LABEL_PX, mesh_panels, points_panels
 from lit3d.reconstruct.outputs import finished_set, mesh_bytes, output_files, request_key, write_outputs
@@ -77,8 +78,7 @@ def _normalised(verts_gl: np.ndarray, faces: np.ndarray):
     """A trimesh of GL-frame ``verts`` centred on its bounding box, longest side 1; centre, scale."""
     import trimesh
 
-    lo, hi = verts_gl.min(0), verts_gl.max(0)
-    centre, scale = (lo + hi) / 2, 1.0 / float(max(hi - lo))
+    centre, scale = bounding_frame(verts_gl)
     return trimesh.Trimesh((verts_gl - centre) * scale, faces, process=False), centre, scale
 
 
