@@ -10,7 +10,7 @@ from datamodules.canonical import CanonicalDataModule
 from omegaconf import OmegaConf
 
 from lit3d.canonical import evaluator
-from lit3d.canonical.module import CanonicalTask
+from lit3d.canonical.module import CanonicalTask, validation_retrieval
 from lit3d.cli.common import build_datamodule, build_task
 
 
@@ -41,7 +41,8 @@ def _train(tmp_path, net, epochs, retrieval=None, size=48, n=9, mesh_resolution=
                     enable_model_summary=False, accelerator="cpu", num_sanity_val_steps=0,
                     check_val_every_n_epoch=epochs, deterministic=True)
     tr.fit(task, dm)
-    res = tr.test(task, dm, verbose=False)[0]
+    validation = {k: float(v) for k, v in tr.callback_metrics.items() if k.startswith("val/")}  # test() clears them
+    res = tr.test(task, dm, verbose=False)[0] | validation
     res.update(evaluator.protocol(task, dm).metrics)
     return task, dm, res
 
@@ -57,6 +58,8 @@ def test_short_training_beats_posed_input_on_held_out_subjects_and_poses(tmp_pat
     for src in ("model", "input", "target", "chance"):
         assert 0 <= res[f"test/retrieval/{src}/dcg"] <= 1
     assert task.loss_alpha == 1000 and task.loss_beta == 100  # last phase reached
+    for k in ("retrieval_nn", "retrieval_ft", "retrieval_nn_input", "retrieval_ft_input"):  # validation subjects
+        assert 0 <= res[f"val/{k}"] <= 1, (k, res)  # retrieved by mask IoU, every validation epoch
     print(f"train+test {time.time() - t0:.0f}s: {res}")
 
 
@@ -196,3 +199,17 @@ def test_warp_terms_join_the_loss_with_their_weights(tiny_net):
     assert float(offset_tv) > 0
     got = float(with_offset.training_step(batch, 0).detach())
     assert got == pytest.approx(float(expected + 5.0 * offset_tv), rel=1e-5)
+
+
+def test_validation_retrieval_finds_each_subject_by_its_mask():
+    """Three subjects, two items each: predictions that keep each subject's own width are retrieved
+    perfectly; posed inputs that are all one body are retrieved at the tie level."""
+    pred = torch.zeros(6, 1, 16, 16, dtype=torch.bool)
+    for i, width in enumerate((2, 2, 5, 5, 9, 9)):
+        pred[i, 0, 2:14, 3:3 + width] = True
+    same = torch.zeros_like(pred)
+    same[:, 0, 2:14, 3:8] = True
+    out = validation_retrieval({"pred_mask": pred, "mask": same, "subject_idx": torch.tensor([0, 0, 1, 1, 2, 2])})
+    assert out["retrieval_nn"] == out["retrieval_ft"] == 1.0
+    assert out["retrieval_nn_input"] == pytest.approx(0.2)  # 1 of 5 tied others is the subject's
+    assert validation_retrieval({"pred_mask": pred[::2], "mask": same[::2], "subject_idx": torch.arange(3)}) == {}

@@ -30,7 +30,8 @@ Logged: ``train/loss|depth_loss|mask_loss|alpha|beta`` (``identity_loss`` with t
 ``flow_loss|vis_loss|smooth_loss`` and ``val/flow_epe`` in pixels with the warp head); ``val/`` and ``test/`` ``depth_mse``
 (masked depth error, :class:`lit3d.metrics.depth.MaskedDepthMSE`), ``iou`` (mask IoU,
 :class:`lit3d.metrics.depth.MaskIoU`), and the same with suffix ``_input`` for the posed-input
-baseline (the input taken as its own canonical form).
+baseline (the input taken as its own canonical form); ``val/retrieval_nn|ft`` (and ``_input``): the
+validation subjects retrieved by their masks (:func:`validation_retrieval`).
 
 At test time the module also gathers, in :attr:`CanonicalTask.test_outputs` (a DDP-correct
 :class:`lit3d.metrics.gathered.GatheredTensors`), every test item's prediction, input, target,
@@ -54,7 +55,8 @@ from lit3d.canonical.recall import RecallTemplates
 from lit3d.canonical.losses import canonical_loss, flow_loss, flow_smoothness, visibility_loss
 from lit3d.canonical.warp import pixels_to_grid
 from lit3d.metrics.depth import MaskedDepthMSE, MaskIoU
-from lit3d.metrics.gathered import GatheredTensors
+from lit3d.metrics.gathered import GatheredTensors, compute_if_updated
+from lit3d.metrics.retrieval import mask_retrieval
 from lit3d.utils.checkpoints import load_checkpoint
 from lit3d.utils.log_images import log_image, media_loggers
 
@@ -66,6 +68,26 @@ WARP_TERMS = ("flow", "vis", "smooth", "offset_smooth")
 # "index": the item's place in the test set, so the evaluator sees the items in one order under DDP too
 TEST_OUTPUTS = ("pred_depth", "pred_mask", "depth", "mask", "canon_depth", "canon_mask", "subject_idx", "pose", "view",
                 "index")
+
+# per validation item: the prediction's mask (at mask_threshold) and the posed input's ((N, 1, S, S) bool), subject
+VAL_OUTPUTS = ("pred_mask", "mask", "subject_idx")
+
+
+def validation_retrieval(gathered: dict[str, torch.Tensor]) -> dict[str, float]:
+    """Retrieval of the validation subjects by their masks (distance 1 - mask IoU, classes = subjects:
+    :func:`lit3d.metrics.retrieval.mask_retrieval`): ``{"retrieval_nn", "retrieval_ft"}`` of the
+    predictions and ``..._input`` of the posed inputs, from :data:`VAL_OUTPUTS` ``(N, 1, S, S)`` masks and
+    ``(N,)`` subjects; ``{}`` when no subject has two items. A figure on people never tested, for
+    choosing settings that keep the person (the test's descriptor is too slow for every epoch)."""
+    labels = gathered["subject_idx"].cpu().numpy()
+    if len(labels) == len(set(labels.tolist())):
+        return {}
+    out = {}
+    for key, suffix in (("pred_mask", ""), ("mask", "_input")):
+        masks = gathered[key].cpu().numpy()
+        scores = mask_retrieval(masks.reshape(len(masks), *masks.shape[-2:]), labels)
+        out.update({f"retrieval_nn{suffix}": float(scores["nn"]), f"retrieval_ft{suffix}": float(scores["ft"])})
+    return out
 
 
 class CanonicalTask(pl.LightningModule):
@@ -133,6 +155,7 @@ class CanonicalTask(pl.LightningModule):
         self.val_metrics = self._image_metrics(mask_threshold)
         self.test_metrics = self._image_metrics(mask_threshold)
         self.test_outputs = GatheredTensors(TEST_OUTPUTS)  # read by lit3d.canonical.evaluator.protocol
+        self.val_outputs = GatheredTensors(VAL_OUTPUTS)  # the validation retrieval by mask IoU
         self.skipped_steps = 0  # training steps skipped for a NaN/Inf loss (on_nonfinite=skip)
 
     @staticmethod
@@ -253,6 +276,8 @@ class CanonicalTask(pl.LightningModule):
     def validation_step(self, batch: dict, batch_idx: int) -> None:
         out = self(batch["depth"], batch["mask"])
         self._update(self.val_metrics, batch, out)
+        self.val_outputs.update(pred_mask=out.mask >= self.hparams.mask_threshold, mask=batch["mask"] > 0.5,
+                                subject_idx=torch.as_tensor(batch["subject_idx"], device=self.device))
         loss = canonical_loss(out.depth, out.mask, batch["canon_depth"], batch["canon_mask"], 1.0, 1.0)
         bs = batch["depth"].shape[0]
         self.log_dict({"val/depth_loss": loss["depth"], "val/mask_loss": loss["mask"]}, on_epoch=True, batch_size=bs)
@@ -269,6 +294,10 @@ class CanonicalTask(pl.LightningModule):
         for k, m in self.val_metrics.items():
             self.log(f"val/{k}", m.compute(), prog_bar=k in ("depth_mse", "iou"))
             m.reset()
+        gathered = compute_if_updated(self.val_outputs)
+        self.val_outputs.reset()
+        if gathered and not self.trainer.sanity_checking:
+            self.log_dict({f"val/{k}": v for k, v in validation_retrieval(gathered).items()})
 
     def on_test_epoch_start(self) -> None:
         self.test_outputs.reset()

@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from lit3d.canonical.heldout import pool
-from lit3d.canonical.pooled import SCORES, canonical_masks, job_dirs, mask_iou, mean_sd, prediction_masks
+from lit3d.canonical.pooled import SCORES, canonical_masks, job_dirs, mean_sd, prediction_masks
+from lit3d.metrics.retrieval import mask_iou
 from lit3d.utils.tables import markdown_table
 
 MASK_KEYS = ("iou", "nearest_subject", "nn_by_mask", "ft_by_mask", "iou_same", "iou_other")

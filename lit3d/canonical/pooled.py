@@ -38,7 +38,7 @@ from lit3d.canonical.baselines import mesh_rows
 from lit3d.canonical.heldout import HELDOUT_FILE, pool, settings_of
 from lit3d.canonical.report import write_pooled_results
 from lit3d.metrics.depth import composite_depth
-from lit3d.metrics.retrieval import chance_scores, retrieval_scores
+from lit3d.metrics.retrieval import chance_scores, mask_iou, retrieval_scores
 from lit3d.retrieval.descriptor import DescriptorConfig, depth_meshes, distance_matrix_from_features, mesh_features
 from lit3d.utils.config_dir import config_dir
 from lit3d.utils.io import write_json
@@ -103,13 +103,6 @@ def folder_depths(items: dict, folder, suffix: str = FOLDER_DEPTH_SUFFIX) -> np.
 def _flat(m) -> np.ndarray:
     """``(N, 1, S, S)`` or ``(N, S, S)`` -> ``(N, S, S)``."""
     return np.asarray(m).reshape(len(m), *np.shape(m)[-2:])
-
-
-def mask_iou(a, b) -> np.ndarray:
-    """Mask IoU of every pair: ``(N, S, S)`` x ``(M, S, S)`` booleans -> ``(N, M)``."""
-    inter = np.einsum("nij,mij->nm", a.astype(np.float32), b.astype(np.float32))
-    union = a.sum((1, 2))[:, None] + b.sum((1, 2))[None] - inter
-    return inter / np.maximum(union, 1)
 
 
 def canonical_masks(items: dict) -> tuple[list[str], np.ndarray, np.ndarray]:

@@ -91,3 +91,18 @@ def expected_chance_scores(labels: Sequence) -> dict[str, float]:
     labels = np.asarray(list(labels))
     n = len(labels)
     return retrieval_scores(np.zeros((n, n)), labels)
+
+
+def mask_iou(a, b) -> np.ndarray:
+    """Mask IoU of every pair: ``(N, S, S)`` x ``(M, S, S)`` booleans -> ``(N, M)`` (0 for two empty masks)."""
+    a, b = np.asarray(a, dtype=np.float32), np.asarray(b, dtype=np.float32)
+    inter = np.einsum("nij,mij->nm", a, b)
+    union = a.sum((1, 2))[:, None] + b.sum((1, 2))[None] - inter
+    return inter / np.maximum(union, 1)
+
+
+def mask_retrieval(masks, labels: Sequence) -> dict[str, float]:
+    """:func:`retrieval_scores` of masks ``(N, S, S)`` (booleans) with distance 1 - mask IoU: no
+    descriptor, no codebook, so no seed (the canonical task's validation retrieval and the pooled
+    ``nn_by_mask`` / ``ft_by_mask`` rows)."""
+    return retrieval_scores(1.0 - mask_iou(masks, masks), labels)
