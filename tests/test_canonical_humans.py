@@ -125,6 +125,18 @@ def test_anny_datamodule_pairs_share_each_subjects_canonical(tmp_path):
     assert dm2.config_hash() == dm.config_hash()
     dm2.setup()
     assert dm2.splits["test"] == dm.splits["test"]
+    # phenotype targets (task.phenotype_weight) come from the same draw, not from a new cache
+    dm3 = CanonicalDataModule(str(tmp_path / "anny"), source="anny", n_subjects=4, n_poses=4, image_size=48,
+                              split="subject_pose", n_folds=2, split_seed=0, seed=1, batch_size=4,
+                              phenotype_targets=True)
+    assert dm3.config_hash() == dm.config_hash()
+    dm3.setup()
+    batch = next(iter(dm3.test_dataloader()))
+    want = [[bodies.sample_phenotype(0, int(s[len("anny"):]))[k] for k in bodies.PHENOTYPE_RANGES]
+            for s in batch["subject"]]
+    assert batch["phenotype"].shape == (len(want), 6)
+    assert np.allclose(batch["phenotype"].numpy(), want, atol=1e-6)
+    assert "phenotype" not in next(iter(dm.test_dataloader()))
 
 
 # ------------------------------------------------------------------ FAUST and Sumner readers

@@ -130,6 +130,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         val_subjects: int | None = None,
         phenotypes: str = "uniform",
         pose_draw: str = "shared",
+        phenotype_targets: bool = False,
     ):
         super().__init__()
         self.save_hyperparameters()
@@ -260,6 +261,14 @@ class CanonicalDataModule(pl.LightningDataModule):
             raise DataError(f"{self.data_dir}: no usable subject left ({len(self.skipped)} bad images skipped)")
         self.subject_index = {s: i for i, s in enumerate(man["subjects"])}
 
+    def subject_phenotypes(self) -> dict[str, np.ndarray]:
+        """Every cached subject's phenotypes ``(len(bodies.PHENOTYPE_RANGES),)`` float32 in [0, 1] (Anny's labels in
+        that order), drawn again from the source's seeds (nothing new in the cache); DataError for a source
+        without phenotypes."""
+        if not hasattr(self.source, "phenotype"):
+            raise DataError(f"phenotype_targets: data source '{self.hparams.source}' has no phenotypes (anny has)")
+        return {s: np.array([self.source.phenotype(s)[k] for k in bodies.PHENOTYPE_RANGES], np.float32) for s in self.cache}
+
     def setup(self, stage: str | None = None) -> None:
         if self.datasets:
             return
@@ -267,6 +276,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         hp = self.hparams
         subject_poses = {s: c["poses"] for s, c in self.cache.items()}
         pairs = self._pairs(hp.fold)
+        phenotypes = self.subject_phenotypes() if hp.get("phenotype_targets") else None
         pairs["train"] = thin_training(pairs["train"], hp.train_pose_fraction, hp.seed + hp.fold)
         if hp.max_val_items and len(pairs["val"]) > hp.max_val_items:
             idx = np.random.default_rng(self.split_seed).choice(len(pairs["val"]), hp.max_val_items, replace=False)
@@ -283,7 +293,7 @@ class CanonicalDataModule(pl.LightningDataModule):
             if not self.splits[k]:
                 raise DataError(f"split '{k}' is empty (subjects {len(subject_poses)}, folds {hp.n_folds}): "
                                 "use more subjects/poses or fewer folds")
-            self.datasets[k] = CanonicalPairDataset(self.splits[k], self.cache, self.subject_index,
+            self.datasets[k] = CanonicalPairDataset(self.splits[k], self.cache, self.subject_index, phenotypes=phenotypes,
                                            flip_lr=hp.flip_lr and k == "train", flip_target=hp.view_mode == "fixed",
                                            mirror_view=mirror_views(hp.azimuths),
                                            roll_deg=hp.roll_deg if k == "train" else 0.0)

@@ -5,7 +5,7 @@ Items (``S = image_size``): ``depth``, ``mask``, ``canon_depth``, ``canon_mask``
 float32; ``subject`` str, ``subject_idx``, ``pose``, ``view`` int; ``flow`` ``(2, S, S)`` (backward
 flow in pixels, :mod:`datamodules.canonical.flow`), ``vis`` ``(1, S, S)`` float32 and ``has_flow``
 bool (zeros and False for an item without targets, or whose input is rolled or mirrored without its
-target). With ``flip_lr`` (training
+target); ``phenotype`` ``(P,)`` float32 when the dataset is given phenotypes. With ``flip_lr`` (training
 only) the posed images of an item are mirrored left-right with probability 1/2, and the canonical
 images with them only when ``flip_target`` (the camera convention decides, see
 :class:`CanonicalPairDataset`).
@@ -42,8 +42,9 @@ class CanonicalPairDataset(Dataset):
 
     def __init__(self, records: list[dict], cache: dict[str, dict], subject_index: dict[str, int],
                  flip_lr: bool = False, flip_target: bool = True, mirror_view: dict[int, int] | None = None,
-                 roll_deg: float = 0.0):
+                 roll_deg: float = 0.0, phenotypes: dict[str, np.ndarray] | None = None):
         self.records, self.cache, self.subject_index = records, cache, subject_index
+        self.phenotypes = phenotypes  # {subject: (P,) float32}: items carry "phenotype" (the task's regression)
         self.flip_lr = flip_lr  # mirror the input left-right with probability 1/2
         self.flip_target = flip_target  # ... and the canonical target with it (same camera only)
         self.mirror_view = dict(mirror_view or {})
@@ -77,13 +78,16 @@ class CanonicalPairDataset(Dataset):
         else:
             size = depth.shape[-1]
             flow, vis = torch.zeros(2, size, size), torch.zeros(1, size, size)
-        return {
+        item = {
             "depth": depth, "mask": mask,
             "canon_depth": t(c["depth"][ck], flip_canon), "canon_mask": t(c["mask"][ck], flip_canon),
             "subject": r["subject"], "subject_idx": self.subject_index[r["subject"]],
             "pose": int(r["pose"]), "view": int(r["view"]), "index": i,
             "flow": flow, "vis": vis, "has_flow": has_flow,
         }
+        if self.phenotypes is not None:
+            item["phenotype"] = torch.from_numpy(self.phenotypes[r["subject"]])
+        return item
 
     def canonical_templates(self, view: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
         """Every subject's canonical depth and mask seen from view ``view``, ``(K, 1, S, S)`` float32 each,

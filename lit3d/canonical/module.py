@@ -12,6 +12,11 @@ version does not).
 A NaN/Inf loss term stops training with the step and the term named
 (``on_nonfinite="raise"``) or skips that step (``"skip"``, counted in ``skipped_steps``).
 
+``phenotype_weight > 0`` adds a linear regression of the body's phenotypes (``phenotype_dims``; Anny's
+6, ``data.phenotype_targets``) from the MSFE latent and its mean squared error, times that weight: a
+body-shape code that, unlike a closed-set subject classifier, means the same for people never seen
+(``val/phenotype_mae`` on the validation subjects).
+
 ``identity_weight > 0`` adds a subject classifier (one linear layer, ``identity_classes`` outputs)
 on the MSFE's fused latent and its cross-entropy, times that weight, to the loss: the targets
 already name the subject (one canonical image each); this asks the latent to say it too.
@@ -127,6 +132,8 @@ class CanonicalTask(pl.LightningModule):
         vis_weight: float = 0.0,
         smooth_weight: float = 0.0,
         offset_smooth_weight: float = 0.0,
+        phenotype_weight: float = 0.0,
+        phenotype_dims: int = 0,
         unet_baseline: bool = False,
     ):
         super().__init__()
@@ -150,6 +157,12 @@ class CanonicalTask(pl.LightningModule):
                                  f"(the number of training subjects); got arch={arch}, use_msfe={use_msfe}, "
                                  f"identity_classes={identity_classes}")
             self.identity_head = torch.nn.Linear(int(cfg.get("fuser_out", 500)), int(identity_classes))
+        self.phenotype_head = None  # body-shape regression on the MSFE latent (phenotype_weight > 0)
+        if phenotype_weight > 0:
+            if arch != "canonical" or not use_msfe or phenotype_dims < 1:
+                raise ValueError("phenotype_weight > 0 needs arch=canonical with the MSFE and phenotype_dims >= 1 "
+                                 f"(Anny: 6); got arch={arch}, use_msfe={use_msfe}, phenotype_dims={phenotype_dims}")
+            self.phenotype_head = torch.nn.Linear(int(cfg.get("fuser_out", 500)), int(phenotype_dims))
         # set by LossPhases each epoch; constant weights when phases are off
         self.loss_alpha, self.loss_beta = float(alpha), float(beta)
         self.val_metrics = self._image_metrics(mask_threshold)
@@ -210,6 +223,9 @@ class CanonicalTask(pl.LightningModule):
         if self.hparams.identity_weight > 0:  # the MSFE's identity head, or the recall net's own logits
             terms["identity"] = self._identity_loss(out.latent, batch["subject_idx"])
             terms["loss"] = terms["loss"] + self.hparams.identity_weight * terms["identity"]
+        if self.phenotype_head is not None:
+            terms["phenotype"] = self._phenotype_error(out.latent, batch).pow(2).mean()
+            terms["loss"] = terms["loss"] + self.hparams.phenotype_weight * terms["phenotype"]
         if out.flow is not None:  # the warp head: each of its terms times its weight
             warp = self._warp_terms(out, batch)
             terms.update(warp)
@@ -220,8 +236,9 @@ class CanonicalTask(pl.LightningModule):
         bs = batch["depth"].shape[0]
         self.log_dict({"train/loss": terms["loss"], "train/depth_loss": losses["depth"],
                        "train/mask_loss": losses["mask"]}, on_step=True, on_epoch=True, batch_size=bs)
-        if "identity" in terms:
-            self.log("train/identity_loss", terms["identity"], on_step=False, on_epoch=True, batch_size=bs)
+        for k in ("identity", "phenotype"):
+            if k in terms:
+                self.log(f"train/{k}_loss", terms[k], on_step=False, on_epoch=True, batch_size=bs)
         for k in WARP_TERMS:
             if k in terms:
                 self.log(f"train/{k}_loss", terms[k], on_step=False, on_epoch=True, batch_size=bs)
@@ -264,6 +281,18 @@ class CanonicalTask(pl.LightningModule):
         logits = latent.float() if self.identity_head is None else self.identity_head(latent.float())
         return torch.nn.functional.cross_entropy(logits, target)
 
+    def _phenotype_error(self, latent: torch.Tensor, batch: dict) -> torch.Tensor:
+        """Predicted minus true phenotypes ``(B, phenotype_dims)`` (the head on the MSFE latent ``(B, fuser_out)``;
+        targets ``batch["phenotype"]`` in [0, 1]); ValueError when the batch has none or another width."""
+        if "phenotype" not in batch:
+            raise ValueError("phenotype_weight > 0 needs phenotype targets in the batch: data.phenotype_targets=true "
+                             "(data.source=anny)")
+        target = batch["phenotype"].float()
+        if target.shape[-1] != self.phenotype_head.out_features:
+            raise ValueError(f"the data has {target.shape[-1]} phenotypes, task.phenotype_dims="
+                             f"{self.phenotype_head.out_features}")
+        return self.phenotype_head(latent.float()) - target
+
     # ------------------------------------------------------------------ evaluation
     @staticmethod
     def _update(metrics: torch.nn.ModuleDict, batch: dict, out) -> None:
@@ -286,6 +315,9 @@ class CanonicalTask(pl.LightningModule):
             target, vis, has = self._flow_targets(out, batch)
             epe = flow_loss(out.flow, target, vis, has) * batch["depth"].shape[-1] / 2
             self.log("val/flow_epe", epe, on_epoch=True, batch_size=bs)
+        if self.phenotype_head is not None and "phenotype" in batch:  # new people's body shape, mean |error|
+            self.log("val/phenotype_mae", self._phenotype_error(out.latent, batch).abs().mean(), on_epoch=True,
+                     batch_size=bs)
         if batch_idx == 0 and self.hparams.image_every_n_epochs and \
                 self.current_epoch % self.hparams.image_every_n_epochs == 0:
             self._log_panels(batch, out)
