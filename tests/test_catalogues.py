@@ -84,6 +84,8 @@ def test_unpacked_catalogue_indexes_and_its_first_model_loads_upright(package):
     assert EXPECTED[package] <= {m.category for m in models}
     assert len({m.model_id for m in models}) == len(models)
     assert all(m.licence and m.creator for m in models) and all(d["reason"] for d in dropped)
+    if package == "ufoai-data":  # each model its own file's licence from ufoai-data's DEP-5 copyright
+        assert {m.licence for m in models} >= {"GPL-2", "GPL-2+", "CC-BY-SA-3.0"}, {m.licence for m in models}
     mesh = load_model_mesh(min(models, key=lambda m: m.model_id))
     ext = mesh.extents
     assert len(mesh.faces) > 10 and np.all(np.isfinite(mesh.vertices))

@@ -45,6 +45,7 @@ import numpy as np
 
 from datamodules.cache import DataError
 from datamodules.completion.cad_models import CadModel
+from datamodules.completion.dep5 import read_dep5, stanza_of
 from datamodules.completion.sweethome3d import assign_category, index_sweethome3d, parse_properties
 
 DEFAULT_ROOT = "~/.cache/lit3d/catalogues"
@@ -159,6 +160,7 @@ def index_torcs(tree: Path) -> tuple[list[CadModel], list[dict]]:
 
 # ---------------------------------------------------------------- UFO:AI
 UFOAI_REL = "usr/share/games/ufoai/base/0models.pk3"
+UFOAI_COPYRIGHT = "usr/share/doc/ufoai-data/copyright"  # DEP-5: each model file's licence
 UFOAI_GUNS = ("assault bolterrifle chaingun coilgun electrolaser flamer grenl laserheavy laserpistol laserrifle "
               "machinegun needlergun needlerheavy pbeamcannon pbeampistol pbeamrifle pistol pistol2 plasblaster "
               "plaspistol plasrifle rpg2 shotgun shotgun2 shotgunmicro smg sniper vhs xaw95").split()
@@ -174,6 +176,19 @@ UFOAI_RULES: tuple[tuple[str, str], ...] = (
 UFOAI_TYRES = re.compile(r"(_t|t)\.md2$")
 
 
+def ufoai_licence(stanzas: list, parts: list[str]) -> tuple[str, str]:
+    """(licence, creator) of a UFO:AI model's files (``models/...`` in the archive = ``base/models/...`` in
+    ufoai-data's DEP-5 copyright): each file's own licence (``; ``-joined when body and tyres differ) and
+    its stanza's group of authors; without the copyright file, the package's two licences."""
+    found = [stanza_of(stanzas, f"base/{p}") for p in parts] if stanzas else []
+    if not found or any(s is None for s in found):
+        return "GPL-2+ or CC-BY-SA-3.0 (per file: ufoai-data's copyright)", "UFO:AI team"
+    licences = "; ".join(dict.fromkeys(s.licence for s in found))
+    authors = list(dict.fromkeys(a for s in found for a in s.copyright))
+    group = ", ".join(authors[:3]) + (f" and {len(authors) - 3} more" if len(authors) > 3 else "")
+    return licences, f"UFO:AI team and contributors (this licence's group in ufoai-data's copyright: {group})"
+
+
 def index_ufoai(pk3: Path) -> tuple[list[CadModel], list[dict]]:
     """Weapons, cars and furniture of UFO:AI's model archive by :data:`UFOAI_RULES` (z-up, front +x)."""
     try:
@@ -181,7 +196,8 @@ def index_ufoai(pk3: Path) -> tuple[list[CadModel], list[dict]]:
             members = sorted(n for n in z.namelist() if n.startswith("models/") and n.endswith(".md2"))
     except (OSError, zipfile.BadZipFile) as exc:
         raise DataError(f"{pk3}: not a zip archive ({type(exc).__name__}: {exc})") from exc
-    licence = "GPL-2+ or CC-BY-SA-3.0 (per file: ufoai-data's copyright)"
+    root = Path(str(pk3)[:-len(UFOAI_REL)]) if str(pk3).endswith(UFOAI_REL) else pk3.parent
+    stanzas = read_dep5(root / UFOAI_COPYRIGHT)
     models, dropped, stems = [], [], set(members)
     for n in members:
         rel = n[len("models/"):]
@@ -196,8 +212,9 @@ def index_ufoai(pk3: Path) -> tuple[list[CadModel], list[dict]]:
                 continue
             parts = [n] + [t for t in (n[:-4] + "_t.md2", n[:-4] + "t.md2") if t in stems]
             forward = "+y" if category == "car" else "+x"  # seen in renders: cars along y, guns and chairs along x
+            licence, creator = ufoai_licence(stanzas, parts)
             models.append(CadModel(f"ufoai/{rel[:-4]}", category, tuple(f"{pk3}::{p}" for p in parts),
-                                   name=rel[:-4], licence=licence, creator="UFO:AI team",
+                                   name=rel[:-4], licence=licence, creator=creator,
                                    rotation=frame("+z", forward)))
     return models, dropped
 
