@@ -8,6 +8,7 @@ import trimesh
 
 from datamodules.canonical import CanonicalDataModule, DataError, split_pose, split_subject_pose
 from datamodules.canonical import tosca
+from datamodules.canonical.sources import SynthSource
 from datamodules.canonical.figures import KINDS, figure_mesh, joint_positions, make_pose, make_subject
 from lit3d.render.depth import depth_to_mesh, depth_to_points, render_depth
 
@@ -26,6 +27,25 @@ def test_figures_are_closed_posed_and_subject_specific(kind):
     assert not np.allclose(joint_positions(s1, p), joint_positions(s1))
     # the same pose index gives the same joint angles for every subject
     assert all(np.allclose(a, b) for a, b in zip(make_pose(kind, 3).values(), p.values()))
+
+
+def test_per_subject_figure_poses_are_each_figures_own_and_change_the_cache(tmp_path):
+    def rotations(draw, subject):
+        src = SynthSource(["humanoid"], 3, 4, 0, 32, 0, 15.0, 1.0, pose_draw=draw)
+        return src._posing(subject, 2)[1:3]
+
+    (a, ya), (b, yb) = rotations("per_subject", "humanoid001"), rotations("per_subject", "humanoid002")
+    assert any(not np.allclose(a[k], b[k]) for k in a) and ya != yb  # two figures, two poses
+    again, _ = rotations("per_subject", "humanoid001")
+    assert all(np.array_equal(a[k], again[k]) for k in a)  # seeded
+    shared = [rotations("shared", s)[0] for s in ("humanoid001", "humanoid002")]
+    assert all(np.array_equal(shared[0][k], shared[1][k]) for k in shared[0])  # the old draw: one pose for all
+    kw = dict(n_subjects=3, n_poses=4, image_size=32, kinds=["humanoid"])
+    old = CanonicalDataModule(str(tmp_path), **kw)
+    assert "pose_draw" not in old.cache_config()  # shared caches keep their hash
+    assert CanonicalDataModule(str(tmp_path), pose_draw="per_subject", **kw).config_hash() != old.config_hash()
+    with pytest.raises(DataError, match="unknown pose_draw 'each'"):
+        SynthSource(["humanoid"], 3, 4, 0, 32, 0, 15.0, 1.0, pose_draw="each")
 
 
 def test_depth_camera_is_linear_and_back_projects():

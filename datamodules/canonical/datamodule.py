@@ -180,8 +180,8 @@ class CanonicalDataModule(pl.LightningDataModule):
             cfg["bodies"] = [bodies.BODIES_VERSION, bodies.anny_version()]
             if hp.phenotypes != "uniform":  # absent for the old draw: its caches keep their hash
                 cfg["phenotypes"] = hp.phenotypes
-            if hp.get("pose_draw", "shared") != "shared":  # likewise
-                cfg["pose_draw"] = hp.pose_draw
+        if hp.source in ("synth", "anny") and hp.get("pose_draw", "shared") != "shared":  # absent: old hashes kept
+            cfg["pose_draw"] = hp.pose_draw
         if hp.skip_bad:  # a cache rendered while skipping may lack poses
             cfg["skip_bad"] = True
         if hp.view_mode != "fixed":  # absent for the old convention: its caches keep their hash

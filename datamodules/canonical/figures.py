@@ -116,13 +116,15 @@ def make_subject(kind: str, seed: int) -> Subject:
     raise ValueError(f"unknown figure kind '{kind}' (known: {', '.join(KINDS)})")
 
 
-def make_pose(kind: str, pose_index: int, seed: int = 0, strength: float = 1.0) -> dict[str, np.ndarray]:
+def make_pose(kind: str, pose_index: int, seed: int = 0, strength: float = 1.0,
+              subject: int | None = None) -> dict[str, np.ndarray]:
     """Local joint rotations (3x3) of pose ``pose_index``; ``{}`` is the canonical pose.
 
-    The same (kind, pose_index, seed) gives the same angles for every subject.
-    ``strength`` scales all angles (0 = canonical).
+    The same (kind, pose_index, seed) gives the same angles for every subject; ``subject`` (an index)
+    draws that subject's own pose instead (no two subjects share one). ``strength`` scales all angles
+    (0 = canonical).
     """
-    rng = np.random.default_rng([seed, pose_index, 104729, KINDS.index(kind)])
+    rng = np.random.default_rng([seed, pose_index, 104729, KINDS.index(kind)] + ([] if subject is None else [subject]))
     u = lambda lo, hi: float(rng.uniform(lo, hi)) * strength  # noqa: E731
     R: dict[str, np.ndarray] = {}
     if kind == "humanoid":

@@ -51,11 +51,17 @@ class _Source:
 
 
 class SynthSource(_Source):
+    """``n_subjects`` procedural figures (``kinds`` in turn) x ``n_poses`` poses drawn with ``pose_seed``: pose
+    p is the same for every subject of a kind (``pose_draw="shared"``) or each subject's own (``"per_subject"``)."""
+
     kind = "synth"
 
     def __init__(self, kinds: Sequence[str], n_subjects: int, n_poses: int, seed: int, mesh_resolution: int,
-                 pose_seed: int, yaw_range: float, pose_strength: float):
+                 pose_seed: int, yaw_range: float, pose_strength: float, pose_draw: str = "shared"):
+        if pose_draw not in POSE_DRAWS:
+            raise DataError(f"unknown pose_draw '{pose_draw}' ({', '.join(POSE_DRAWS)})")
         self.f = figures
+        self.pose_draw = pose_draw
         self.kinds = list(kinds)
         self.n_subjects, self.n_poses = n_subjects, n_poses
         self.seed, self.res, self.pose_seed = seed, mesh_resolution, pose_seed
@@ -85,9 +91,11 @@ class SynthSource(_Source):
         turn = 90.0 if kind == "quadruped" else 0.0  # figure_mesh shows quadrupeds from the side
         if pose == "canonical":
             return subj, None, 0.0, turn
-        rng = np.random.default_rng([self.pose_seed, int(pose), 17])
+        own = [int(subject[len(kind):])] if self.pose_draw == "per_subject" else []  # the subject's own poses
+        rng = np.random.default_rng([self.pose_seed, int(pose), 17] + own)
         yaw = float(rng.uniform(-self.yaw_range, self.yaw_range))
-        return subj, self.f.make_pose(kind, int(pose), self.pose_seed, self.strength), yaw, turn + yaw
+        rotations = self.f.make_pose(kind, int(pose), self.pose_seed, self.strength, *own)
+        return subj, rotations, yaw, turn + yaw
 
     def mesh(self, subject, pose):
         subj, rotations, yaw, _ = self._posing(subject, pose)
@@ -234,7 +242,7 @@ def make_source(hp) -> _Source:
     """The source named by ``hp.source`` built from the DataModule's hyper-parameters ``hp``."""
     if hp.source == "synth":
         return SynthSource(hp.kinds, hp.n_subjects, hp.n_poses, hp.seed, hp.mesh_resolution,
-                           hp.pose_seed, hp.yaw_range, hp.pose_strength)
+                           hp.pose_seed, hp.yaw_range, hp.pose_strength, hp.get("pose_draw", "shared"))
     if hp.source == "tosca":
         return ToscaSource(hp.root, hp.classes, hp.canonical_pose, hp.up_axis)
     if hp.source == "shrec14":
