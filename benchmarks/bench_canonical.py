@@ -48,7 +48,7 @@ def _net_times(size: int, batch: int, arch: str, steps: int, warmup: int) -> tup
     """(train s/image, inference s/image, parameters) of the paper-size net at ``size``^2."""
     cfg = _cfg("canonical_paper", tempfile.mkdtemp(),
                [f"task.net.image_size={size}", f"data.image_size={size}", f"task.arch={arch}",
- "task.retrieval=null"])
+ "evaluation.retrieval=null"])
     task = build_task(cfg.task)
     params = sum(p.numel() for p in task.net.parameters())
     batches = _batches(steps + warmup, batch, size)
@@ -137,9 +137,9 @@ def run() -> list[dict]:
             dm_paper, cfg_paper, r_paper = _gen("canonical_paper", tmp_paper, 3, 2)
             rows += [r_demo, r_paper]
             d, m = _canonical_depth(dm_demo, int(cfg_demo.data.image_size))
-            rc = cfg_demo.task.retrieval
+            rc = cfg_demo.evaluation.retrieval
             rows.append(_descriptor_row(d, m, int(rc.level), int(rc.view_size), int(rc.vocab), "demo settings"))
             d, m = _canonical_depth(dm_paper, int(cfg_paper.data.image_size))
-            rc = cfg_paper.task.retrieval
+            rc = cfg_paper.evaluation.retrieval
             rows.append(_descriptor_row(d, m, int(rc.level), int(rc.view_size), int(rc.vocab), "paper settings"))
     return rows

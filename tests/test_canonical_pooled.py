@@ -85,13 +85,13 @@ def test_pool_checks_coverage():
 
 
 def test_folds_write_heldout_and_the_pooled_evaluator_scores_every_row(tmp_path):
-    hp = AttributeDict(arch="canonical", retrieval=RETRIEVAL, mask_threshold=0.5, chance_trials=5,
-                       mesh_baselines=["gps"], baseline_landmarks=30, baseline_max_vertices=None,
-                       baseline_smacof_eps=1e-4)
+    hp = AttributeDict(arch="canonical", mask_threshold=0.5)  # the task's; the rest are evaluation settings
+    settings = dict(retrieval=RETRIEVAL, chance_trials=5, mesh_baselines=["gps"], baseline_landmarks=30,
+                    baseline_max_vertices=None, baseline_smacof_eps=1e-4)
     runs = []
     for f in range(3):
         dm = _dm(tmp_path, f)
-        held = evaluator.heldout_items(SimpleNamespace(hparams=hp, _trainer=None), _fold_outputs(dm), dm)
+        held = evaluator.heldout_items(SimpleNamespace(hparams=hp, _trainer=None), _fold_outputs(dm), dm, settings)
         run = tmp_path / f"run{f}"
         assert evaluator.write_artefacts(Evaluation({}, {"heldout": held}), run) == [run / heldout.HELDOUT_FILE]
         evaluator.write_results({"test/depth_mse": 0.1}, run)

@@ -31,19 +31,29 @@ def tiny_net(compose_cfg):
     return net
 
 
-def _train(tmp_path, net, epochs, retrieval=None, size=48, n=9, mesh_resolution=32, **task_kw):
-    """Fit and test on synthetic humanoids; returns (task, datamodule, test metrics + evaluator protocol)."""
+def _settings(retrieval=None, mesh_baselines=None, baseline_max_vertices=None) -> dict:
+    """Evaluation settings (the config's ``evaluation`` node) with 20 chance trials."""
+    return {"retrieval": retrieval, "retrieval_min_subjects": 2, "chance_trials": 20, "ceiling_jitter_deg": 0.0,
+            "mesh_baselines": mesh_baselines, "baseline_max_vertices": baseline_max_vertices,
+            "baseline_landmarks": 300, "baseline_smacof_eps": 1e-4}
+
+
+def _train(tmp_path, net, epochs, retrieval=None, size=48, n=9, mesh_resolution=32, mesh_baselines=None,
+           baseline_max_vertices=None, **task_kw):
+    """Fit and test on synthetic humanoids; returns (task, datamodule, test metrics + evaluator protocol
+    with the evaluation settings ``retrieval``, ``mesh_baselines``, ``baseline_max_vertices``)."""
     pl.seed_everything(0, workers=True)
     dm = CanonicalDataModule(str(tmp_path / "data"), image_size=size, n_subjects=n, n_poses=n,
                              mesh_resolution=mesh_resolution, n_folds=3, batch_size=8, kinds=["humanoid"], seed=0)
-    task = CanonicalTask(net=net(size), retrieval=retrieval, chance_trials=20, **task_kw)
+    task = CanonicalTask(net=net(size), **task_kw)
+    settings = _settings(retrieval, mesh_baselines, baseline_max_vertices)
     tr = pl.Trainer(max_epochs=epochs, logger=False, enable_checkpointing=False, enable_progress_bar=False,
                     enable_model_summary=False, accelerator="cpu", num_sanity_val_steps=0,
                     check_val_every_n_epoch=epochs, deterministic=True)
     tr.fit(task, dm)
     validation = {k: float(v) for k, v in tr.callback_metrics.items() if k.startswith("val/")}  # test() clears them
     res = tr.test(task, dm, verbose=False)[0] | validation
-    res.update(evaluator.protocol(task, dm).metrics)
+    res.update(evaluator.protocol(task, dm, settings).metrics)
     return task, dm, res
 
 
@@ -83,7 +93,7 @@ def test_tiny_run_scores_mesh_baselines_and_a_unet_run_under_its_source(tmp_path
     outputs = {k: v.cpu() for k, v in task.test_outputs.compute().items()}
     assert outputs["pred_depth"].shape == (len(dm.splits["test"]), 1, 32, 32)
     n_shapes = len({(r["subject"], r["pose"]) for r in dm.splits["test"]})
-    results = evaluator.retrieval_results(task.hparams, outputs, dm)
+    results = evaluator.retrieval_results(_settings(kw["retrieval"], ["cmds"], 200), outputs, dm)
     assert results["cmds"]["n_queries"] <= n_shapes
     # the plain U-Net as a run of its own: same data and losses, retrieval under source "unet"
     unet, _, res_u = _train(tmp_path, tiny_net, arch="unet", **kw)

@@ -44,7 +44,7 @@ def test_fast_dev_run(compose_cfg, data_dir):
     assert {"test/same/iou_pooled", "test/same/iou_extrusion", "test/same/paired/margin_input_lo"} <= set(metrics)
     results = (Path(cfg.paths.output_dir) / "results.md").read_text()
     assert "Paired comparison, same view" in results and "silhouette extrusion (ours)" in results
-    # surface metrics (task.surface) for the model and every baseline, beside IoU in results.md
+    # surface metrics (evaluation.surface) for the model and every baseline, beside IoU in results.md
     assert {f"test/same/{k}{s}" for k in ("chamfer_l1", "fscore_1pct", "fscore_2pct", "normal_consistency")
             for s in ("", "_input", "_extrusion", "_prior")} <= set(metrics)
     assert "## Surface metrics, same view" in results
@@ -78,13 +78,15 @@ def test_train_then_eval_writes_tables_and_figures(compose_cfg, data_dir, tmp_pa
     assert (run / "config.yaml").is_file()
     metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["monitor"] == "val/iou" and value == pytest.approx(metrics["monitored_value"])
-    # checkpoints load with torch's safe loader
-    torch.load(best[0], map_location="cpu", weights_only=True)
+    # checkpoints load with torch's safe loader, and carry the evaluation settings the test used
+    saved = torch.load(best[0], map_location="cpu", weights_only=True)
+    assert saved["lit3d"]["evaluation"]["surface"]["points"] == 10000 and "test/same/chamfer_l1" in metrics
 
     ecfg = compose_cfg([f"ckpt_path={best[0]}", "task=completion"], config_name="eval", data_dir=data_dir)
     emetrics = evaluate(ecfg)
     out = Path(ecfg.paths.output_dir)
     assert (out / "metrics.json").is_file() and "test/same/iou" in emetrics
+    assert "test/same/chamfer_l1" in emetrics  # evaluation.surface: the checkpoint's, set up before the test
     text = (out / "results.md").read_text()
     assert "Tables 3.1 / 3.2" in text and "(thesis 3.2)" in text and "lit3d, multi-category (ours)" in text
     assert list(out.glob("completion_*.png"))

@@ -59,7 +59,7 @@ def test_two_optuna_trials_of_a_tiny_config(tmp_path):
     env = {**os.environ, "OMP_NUM_THREADS": "1", "HYDRA_FULL_ERROR": "1", "WANDB_MODE": "offline"}
     args = [str(Path(sys.executable).parent / "lit3d-train"), "hparams_search=canonical_optuna",
             "experiment=canonical_tiny", "debug=limit", "trainer.max_epochs=1", "test_after_fit=false",
-            "logger=none", "callbacks.progress_bar=null", "task.retrieval=null", "hydra.sweeper.n_trials=2",
+            "logger=none", "callbacks.progress_bar=null", "evaluation.retrieval=null", "hydra.sweeper.n_trials=2",
             f"hydra.sweep.dir={sweep}", f"paths.data_dir={tmp_path / 'data'}"]
     res = subprocess.run(args, cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr[-3000:]

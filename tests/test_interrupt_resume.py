@@ -43,8 +43,8 @@ CANONICAL = [
     "data.mesh_resolution=20", "data.kinds=[humanoid]", "data.batch_size=4", "task.net.image_size=32",
     "task.net.lfe_channels=[8,12,16]", "task.net.msfe_channels=[6,6,4]", "task.net.msfe_grid=6",
     "task.net.fuser_hidden=64", "task.net.fuser_out=48", "task.net.msfe_dec_channels=[32,16,12,8,8,8]",
-    "task.net.rec_channels=[12,16,24]", "task.retrieval=null",
-    "task.mesh_baselines=[]", "task.mask_loss=bce", "test_after_fit=false", "callbacks.progress_bar=null",
+    "task.net.rec_channels=[12,16,24]", "evaluation.retrieval=null",
+    "evaluation.mesh_baselines=[]", "task.mask_loss=bce", "test_after_fit=false", "callbacks.progress_bar=null",
     "+trainer.limit_val_batches=0",
 ]
 CANONICAL_STEPS_PER_EPOCH = 4

@@ -66,8 +66,8 @@ def test_datamodule_prepares_once_and_describes(tmp_path):
 
 def test_task_trains_checkpoints_and_predicts(tmp_path):
     dm = make_dm(tmp_path)
-    task = QualityTask(lr=0.01, momentum=0.9, sfs={"max_features": 3, "epochs": 10}, cv=True, cv_epochs=10,
-                       cv_methods=["ours_sfs"])
+    task = QualityTask(lr=0.01, momentum=0.9, sfs={"max_features": 3, "epochs": 10})
+    settings = {"baselines": None, "cv": True, "cv_epochs": 10, "cv_methods": ["ours_sfs"], "cross_data": None}
     trainer = pl.Trainer(max_epochs=8, logger=False, enable_checkpointing=False, enable_progress_bar=False,
                          enable_model_summary=False, default_root_dir=str(tmp_path))
     trainer.fit(task, datamodule=dm)
@@ -76,7 +76,7 @@ def test_task_trains_checkpoints_and_predicts(tmp_path):
     m = {k: float(v) for k, v in trainer.callback_metrics.items()}
     from lit3d.quality import evaluator
 
-    evaluation = evaluator.protocol(task, dm)  # baselines + leave-one-shape-out (as run_evaluation does)
+    evaluation = evaluator.protocol(task, dm, settings)  # baselines + leave-one-shape-out (as run_evaluation does)
     m.update(evaluation.metrics)
     for key in ("test/ours/pearson", "test/ours/spearman/rock", "test/chamfer/pearson", "test/single_best/spearman",
                 "test/cv/ours_sfs/pearson/blob", "test/cv/chamfer/spearman"):
@@ -150,6 +150,7 @@ def test_experiment_configs_compose(compose_cfg, experiment):
     kw = task_kwargs(cfg.task)
     QualityTask(**kw)  # plain kwargs build the task
     assert cfg.data.batch_size == 3
+    assert cfg.evaluation.cv is True and "cv" not in kw  # the protocol's settings: the evaluator's, not the task's
 
 
 @pytest.mark.parametrize("data", ["liris_epfl", "liris_masking", "guo2016"])

@@ -13,7 +13,7 @@ from lit3d.utils.curves import PANEL_W, panels, read_csv_logs
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 TINY = ["experiment=canonical_tiny", "debug=limit", "test_after_fit=false", "callbacks.progress_bar=null",
-        "task.retrieval=null"]
+        "evaluation.retrieval=null"]
 
 
 @pytest.fixture(scope="module")

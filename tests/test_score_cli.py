@@ -142,7 +142,7 @@ def quality_ckpt(tmp_path_factory):
             "experiment=quality_demo", "logger=none", "callbacks.progress_bar=null", "test_after_fit=false",
             "+trainer.enable_progress_bar=false", "data.shapes=[blob,bumpy,torus]", "+data.distortions=[noise,taubin]",
             "data.n_levels=2", "data.subdivisions=2", f"data.feature_options={{{opts}}}", "task.sfs.epochs=2",
-            "task.sfs.max_features=2", "task.cv=false", "trainer.max_epochs=2"])
+            "task.sfs.max_features=2", "evaluation.cv=false", "trainer.max_epochs=2"])
     GlobalHydra.instance().clear()
     with open_dict(cfg):
         cfg.paths.output_dir = str(root / "run")

@@ -75,7 +75,7 @@ def train_config(overrides: Sequence[str]) -> DictConfig:
 def untrained_checkpoint(experiment: str, path: str | Path, overrides: Sequence[str] = ()) -> Path:
     """Write the checkpoint of an untrained model of ``experiment=NAME`` (``conf/experiment/NAME.yaml``
     plus Hydra ``overrides``, e.g. ``["task.nets.k=10"]``) to ``path``, with the metadata that
-    ``lit3d-train`` stores (task and data config, provenance): for trying the API and
+    ``lit3d-train`` stores (task and data config, evaluation settings, provenance): for trying the API and
     :func:`lit3d.export` without training. Its predictions are those of random weights.
 
     A quality model needs its features named (``task.features=[...]``): training selects them.
@@ -86,7 +86,8 @@ def untrained_checkpoint(experiment: str, path: str | Path, overrides: Sequence[
     ckpt = {"pytorch-lightning_version": pl.__version__, "epoch": 0, "global_step": 0,
             "state_dict": module.state_dict(), "hyper_parameters": dict(module.hparams)}
     module.on_save_checkpoint(ckpt)
-    MetadataCallback(task_meta(cfg), to_plain(cfg.data), None).on_save_checkpoint(None, module, ckpt)
+    MetadataCallback(task_meta(cfg), to_plain(cfg.data), None,
+                     to_plain(cfg.get("evaluation"))).on_save_checkpoint(None, module, ckpt)
     buf = io.BytesIO()
     torch.save(ckpt, buf)
     try:

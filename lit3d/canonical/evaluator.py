@@ -18,14 +18,17 @@ test (``task.test_outputs``, DDP-correct) and returns ``test/retrieval/<source>/
 :func:`protocol`) to ``<run dir>/heldout.npz`` (:mod:`lit3d.canonical.heldout`) for the pooled
 cross-validated protocol (:mod:`lit3d.canonical.pooled`).
 
-Settings come from the task config (``retrieval``: descriptor config or null = off,
-``retrieval_min_subjects``, ``chance_trials``, ``mask_threshold``, ``mesh_baselines``,
-``baseline_max_vertices``, ``baseline_smacof_eps``).
+``settings`` are the run's evaluation settings (the config's ``evaluation`` node, saved in the checkpoint:
+``retrieval``: descriptor config or null = off, ``retrieval_min_subjects``, ``chance_trials``,
+``ceiling_jitter_deg``, ``mesh_baselines``, ``baseline_landmarks``, ``baseline_max_vertices``,
+``baseline_smacof_eps``); the task itself gives only its ``arch`` (the prediction row's name) and
+``mask_threshold`` (where its predicted mask is).
 """
 from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -46,35 +49,47 @@ LOGGED_SCORES = ("nn", "ft", "st", "e", "dcg", "seconds")
 PREDICTION_SOURCE = {"canonical": "model", "unet": "unet"}
 
 
-def protocol(task, datamodule) -> Evaluation:
+def prepare(task, settings: Mapping) -> None:
+    """Nothing to set up before the test: the module gathers every test item (``task.test_outputs``)."""
+
+
+def protocol(task, datamodule, settings: Mapping) -> Evaluation:
     """Metrics ``{"test/retrieval/<source>/<score>": value}`` from the task's gathered test outputs
-    (none when retrieval is off (``task.retrieval=null``), nothing was tested, or fewer than
+    (none when retrieval is off (``evaluation.retrieval=null``), nothing was tested, or fewer than
     ``retrieval_min_subjects`` test subjects have 2+ items) and, on rank 0, the ``heldout``
-    artefact (:func:`heldout_items`). Call on every process (the gathered outputs are
-    synchronised across DDP ranks)."""
+    artefact (:func:`heldout_items`). ``settings``: the evaluation settings (module doc). Call on
+    every process (the gathered outputs are synchronised across DDP ranks)."""
     outputs = task.test_outputs.compute()
-    if task.hparams.retrieval is None or not outputs:
+    if settings.get("retrieval") is None or not outputs:
         return Evaluation()
     order = torch.argsort(outputs["index"].cpu())  # dataset order: ranks hand in interleaved shares
     outputs = {k: v.cpu()[order] for k, v in outputs.items()}
-    held = heldout_items(task, outputs, datamodule)
-    results = retrieval_results(task.hparams, outputs, datamodule)
+    held = heldout_items(task, outputs, datamodule, settings)
+    results = retrieval_results(settings, outputs, datamodule, source=prediction_source(task),
+                                mask_threshold=float(task.hparams.mask_threshold))
     metrics = {f"test/retrieval/{source}/{k}": float(scores[k])
                for source, scores in results.items() for k in LOGGED_SCORES if k in scores}
     return Evaluation(metrics, {"heldout": held} if held else {})
 
 
-def heldout_items(task, outputs: dict[str, torch.Tensor], datamodule) -> dict | None:
+def prediction_source(task) -> str:
+    """The retrieval row of the task's own predictions: ``model``, or ``unet`` for the plain U-Net."""
+    return PREDICTION_SOURCE.get(task.hparams.arch, "model")
+
+
+def heldout_items(task, outputs: dict[str, torch.Tensor], datamodule, settings: Mapping) -> dict | None:
     """This fold's held-out items (:func:`lit3d.canonical.heldout.heldout_arrays`) for the pooled
-    protocol (:mod:`lit3d.canonical.pooled`); None off rank 0 or for a datamodule that does not
-    list its held-out items."""
+    protocol (:mod:`lit3d.canonical.pooled`), with the settings it scores them with (``settings`` and
+    the task's ``mask_threshold``); None off rank 0 or for a datamodule that does not list its
+    held-out items."""
     trainer = getattr(task, "_trainer", None)
     if (trainer is not None and not trainer.is_global_zero) or not hasattr(datamodule, "held_out_ids"):
         return None
     hp = datamodule.hparams
     return heldout_arrays(
         outputs, {i: s for s, i in datamodule.subject_index.items()}, datamodule.held_out_ids(),
-        PREDICTION_SOURCE.get(task.hparams.arch, "model"), dict(hp), hp.fold, hp.n_folds, settings_of(dict(task.hparams)))
+        prediction_source(task), dict(hp), hp.fold, hp.n_folds,
+        settings_of({"mask_threshold": task.hparams.mask_threshold, **settings}))
 
 
 def write_artefacts(evaluation: Evaluation, out_dir: Path) -> list[Path]:
@@ -87,27 +102,30 @@ def write_artefacts(evaluation: Evaluation, out_dir: Path) -> list[Path]:
     return [path]
 
 
-def retrieval_results(hp, outputs: dict[str, torch.Tensor], datamodule=None) -> dict[str, dict]:
+def retrieval_results(settings: Mapping, outputs: dict[str, torch.Tensor], datamodule=None, source: str = "model",
+                      mask_threshold: float = 0.5) -> dict[str, dict]:
     """``{source: retrieval scores}`` (see :func:`lit3d.metrics.retrieval.retrieval_scores`) of the
-    depth sources and the mesh baselines; ``{}`` when too few subjects. ``hp``: the task's
-    hyper-parameters; ``outputs``: ``task.test_outputs.compute()`` on the CPU."""
+    depth sources and the mesh baselines; ``{}`` when too few subjects. ``settings``: the evaluation
+    settings (module doc); ``outputs``: ``task.test_outputs.compute()`` on the CPU; ``source``: the
+    prediction row's name (:func:`prediction_source`); ``mask_threshold``: the task's."""
     labels = outputs["subject_idx"].numpy()
-    if (np.bincount(labels) >= 2).sum() < hp.retrieval_min_subjects:
-        log.info("retrieval skipped: fewer than %d test subjects with 2+ items", hp.retrieval_min_subjects)
+    if (np.bincount(labels) >= 2).sum() < settings["retrieval_min_subjects"]:
+        log.info("retrieval skipped: fewer than %d test subjects with 2+ items", settings["retrieval_min_subjects"])
         return {}
-    results = depth_retrieval(hp, outputs, labels)
-    results.update(jittered_target(hp, outputs, labels, datamodule))
-    results.update(mesh_baseline_retrieval(hp, outputs, datamodule))
+    results = depth_retrieval(settings, outputs, labels, source, mask_threshold)
+    results.update(jittered_target(settings, outputs, labels, datamodule))
+    results.update(mesh_baseline_retrieval(settings, outputs, datamodule))
     return results
 
 
-def depth_retrieval(hp, outputs: dict[str, torch.Tensor], labels: np.ndarray) -> dict[str, dict]:
-    """Retrieval scores of the predicted canonical forms, the posed inputs and the true canonical
-    forms (each depth image back-projected to a surface, then the CM-BOF-style descriptor), and chance."""
-    cfg = DescriptorConfig(**(hp.retrieval or {}))
-    predicted = PREDICTION_SOURCE.get(hp.arch, "model")
+def depth_retrieval(settings: Mapping, outputs: dict[str, torch.Tensor], labels: np.ndarray, source: str = "model",
+                    mask_threshold: float = 0.5) -> dict[str, dict]:
+    """Retrieval scores of the predicted canonical forms (row ``source``, mask at ``mask_threshold``), the
+    posed inputs and the true canonical forms (each depth image back-projected to a surface, then the
+    CM-BOF-style descriptor), and chance."""
+    cfg = DescriptorConfig(**(settings.get("retrieval") or {}))
     sources = {
-        predicted: (outputs["pred_depth"], (outputs["pred_mask"] >= hp.mask_threshold).float()),
+        source: (outputs["pred_depth"], (outputs["pred_mask"] >= mask_threshold).float()),
         "input": (outputs["depth"], outputs["mask"]),
         "target": (outputs["canon_depth"], outputs["canon_mask"]),
     }
@@ -115,18 +133,19 @@ def depth_retrieval(hp, outputs: dict[str, torch.Tensor], labels: np.ndarray) ->
     for name, (d, m) in sources.items():
         dist = distance_matrix_from_depths(composite_depth(d, m)[:, 0].numpy(), m[:, 0].numpy(), cfg)
         out[name] = retrieval_scores(dist, labels)
-    out["chance"] = chance_scores(labels, hp.chance_trials, seed=0)
+    out["chance"] = chance_scores(labels, settings["chance_trials"], seed=0)
     return out
 
 
-def jittered_target(hp, outputs: dict[str, torch.Tensor], labels: np.ndarray, datamodule) -> dict[str, dict]:
+def jittered_target(settings: Mapping, outputs: dict[str, torch.Tensor], labels: np.ndarray,
+                    datamodule) -> dict[str, dict]:
     """``{"target_jitter": scores}``: the true canonical form of every test item rendered again with the
     camera turned by U(-j, j) degrees (``ceiling_jitter_deg`` = j, seeded per item), through the same
     descriptor. Every pose of a subject has one identical true canonical image, so the plain ``target``
     row is 1.00 by construction; this row is the ceiling a perfect canonical form reaches when its
     image is not pixel-identical. Empty when ``ceiling_jitter_deg`` is 0/absent or the datamodule cannot
     render (``canonical_turned``)."""
-    jitter = float(hp.get("ceiling_jitter_deg") or 0.0)
+    jitter = float(settings.get("ceiling_jitter_deg") or 0.0)
     if not jitter or datamodule is None or not hasattr(datamodule, "canonical_turned"):
         return {}
     names = {i: s for s, i in datamodule.subject_index.items()}
@@ -135,15 +154,15 @@ def jittered_target(hp, outputs: dict[str, torch.Tensor], labels: np.ndarray, da
              for s, v, t in zip(outputs["subject_idx"], outputs["view"], turns)]
     depth = np.stack([d for d, _ in views]).astype(np.float32)
     mask = np.stack([m for _, m in views]).astype(np.float32)
-    dist = distance_matrix_from_depths(depth, mask, DescriptorConfig(**(hp.retrieval or {})))
+    dist = distance_matrix_from_depths(depth, mask, DescriptorConfig(**(settings.get("retrieval") or {})))
     return {"target_jitter": retrieval_scores(dist, labels)}
 
 
-def mesh_baseline_retrieval(hp, outputs: dict[str, torch.Tensor], datamodule) -> dict[str, dict]:
+def mesh_baseline_retrieval(settings: Mapping, outputs: dict[str, torch.Tensor], datamodule) -> dict[str, dict]:
     """Non-learned canonical forms (``mesh_baselines``) of the full test meshes, one per unique
     (subject, pose) of the test items, through the same descriptor (empty when off, or when the
     datamodule cannot give meshes)."""
-    methods = list(hp.mesh_baselines or [])
+    methods = list(settings.get("mesh_baselines") or [])
     if not methods:
         return {}
     if datamodule is None or not hasattr(datamodule, "normalized_mesh"):
@@ -153,8 +172,8 @@ def mesh_baseline_retrieval(hp, outputs: dict[str, torch.Tensor], datamodule) ->
     keys = sorted({(int(s), int(p)) for s, p in zip(outputs["subject_idx"], outputs["pose"])})
     t0 = time.perf_counter()
     meshes = [datamodule.normalized_mesh(names[s], p) for s, p in keys]
-    out = baseline_retrieval(meshes, [s for s, _ in keys], methods, DescriptorConfig(**(hp.retrieval or {})),
-                             hp.baseline_max_vertices, eps=hp.baseline_smacof_eps,
-                             landmarks=hp.get("baseline_landmarks", 300))
+    cfg = DescriptorConfig(**(settings.get("retrieval") or {}))
+    out = baseline_retrieval(meshes, [s for s, _ in keys], methods, cfg, settings.get("baseline_max_vertices"), eps=settings.get("baseline_smacof_eps", 1e-4),
+                             landmarks=settings.get("baseline_landmarks", 300))
     log.info("mesh baselines %s on %d test shapes: %.0fs", methods, len(keys), time.perf_counter() - t0)
     return out

@@ -10,7 +10,7 @@ After the test, :func:`lit3d.canonical.evaluator.protocol` writes ``heldout.npz`
     expected (M,) str       every item of the data (all folds): what the pooled set must cover once
     source () str           "model" or "unet" (the prediction row's name, by task.arch)
     fold, n_folds () int64; data () str: the data config as JSON (to rebuild meshes for the mesh rows)
-    settings () str         the task's retrieval settings as JSON (retrieval, mask_threshold, ...)
+    settings () str         the retrieval settings as JSON (the run's evaluation settings, the task's mask_threshold)
 
 :func:`pool` merges the files of every fold and checks that each expected item appears exactly once.
 """
@@ -27,14 +27,16 @@ from lit3d.utils.io import atomic_write_bytes
 
 HELDOUT_FILE = "heldout.npz"
 IMAGES = ("pred_depth", "pred_mask", "depth", "mask", "canon_depth", "canon_mask")
-# the task settings the pooled protocol scores with (saved as ``settings`` in heldout.npz)
+# the settings the pooled protocol scores with (saved as ``settings`` in heldout.npz): the task's
+# mask_threshold and the run's evaluation settings (the config's ``evaluation`` node)
 SETTINGS = ("retrieval", "mask_threshold", "chance_trials", "mesh_baselines", "baseline_max_vertices",
             "baseline_landmarks", "baseline_smacof_eps")
 
 
-def settings_of(task_cfg: dict) -> dict:
-    """The retrieval settings (:data:`SETTINGS`) present in a task config or the task's hparams."""
-    return {k: task_cfg[k] for k in SETTINGS if k in task_cfg}
+def settings_of(cfg: dict) -> dict:
+    """The retrieval settings (:data:`SETTINGS`) present in ``cfg`` (the evaluation settings with the
+    task's ``mask_threshold``)."""
+    return {k: cfg[k] for k in SETTINGS if k in cfg}
 
 
 def item_ids(subjects, poses, views) -> np.ndarray:

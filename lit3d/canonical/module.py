@@ -41,9 +41,10 @@ validation subjects retrieved by their masks (:func:`validation_retrieval`).
 At test time the module also gathers, in :attr:`CanonicalTask.test_outputs` (a DDP-correct
 :class:`lit3d.metrics.gathered.GatheredTensors`), every test item's prediction, input, target,
 subject and pose; :func:`lit3d.canonical.evaluator.protocol` scores retrieval and the mesh
-baselines from it after the test (``retrieval``, ``retrieval_min_subjects``, ``chance_trials``,
-``mesh_baselines``, ``baseline_*`` are its settings). The plain U-Net baseline is a run of its
-own (``arch=unet``, same data and losses).
+baselines from it after the test, with settings of its own (the config's ``evaluation`` node:
+``retrieval``, ``retrieval_min_subjects``, ``chance_trials``, ``ceiling_jitter_deg``, ``mesh_baselines``,
+``baseline_*``), not this module's. The plain U-Net baseline is a run of its own (``arch=unet``, same
+data and losses).
 """
 from __future__ import annotations
 
@@ -63,6 +64,7 @@ from lit3d.metrics.depth import MaskedDepthMSE, MaskIoU
 from lit3d.metrics.gathered import GatheredTensors, compute_if_updated
 from lit3d.metrics.retrieval import mask_retrieval
 from lit3d.utils.checkpoints import load_checkpoint
+from lit3d.utils.evaluation import legacy_settings
 from lit3d.utils.log_images import log_image, media_loggers
 
 METRICS = ("depth_mse", "iou", "depth_mse_input", "iou_input")
@@ -73,6 +75,13 @@ WARP_TERMS = ("flow", "vis", "smooth", "offset_smooth")
 # "index": the item's place in the test set, so the evaluator sees the items in one order under DDP too
 TEST_OUTPUTS = ("pred_depth", "pred_mask", "depth", "mask", "canon_depth", "canon_mask", "subject_idx", "pose", "view",
                 "index")
+
+# the evaluator's settings (the config's ``evaluation`` node, :func:`lit3d.canonical.evaluator.protocol`) that
+# checkpoints written before that node hold among the task's hyper-parameters, with the defaults the
+# constructor had for them then (what such a checkpoint without the key was evaluated with)
+EVALUATION_LEGACY = {"retrieval": None, "retrieval_min_subjects": 2, "chance_trials": 100, "ceiling_jitter_deg": 0.0,
+                     "mesh_baselines": None, "baseline_max_vertices": None, "baseline_smacof_eps": 1e-4,
+                     "baseline_landmarks": 300}
 
 # per validation item: the prediction's mask (at mask_threshold) and the posed input's ((N, 1, S, S) bool), subject
 VAL_OUTPUTS = ("pred_mask", "mask", "subject_idx")
@@ -99,6 +108,8 @@ class CanonicalTask(pl.LightningModule):
     """Posed depth+mask -> canonical depth+mask (CanonicalNet; a plain U-Net with ``arch="unet"``; the
     closed-set recall net with ``arch="recall"``)."""
 
+    evaluation_legacy = EVALUATION_LEGACY  # read by lit3d-eval for checkpoints saved before the evaluation node
+
     def __init__(
         self,
         net: dict | None = None,
@@ -116,14 +127,6 @@ class CanonicalTask(pl.LightningModule):
         mask_threshold: float = 0.5,
         image_every_n_epochs: int = 1,
         n_panel: int = 4,
-        retrieval: dict | None = None,
-        retrieval_min_subjects: int = 2,
-        chance_trials: int = 100,
-        ceiling_jitter_deg: float = 0.0,
-        mesh_baselines: Sequence[str] | None = None,
-        baseline_max_vertices: int | None = None,
-        baseline_smacof_eps: float = 1e-4,
-        baseline_landmarks: int | None = 300,
         on_nonfinite: str = "raise",
         identity_weight: float = 0.0,
         identity_classes: int = 0,
@@ -135,13 +138,19 @@ class CanonicalTask(pl.LightningModule):
         phenotype_weight: float = 0.0,
         phenotype_dims: int = 0,
         unet_baseline: bool = False,
+        **legacy_evaluation,
     ):
+        """``legacy_evaluation``: the evaluation settings (:data:`EVALUATION_LEGACY`) that checkpoints written
+        before they got their own config node hold among these hyper-parameters; accepted and ignored
+        (``lit3d-eval`` reads them from the checkpoint), any other keyword is a ValueError."""
         super().__init__()
         if unet_baseline:
             raise ValueError("unet_baseline was removed: train the plain U-Net as a run of its own "
                              "(task.arch=unet) and merge its rows with python -m lit3d.canonical.report RUN_DIR "
                              "--unet UNET_RUN_DIR")
-        self.save_hyperparameters(ignore=["unet_baseline"])  # accepted (false) from older checkpoints only
+        legacy_settings(type(self).__name__, legacy_evaluation, EVALUATION_LEGACY)
+        # unet_baseline: accepted (false) from older checkpoints only; the evaluation settings are not the module's
+        self.save_hyperparameters(ignore=["unet_baseline", *legacy_evaluation])
         validate_mode(on_nonfinite)
         cfg = dict(net or {})
         cfg["kind"] = arch

@@ -9,12 +9,12 @@ With run dirs (one per fold, each with the ``heldout.npz`` that
 :func:`lit3d.canonical.evaluator.protocol` writes), the folds are merged
 (:func:`lit3d.canonical.heldout.pool`: each item held out exactly once) and the rows are the
 prediction (``model`` or ``unet``), the posed input depth and the true canonical depth, plus the
-mesh rows. Without run dirs the Hydra overrides after ``--`` compose the data and task config (as
+mesh rows. Without run dirs the Hydra overrides after ``--`` compose the data, task and evaluation config (as
 ``lit3d-train`` would) and the items are every item some fold holds out
 (:meth:`datamodules.canonical.CanonicalDataModule.held_out_records`): the posed-input and true
 canonical depth rows plus the mesh rows, and with ``data.flow_targets=true`` the warp oracle
 (:func:`warp_oracle`: the true canonical where the posed input sees it, the mean body elsewhere). Mesh rows (one per held-out subject x pose, full
-resolution): the non-learned canonical forms ``task.mesh_baselines`` (landmark geodesics,
+resolution): the non-learned canonical forms ``evaluation.mesh_baselines`` (landmark geodesics,
 :mod:`lit3d.geometry.canonical_forms`), ShapeDNA of the posed full mesh (the intrinsic ceiling,
 :func:`lit3d.geometry.spectral.shape_dna`; no codebook, so sd 0), and chance (random distances,
 seeded by the codebook seed). ``--depth-row ROW=DIR``: one more depth row, the canonical depth images
@@ -187,7 +187,7 @@ def summarise(per_seed: dict[str, dict[str, list[float]]]) -> dict[str, dict[str
 
 def study(items: dict, datamodule, settings: dict, seeds, rows=None, extra_depths: dict | None = None) -> dict:
     """Every row's per-seed scores on the pooled ``items`` (``subject``, ``pose`` and the depth
-    images of :func:`lit3d.canonical.heldout.pool`); ``settings``: the task's ``retrieval``,
+    images of :func:`lit3d.canonical.heldout.pool`); ``settings``: the evaluation settings ``retrieval``,
     ``mask_threshold``, ``chance_trials``, ``mesh_baselines``, ``baseline_max_vertices``,
     ``baseline_landmarks``, ``baseline_smacof_eps``. ``rows``: restrict to these row names.
     ``extra_depths``: ``{row: (N, S, S) depth}`` more depth rows (mask: depth > 0; :func:`folder_depths`)."""
@@ -246,8 +246,8 @@ def run(run_dirs, seeds, out_dir, overrides=(), rows=None, strict: bool = True, 
         fold_test: bool = False, depth_rows: dict | None = None) -> Path:
     """Pool (or, without run dirs, take every held-out item of the composed config; ``fold_test``: only
     the test split of its ``data.fold``), score, write ``pooled_results.md`` and ``pooled.json`` into
-    ``out_dir``; returns the .md path. ``mesh_baselines``: the canonical-form rows (default: the task's
-    ``mesh_baselines``); ``depth_rows``: ``{row: folder}`` more depth rows (:func:`folder_depths`)."""
+    ``out_dir``; returns the .md path. ``mesh_baselines``: the canonical-form rows (default: the runs'
+    ``evaluation.mesh_baselines``); ``depth_rows``: ``{row: folder}`` more depth rows (:func:`folder_depths`)."""
     from omegaconf import OmegaConf
 
     t0 = time.perf_counter()
@@ -259,7 +259,8 @@ def run(run_dirs, seeds, out_dir, overrides=(), rows=None, strict: bool = True, 
     else:
         cfg = compose(list(overrides))
         data = OmegaConf.to_container(cfg.data, resolve=True)
-        settings = settings_of(OmegaConf.to_container(cfg.task, resolve=True))
+        settings = settings_of({**OmegaConf.to_container(cfg.task, resolve=True),  # mask_threshold
+                                **OmegaConf.to_container(cfg.evaluation, resolve=True)})
         dm = build_datamodule(data)
         dm.prepare_data()
         dm.setup()
@@ -328,7 +329,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--out", type=Path, required=True, help="folder for pooled_results.md and pooled.json")
     parser.add_argument("--rows", nargs="+", default=None, help="only these rows (e.g. input cmds shapedna)")
     parser.add_argument("--mesh-baselines", nargs="*", default=None,
-                        help="canonical-form rows (cmds smacof nmds gps posed; default: the task's mesh_baselines)")
+                        help="canonical-form rows (cmds smacof nmds gps posed; default: evaluation.mesh_baselines)")
     parser.add_argument("--allow-partial", action="store_true", help="score folds that do not cover every item")
     parser.add_argument("--fold-test", action="store_true",
                         help="without run dirs: only the test split of data.fold (not every fold's held-out items)")

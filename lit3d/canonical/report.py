@@ -103,8 +103,8 @@ def write_results(metrics: dict, out_dir: Path, dataset: str | None = None) -> P
         secs = ", ".join(f"{k} {m[f'test/retrieval/{k}/seconds']:.1f}s" for k in MESH_KEYS
                          if m.get(f"test/retrieval/{k}/seconds") is not None)
         notes.append("*Full mesh* rows: the non-learned canonical forms of the test shapes' full meshes (one per "
-                     "subject x pose, simplified to task.baseline_max_vertices; geodesics by the heat method), then the same "
-                     "descriptor; the depth rows rank every test item (subject x pose x view). "
+                     "subject x pose, simplified to evaluation.baseline_max_vertices; geodesics by the heat method), "
+                     "then the same descriptor; the depth rows rank every test item (subject x pose x view). "
                      + (f"Time per method (forms + descriptor): {secs}." if secs else ""))
     if m.get("test/retrieval/model/e") is not None:
         notes.append("E-measure (ours; F1 of the top min(32, n-1) results, so constant when every item is "

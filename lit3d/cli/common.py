@@ -34,6 +34,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from lit3d.cli.about import EXIT_USER, about_flags
 from lit3d.cli.config_checks import ConfigValueError, check_config_values, config_problem
+from lit3d.cli.eval_settings import override_problem, stale_task_keys
 from lit3d.cli.evaluation import run_evaluation, scalar_metrics  # noqa: F401  (re-exported)
 from lit3d.cli.rundir import claim_run_dir, hold_output_dir
 from lit3d.utils import quiet
@@ -215,8 +216,9 @@ def compose_config(config_name: str, overrides=(), return_hydra_config: bool = F
 
 def check_composes(args: Sequence[str], config_name: str, conf_dir: str = CONF_DIR) -> DictConfig | None:
     """Raise :class:`UserError` when the overrides do not compose (e.g. a key that is not in the
-    config: ``trainer.max_epoch=3``), with Hydra's first two lines as the message; else return
-    the composed config (with its ``hydra`` node).
+    config: ``trainer.max_epoch=3``), with Hydra's first two lines as the message (a moved evaluation
+    setting, ``task.mesh_baselines=[]``: one line naming ``evaluation.mesh_baselines``,
+    :mod:`lit3d.cli.eval_settings`); else return the composed config (with its ``hydra`` node).
 
     Skipped for multiruns and Hydra's own flags (``-m``, ``--cfg`` ...): Hydra reports those.
     """
@@ -225,10 +227,17 @@ def check_composes(args: Sequence[str], config_name: str, conf_dir: str = CONF_D
     from hydra.errors import HydraException
 
     try:
-        return compose_config(config_name, args, return_hydra_config=True, conf_dir=conf_dir)
+        composed = compose_config(config_name, args, return_hydra_config=True, conf_dir=conf_dir)
     except HydraException as exc:
+        moved = override_problem(args, lambda rest: compose_config(config_name, rest, conf_dir=conf_dir))
+        if moved:  # a task.KEY that is an evaluation setting now, or evaluation.* without a task
+            raise UserError(moved) from exc
         lines = [ln.strip() for ln in str(exc).strip().splitlines() if ln.strip()]
         raise UserError("; ".join(ln.rstrip(".") for ln in lines[:2]) or type(exc).__name__) from exc
+    stale = stale_task_keys(composed)  # an experiment that still sets an evaluation setting under task:
+    if stale:
+        raise UserError(stale)
+    return composed
 
 
 def check_output_paths(cfg: DictConfig | None) -> None:

@@ -118,7 +118,6 @@ RULES: tuple[Rule, ...] = (
     Rule("task.seed",                          "int",     ">= 0"),
     Rule("task.adversarial",                   "bool"),
     Rule("task.use_*",                         "bool"),
-    Rule("task.cv",                            "bool"),
     # task: net sizes (completion: task.nets, canonical and quality: task.net)
     Rule("task.nets.*_channels.*",             "int",     ">= 1"),
     Rule("task.nets.*_res",                    "int",     ">= 1"),
@@ -144,6 +143,12 @@ RULES: tuple[Rule, ...] = (
     Rule("task.net.warp_affine_cell",          "int",     ">= 1"),
     Rule("task.net.hidden",                    "int",     ">= 1"),
     Rule("task.net.blocks",                    "int",     ">= 1"),
+    # evaluation settings (the evaluator's, not the module's: lit3d.cli.eval_settings)
+    Rule("evaluation.cv",                      "bool"),
+    Rule("evaluation.chance_trials",           "int",     ">= 1"),
+    Rule("evaluation.retrieval_min_subjects",  "int",     ">= 1"),
+    Rule("evaluation.cv_epochs",               "int?",    ">= 1"),
+    Rule("evaluation.surface.points",          "int",     ">= 1"),
 )
 # fmt: on
 

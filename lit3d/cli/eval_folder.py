@@ -14,7 +14,7 @@ target's shape, {0, 1} or probabilities in [0, 1]; an SDF under the npz key 'sdf
 (every target of a scored split needs one). Writes OUT/metrics.json and OUT/results.md: the
 thesis-layout IoU tables (grid predictions) and the surface metrics (Chamfer-L1, F-score,
 normal consistency) beside IoU, as lit3d-eval writes them for a checkpoint. Point count, F-score
-thresholds and seed default to task.surface of conf/task/completion.yaml. Bad input (a missing,
+thresholds and seed default to evaluation.surface of conf/task/completion.yaml. Bad input (a missing,
 unreadable or wrongly shaped prediction, no prepared data) ends with one line naming the file
 and exit status 2.
 """
@@ -31,10 +31,10 @@ PROG = "lit3d-eval-folder"
 
 
 def surface_defaults() -> dict:
-    """``task.surface`` of ``conf/task/completion.yaml`` (points, fscore_at, seed)."""
+    """``evaluation.surface`` of ``conf/task/completion.yaml`` (points, fscore_at, seed)."""
     from omegaconf import OmegaConf
 
-    return OmegaConf.to_container(OmegaConf.load(Path(CONF_DIR) / "task" / "completion.yaml").task.surface)
+    return OmegaConf.to_container(OmegaConf.load(Path(CONF_DIR) / "task" / "completion.yaml").evaluation.surface)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -53,10 +53,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--mesh-frame", choices=("unit", "voxel"), default="unit",
                    help="meshes: 'unit' = the target grid is the cube [-0.5, 0.5]^3 (default); "
                         "'voxel' = vertex (x, y, z) at grid index [x, y, z]")
-    p.add_argument("--points", type=int, default=None, help="points sampled per surface (default task.surface.points)")
+    p.add_argument("--points", type=int, default=None,
+                   help="points sampled per surface (default evaluation.surface.points)")
     p.add_argument("--fscore-at", type=float, nargs="+", default=None,
                    help="F-score thresholds as fractions of the target's bounding-box diagonal "
-                        "(default task.surface.fscore_at)")
+                        "(default evaluation.surface.fscore_at)")
     p.add_argument("--debug", action="store_true", help="show full tracebacks")
     p.add_argument("--version", action="version", version=version_line(PROG))
     return p

@@ -2,6 +2,11 @@
 
     lit3d-eval ckpt_path=logs/completion/runs/X/checkpoints/last.ckpt
     lit3d-eval task=completion ckpt_path=... data=recgan data.root=../shared/data/recgan_sample
+    lit3d-eval task=canonical ckpt_path=... evaluation.mesh_baselines=[]    # other evaluation settings
+
+Evaluates with the evaluation settings the checkpoint was trained with (saved by lit3d-train), except
+those the command line sets (``evaluation.*``; with ``task=NAME``, whose config brings the node):
+:mod:`lit3d.cli.eval_settings`.
 
 Writes into the run dir: metrics.json, results.md (the thesis's table layout,
 with the thesis's figures beside ours), config.yaml and PNG figures, as one set (staged, then moved
@@ -17,13 +22,14 @@ import hydra
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
+from lit3d.cli import eval_settings
 from lit3d.cli.common import (
     CONF_DIR,
     UserError,
     build_datamodule,
     cli_main,
     import_object,
-    read_checkpoint_meta,
+    read_checkpoint,
     run_cli,
     run_evaluation,
     to_plain,
@@ -33,16 +39,16 @@ from lit3d.cli.stops import evaluating
 from lit3d.utils.provenance import provenance
 
 
-def checkpoint_meta_for(cfg: DictConfig) -> dict:
-    """The checkpoint's lit3d metadata; refuses a checkpoint of another task than ``task=NAME``, and
+def checkpoint_meta_for(cfg: DictConfig) -> tuple[dict, dict]:
+    """The checkpoint and its lit3d metadata; refuses a checkpoint of another task than ``task=NAME``, and
     one of another task than the data config's (``data=NAME``, :func:`check_eval_data`)."""
-    meta = read_checkpoint_meta(cfg.ckpt_path)
+    ckpt, meta = read_checkpoint(cfg.ckpt_path)
     have = (meta.get("task") or {}).get("name")
     wanted = cfg.get("task_info")
     if wanted is not None and wanted.get("name") != have:
         raise UserError(f"{cfg.ckpt_path}: checkpoint is for task '{have}', not '{wanted.get('name')}'")
     check_eval_data(cfg.ckpt_path, meta, cfg.get("data"))
-    return meta
+    return ckpt, meta
 
 
 def evaluate(cfg: DictConfig) -> dict[str, float]:
@@ -54,7 +60,7 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
 
 
 def _evaluate(cfg: DictConfig, out_dir: Path) -> dict[str, float]:
-    meta = checkpoint_meta_for(cfg)  # before the heavy imports: a wrong checkpoint fails fast
+    ckpt, meta = checkpoint_meta_for(cfg)  # before the heavy imports: a wrong checkpoint fails fast
     import lightning.pytorch as pl
     import torch
 
@@ -66,6 +72,8 @@ def _evaluate(cfg: DictConfig, out_dir: Path) -> dict[str, float]:
     task_cfg = meta["task"]
     task_cls = import_object(task_cfg["_target_"])
     task = task_cls.load_from_checkpoint(cfg.ckpt_path, map_location="cpu", weights_only=True)
+    settings = eval_settings.resolve(cfg, ckpt, meta, task_cls)  # the checkpoint's; the command line's win
+    del ckpt
     data_cfg = to_plain(cfg.data) if cfg.get("data") is not None else dict(meta["data"])
     if hasattr(task, "adapt_data_config"):
         data_cfg = task.adapt_data_config(data_cfg)
@@ -77,10 +85,10 @@ def _evaluate(cfg: DictConfig, out_dir: Path) -> dict[str, float]:
         return {"ckpt_path": str(cfg.ckpt_path),
                 "provenance": {**provenance(datamodule), "checkpoint": meta.get("provenance")}}
 
-    config = OmegaConf.to_yaml(OmegaConf.create({"task": task_cfg, "data": data_cfg}))
+    config = OmegaConf.to_yaml(OmegaConf.create({"task": task_cfg, "data": data_cfg, "evaluation": settings}))
     return run_evaluation(trainer, task, datamodule, task_cfg["name"], out_dir,
                           validate=getattr(task, "validate_before_test", False), n_figures=cfg.n_figures,
-                          extra=record, files={"config.yaml": config})
+                          extra=record, files={"config.yaml": config}, settings=settings)
 
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="eval")

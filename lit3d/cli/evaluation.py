@@ -17,7 +17,7 @@ import logging
 import os
 import shutil
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 
 from lit3d.cli.registry import evaluator_module
@@ -65,9 +65,10 @@ def staged_outputs(out_dir: Path, last: str = METRICS) -> Iterator[Path]:
 
 def run_evaluation(trainer, task, datamodule, task_name: str, out_dir: Path, *, ckpt_path: str | None = None,
                    validate: bool = False, n_figures: int = 0, extra: dict | Callable[[], dict] | None = None,
-                   files: dict[str, str] | None = None) -> dict[str, float]:
+                   files: dict[str, str] | None = None, settings: Mapping | None = None) -> dict[str, float]:
     """Test ``task`` (after validating it when ``validate``: the completion threshold is chosen there),
-    run the task room's evaluator on the result, and on rank 0 write ``metrics.json``, ``results.md``,
+    run the task room's evaluator on the result with the evaluation ``settings`` (the config's
+    ``evaluation`` node, :mod:`lit3d.cli.eval_settings`), and on rank 0 write ``metrics.json``, ``results.md``,
     the artefacts and ``n_figures`` figures per split into ``out_dir`` as one set
     (:func:`staged_outputs`). Used by ``lit3d-eval`` and, after fitting, by ``lit3d-train``.
     ``extra``: entries written first into ``metrics.json`` (not returned), or a function returning
@@ -75,15 +76,17 @@ def run_evaluation(trainer, task, datamodule, task_name: str, out_dir: Path, *, 
     set (name -> text). Between the steps and after every batch (:mod:`lit3d.utils.stops`) a Ctrl-C
     or SIGTERM under :func:`lit3d.utils.stops.on_signals` stops it, before anything is written."""
     evaluator = evaluator_module(task_name)
+    settings = dict(settings or {})
     metrics: dict[str, float] = {}
     if validate:
         trainer.validate(task, datamodule=datamodule, ckpt_path=ckpt_path, weights_only=True)
         metrics.update({k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("val/")})
         check_stop()
+    evaluator.prepare(task, settings)
     trainer.test(task, datamodule=datamodule, ckpt_path=ckpt_path, weights_only=True)
     metrics.update({k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("test/")})
     check_stop()
-    evaluation = evaluator.protocol(task, datamodule)  # on every rank: it may synchronise states
+    evaluation = evaluator.protocol(task, datamodule, settings)  # on every rank: it may synchronise states
     protocol_metrics = evaluation.metrics
     metrics.update(protocol_metrics)
     check_stop()

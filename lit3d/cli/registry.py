@@ -1,10 +1,14 @@
 """Task name -> the task room's evaluator module. The LightningModule class comes from the task
 config's ``_target_``.
 
-An evaluator module (``lit3d/<task>/evaluator.py``) provides:
+An evaluator module (``lit3d/<task>/evaluator.py``) provides (``settings``: the run's evaluation
+settings, the config's ``evaluation`` node as a plain dict, :mod:`lit3d.cli.eval_settings`; the
+LightningModule does not hold them):
 
-- ``protocol(task, datamodule) -> Evaluation`` (:class:`lit3d.utils.evaluation.Evaluation`): metrics
-  computed after ``trainer.test`` from what the module's test metrics gathered (retrieval,
+- ``prepare(task, settings) -> None``: before ``trainer.test`` (the completion task's surface metrics
+  are set up here; a no-op for the others);
+- ``protocol(task, datamodule, settings) -> Evaluation`` (:class:`lit3d.utils.evaluation.Evaluation`):
+  metrics computed after ``trainer.test`` from what the module's test metrics gathered (retrieval,
   baselines, cross-validation), on every rank, plus in-memory artefacts for the writers below;
 - ``write_artefacts(evaluation, out_dir) -> list[Path]``: files beyond the tables (rank 0);
 - ``write_results(metrics, out_dir) -> Path``: results.md in the thesis's table layout;

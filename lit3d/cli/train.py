@@ -196,7 +196,9 @@ def train(cfg: DictConfig) -> float | None:
     atomic_write_text(output_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))  # once every check passed
     loggers = with_csv_logger(build_loggers(cfg, wandb_id), output_dir)  # the CSV log is always on (curves.png)
     callbacks = [instantiate(c) for c in (cfg.get("callbacks") or {}).values() if c is not None]
-    callbacks += [MetadataCallback(task_meta(cfg), to_plain(cfg.data), wandb_id), StopPoints()]  # StopPoints: the test's
+    settings = to_plain(cfg.get("evaluation"))  # the evaluator's settings, saved in every checkpoint
+    callbacks += [MetadataCallback(task_meta(cfg), to_plain(cfg.data), wandb_id, settings),
+                  StopPoints()]  # StopPoints: the test's
     trainer: pl.Trainer = instantiate(cfg.trainer, callbacks=callbacks, logger=loggers or False,
                                       **checkpoint_plugins(cfg.trainer))
     for lg in loggers:
@@ -213,7 +215,7 @@ def train(cfg: DictConfig) -> float | None:
                 log.info("testing %s", best or "the last weights")
                 run_evaluation(trainer, task, datamodule, cfg.task_info.name, output_dir, ckpt_path=best or None,
                                n_figures=int(cfg.get("n_figures", 0)),
-                               extra=run_info)
+                               extra=run_info, settings=settings)
         elif trainer.is_global_zero:
             write_json(output_dir / "metrics.json", run_info)
         if trainer.is_global_zero:

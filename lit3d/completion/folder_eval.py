@@ -37,7 +37,7 @@ MESH_FRAMES = ("unit", "voxel")
 @dataclass(frozen=True)
 class FolderScoring:
     """What :func:`score_folder` needs besides the folders: ``threshold`` for probability grids,
-    ``mesh_frame`` (``unit`` | ``voxel``) and the surface sizes of ``task.surface``."""
+    ``mesh_frame`` (``unit`` | ``voxel``) and the surface sizes of ``evaluation.surface``."""
 
     points: int
     fscore_at: tuple[float, ...]

@@ -14,6 +14,10 @@ Buffers saved in checkpoints (what evaluation needs, so a loaded checkpoint eval
     prior        (1, 1, R, R, R) float32     per-voxel mean of the first ``prior_samples`` training
                                              targets (index order), computed once at fit start
     prior_items  () int64                    training items averaged into ``prior``; 0 = not computed
+
+The test's surface metrics (Chamfer-L1, F-score, normal consistency) are an evaluation setting
+(``evaluation.surface``), not the module's: :func:`lit3d.completion.evaluator.prepare` sets them up
+before the test (:meth:`CompletionTask.use_surface_metrics`).
 """
 from __future__ import annotations
 
@@ -36,6 +40,7 @@ from lit3d.completion.summary import summarize_completion
 from lit3d.completion.surface_eval import SurfaceTestMetrics
 from lit3d.metrics.gathered import compute_if_updated
 from lit3d.callbacks.nonfinite import NonFiniteLossError, guard_step, validate_mode  # noqa: F401 (re-exported)
+from lit3d.utils.evaluation import legacy_settings
 from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, select_seen_categories, select_unseen_categories
 
 log = logging.getLogger("lit3d.completion")
@@ -45,6 +50,11 @@ TEST_SPLITS = ("same", "cross", "unseen", "unseen_cross")
 PREDICTION_SOURCES = ("model", "input", "prior", "extrusion")
 
 
+# the evaluation settings (the config's ``evaluation`` node, :mod:`lit3d.completion.evaluator`) that checkpoints
+# written before that node hold among the task's hyper-parameters, with the constructor's defaults then
+EVALUATION_LEGACY = {"surface": None}
+
+
 def split_key(name: str) -> str:
     """'test_same' / 'same' -> 'same'."""
     return name.removeprefix("test_")
@@ -52,6 +62,8 @@ def split_key(name: str) -> str:
 
 class CompletionTask(pl.LightningModule):
     """Cascade generator + critic (+ classifier) trained with WGAN-GP and weighted BCE."""
+
+    evaluation_legacy = EVALUATION_LEGACY  # read by lit3d-eval for checkpoints saved before the evaluation node
 
     # lit3d-eval runs validation first: the IoU threshold is chosen there
     validate_before_test = True
@@ -79,10 +91,14 @@ class CompletionTask(pl.LightningModule):
         mesh_every_n_epochs: int = 0,
         channels_last: bool = False,
         on_nonfinite: str = "raise",
-        surface: dict | None = None,
+        **legacy_evaluation,
     ):
+        """``legacy_evaluation``: the evaluation settings (:data:`EVALUATION_LEGACY`, ``surface``) that
+        checkpoints written before they got their own config node hold among these hyper-parameters;
+        accepted and ignored (``lit3d-eval`` reads them from the checkpoint), any other keyword is a ValueError."""
         super().__init__()
-        self.save_hyperparameters()
+        legacy_settings(type(self).__name__, legacy_evaluation, EVALUATION_LEGACY)
+        self.save_hyperparameters(ignore=list(legacy_evaluation))
         validate_mode(on_nonfinite)
         self.automatic_optimization = False
         nets = dict(nets)
@@ -113,11 +129,17 @@ class CompletionTask(pl.LightningModule):
             {f"{sp}_{s}": VoxelSweepMetrics(self.eval_categories, thresholds) for sp in TEST_SPLITS for s in PREDICTION_SOURCES}
         )
         self.test_samples = PairedSamples()
-        # test-time surface metrics (task.surface: points, fscore_at, seed); None = off (checkpoints before issue 36)
-        self.test_surface = SurfaceTestMetrics(TEST_SPLITS, PREDICTION_SOURCES, self.eval_categories, **surface) if surface else None
+        self.test_surface: SurfaceTestMetrics | None = None  # set before the test: use_surface_metrics
         self.generator_steps = 0
         self.skipped_steps = 0
         self.loss_scale = resolve_loss_scale(loss_scale, res)
+
+    def use_surface_metrics(self, surface: dict | None) -> None:
+        """The test's surface metrics with sizes ``surface`` (``points``, ``fscore_at``, ``seed``: the
+        evaluation setting ``evaluation.surface``, set by :func:`lit3d.completion.evaluator.prepare`);
+        None = off. Their states are not saved in checkpoints."""
+        self.test_surface = (SurfaceTestMetrics(TEST_SPLITS, PREDICTION_SOURCES, self.eval_categories, **surface)
+                             if surface else None)
 
     # ------------------------------------------------------------------ helpers
     def forward(self, partial: torch.Tensor) -> torch.Tensor:

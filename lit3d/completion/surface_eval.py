@@ -2,8 +2,8 @@
 prediction source, Chamfer-L1, F-score at fractions of the target's bounding-box diagonal and
 normal consistency of the thresholded prediction's marching-cubes surface against the target's.
 
-Sizes come from ``task.surface`` (``conf/task/completion.yaml``): ``points`` sampled on each
-surface, ``fscore_at`` fractions, ``seed``. Each target is sampled once and shared by the
+Sizes come from the evaluation setting ``evaluation.surface`` (``conf/task/completion.yaml``): ``points``
+sampled on each surface, ``fscore_at`` fractions, ``seed``. Each target is sampled once and shared by the
 prediction sources; a grid that repeats (the prior's) is sampled once. Keys (no suffix for
 ``model``, ``_<source>`` for the baselines):
 ``test/<split>/{chamfer_l1,fscore_<f>pct,normal_consistency}[_<source>][/<category>]`` and
@@ -28,7 +28,7 @@ class SurfaceTestMetrics(torch.nn.Module):
     Args:
         splits, sources: test split and prediction source names.
         categories: the metrics' categories, in their order.
-        points, fscore_at, seed: ``task.surface`` (see the module doc).
+        points, fscore_at, seed: ``evaluation.surface`` (see the module doc).
     """
 
     def __init__(self, splits: Sequence[str], sources: Sequence[str], categories: Sequence[str], points: int,

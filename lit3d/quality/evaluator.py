@@ -5,11 +5,13 @@ after ``trainer.test``, results.md and scatter plots.
 
 - ``test/<baseline>/<kind>[/<shape>]``: each baseline (Chamfer, Hausdorff, MSE, PSNR, MS-SSIM,
   single best feature) fitted / chosen on the datamodule's training split, scored on its test split;
-- with the task's ``cv``: ``test/cv/<method>/<kind>[/<shape>]``, leave-one-shape-out over the
-  datamodule's whole matrix (tables 4.2-4.4), the task's learned methods + the baselines;
-- with the task's ``cross_data`` (data configs): ``test/cross/<dataset>/<method>/...``, select +
-  train on this datamodule's matrix, test on each other dataset (table 4.8).
+- with ``cv``: ``test/cv/<method>/<kind>[/<shape>]``, leave-one-shape-out over the datamodule's
+  whole matrix (tables 4.2-4.4), the learned methods ``cv_methods`` (``cv_epochs`` epochs) + the baselines;
+- with ``cross_data`` (data configs): ``test/cross/<dataset>/<method>/...``, select + train on this
+  datamodule's matrix, test on each other dataset (table 4.8).
 
+``settings`` are the run's evaluation settings (the config's ``evaluation`` node, saved in the checkpoint:
+``baselines``, ``cv``, ``cv_epochs``, ``cv_methods``, ``cross_data``), not the module's.
 Learned methods are the task's own settings through :mod:`lit3d.quality.task_methods` and are
 trained by the one trainer (:mod:`lit3d.quality.trainer`). What the figures need beyond the
 metrics (the leave-one-shape-out predictions) travels in the returned
@@ -33,23 +35,26 @@ from lit3d.utils.evaluation import Evaluation
 __all__ = ["protocol", "write_artefacts", "write_figures", "write_results"]
 
 
-def protocol(task, datamodule) -> Evaluation:
-    """Baselines on the held-out split, and (per the task's settings) leave-one-shape-out and
+def prepare(task, settings: Mapping) -> None:
+    """Nothing to set up before the test: the protocol runs after it."""
+
+
+def protocol(task, datamodule, settings: Mapping) -> Evaluation:
+    """Baselines on the held-out split, and (per the evaluation ``settings``) leave-one-shape-out and
     cross-dataset metrics; see the module docstring for the keys."""
-    hp = task.hparams
-    baselines = task_baselines(hp)
+    baselines = task_baselines(settings.get("baselines"))
     train, test = datamodule.split("train"), datamodule.split("test")
     out: dict[str, float] = {}
     artefacts = {}
     for name, method in baseline_methods(test.names, baselines).items():
         pred = method.fit(train).predict(test)
         out.update(shape_corr_metrics(f"test/{name}", pred, test.target, test.shapes))
-    if hp.cv:
-        results = run_cv(task, datamodule.matrix)
+    if settings.get("cv"):
+        results = run_cv(task, datamodule.matrix, settings)
         artefacts["cv"] = results
         out.update(results_to_metrics(results, "test/cv"))
-    if hp.cross_data:
-        out.update(run_cross(task, datamodule.matrix, hp.cross_data))
+    if settings.get("cross_data"):
+        out.update(run_cross(task, datamodule.matrix, settings["cross_data"], settings))
     return Evaluation(out, artefacts)
 
 
@@ -58,10 +63,17 @@ def write_artefacts(evaluation: Evaluation, out_dir: Path) -> list[Path]:
     return []
 
 
-def run_cv(task, fm: FeatureMatrix) -> dict[str, EvalResult]:
-    """Leave-one-shape-out (tables 4.2-4.4) on ``fm``: the task's learned methods + the baselines."""
-    baselines = task_baselines(task.hparams)
-    methods = dict(cv_methods(task.hparams, task.train_config(task.hparams.cv_epochs), fm.names))
+def learned_methods(task, fm: FeatureMatrix, settings: Mapping) -> dict:
+    """The learned methods of ``settings["cv_methods"]`` (the task's net, optimiser and selection),
+    trained for ``settings["cv_epochs"]`` epochs (None: the trainer's)."""
+    cfg = task.train_config(settings.get("cv_epochs"))
+    return cv_methods(task.hparams, cfg, fm.names, settings.get("cv_methods") or ())
+
+
+def run_cv(task, fm: FeatureMatrix, settings: Mapping) -> dict[str, EvalResult]:
+    """Leave-one-shape-out (tables 4.2-4.4) on ``fm``: the learned methods + the baselines of ``settings``."""
+    baselines = task_baselines(settings.get("baselines"))
+    methods = dict(learned_methods(task, fm, settings))
     for name in baseline_methods(fm.names, baselines):
         methods[name] = lambda name=name: baseline_methods(fm.names, baselines)[name]
     return leave_one_shape_out(fm, methods)
@@ -81,11 +93,11 @@ def load_matrices(data_cfgs) -> dict[str, FeatureMatrix]:
     return out
 
 
-def run_cross(task, fm: FeatureMatrix, data_cfgs) -> dict[str, float]:
+def run_cross(task, fm: FeatureMatrix, data_cfgs, settings: Mapping) -> dict[str, float]:
     """Select + train on ``fm``; test on each ``data_cfgs`` dataset (table 4.8); "ours_sfs" when
-    the task's ``cv_methods`` has it, else every learned method."""
+    ``settings["cv_methods"]`` has it, else every learned method."""
     tests = load_matrices(data_cfgs)
-    all_methods = cv_methods(task.hparams, task.train_config(task.hparams.cv_epochs), fm.names)
+    all_methods = learned_methods(task, fm, settings)
     methods = {k: v for k, v in all_methods.items() if k == "ours_sfs"} or all_methods
     out: dict[str, float] = {}
     for dname, per_method in cross_dataset(fm, tests, methods).items():

@@ -21,8 +21,8 @@ Logged: ``val/mse``, ``val/pearson``, ``val/spearman`` (mean over validation sha
 ``test/ours/<kind>[/<shape>]`` and ``test/n_features``. Correlations come from
 :class:`~lit3d.quality.shape_metric.PerShapeCorrelation`, whose states are gathered over DDP
 ranks before computing. ``baselines``, ``cv``, ``cv_epochs``, ``cv_methods`` and ``cross_data``
-are settings of :func:`lit3d.quality.evaluator.protocol` (``test/<baseline>/...``,
-``test/cv/...``, ``test/cross/...``), kept here so one task config holds them.
+are evaluation settings (the config's ``evaluation`` node) of :func:`lit3d.quality.evaluator.protocol`
+(``test/<baseline>/...``, ``test/cv/...``, ``test/cross/...``), not this module's.
 """
 from __future__ import annotations
 
@@ -39,13 +39,20 @@ from lit3d.quality.nets import QualityMLP, count_parameters
 from lit3d.quality.shape_metric import PerShapeCorrelation
 from lit3d.quality.task_methods import filter_features  # noqa: F401  (re-exported)
 from lit3d.quality.trainer import TrainConfig, init_mlp, make_optimizer
+from lit3d.utils.evaluation import legacy_settings
 
 CKPT_KEY = "quality"
 NET_DEFAULTS = {"hidden": 32, "blocks": 2, "dropout": 0.1, "batch_norm": True}
+# the evaluation settings (the config's ``evaluation`` node, :mod:`lit3d.quality.evaluator`) that checkpoints
+# written before that node hold among the task's hyper-parameters, with the constructor's defaults then
+EVALUATION_LEGACY = {"baselines": None, "cv": False, "cv_epochs": None, "cv_methods": ("ours_all", "ours_sfs"),
+                     "cross_data": None}
 
 
 class QualityTask(pl.LightningModule):
     """Thesis MLP on (selected) rendering features, predicting distortion in [0, 1]."""
+
+    evaluation_legacy = EVALUATION_LEGACY  # read by lit3d-eval for checkpoints saved before the evaluation node
 
     def __init__(
         self,
@@ -59,15 +66,15 @@ class QualityTask(pl.LightningModule):
         include: Sequence[str] | None = None,
         exclude: Sequence[str] | None = None,
         features: Sequence[str] | None = None,
-        baselines: Mapping[str, Sequence] | None = None,
-        cv: bool = False,
-        cv_epochs: int | None = None,
-        cv_methods: Sequence[str] = ("ours_all", "ours_sfs"),
-        cross_data: Sequence[Mapping[str, Any]] | None = None,
         seed: int = 0,
+        **legacy_evaluation,
     ):
+        """``legacy_evaluation``: the evaluation settings (:data:`EVALUATION_LEGACY`) that checkpoints written
+        before they got their own config node hold among these hyper-parameters; accepted and ignored
+        (``lit3d-eval`` reads them from the checkpoint), any other keyword is a ValueError."""
         super().__init__()
-        self.save_hyperparameters()
+        legacy_settings(type(self).__name__, legacy_evaluation, EVALUATION_LEGACY)
+        self.save_hyperparameters(ignore=list(legacy_evaluation))
         self.net_kwargs = {**NET_DEFAULTS, **dict(net or {})}
         self.features: list[str] = []
         self.sfs_info: dict | None = None

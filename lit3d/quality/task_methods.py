@@ -1,11 +1,13 @@
-"""The quality task's settings (its hparams) as protocol pieces: candidate features, feature
-selection on a training split, the learned methods of cross-validation, the baselines.
+"""The quality task's settings (its hparams) and evaluation settings as protocol pieces: candidate
+features, feature selection on a training split, the learned methods of cross-validation, the baselines.
 
 Shared by :class:`lit3d.quality.feature_selection.FeatureSelection` (selection before fit) and
 :func:`lit3d.quality.evaluator.protocol` (baselines, leave-one-shape-out, cross-dataset), so the
 checkpoint's model and the protocol's "Our*" rows are chosen by the same code.
 ``hp`` is the task's ``hparams`` (``QualityTask.__init__`` arguments); ``cfg`` its
-:class:`~lit3d.quality.trainer.TrainConfig` (``QualityTask.train_config``).
+:class:`~lit3d.quality.trainer.TrainConfig` (``QualityTask.train_config``); which learned methods
+cross-validation runs and the baselines are evaluation settings (the config's ``evaluation`` node:
+``cv_methods``, ``baselines``), passed in by :mod:`lit3d.quality.evaluator`.
 """
 from __future__ import annotations
 
@@ -63,13 +65,13 @@ def learned_method(hp: Mapping[str, Any], cfg: TrainConfig, selection: str, name
                         candidates=candidates(hp, names), sfs_cfg=_sfs_cfg(hp, cfg))
 
 
-def cv_methods(hp: Mapping[str, Any], cfg: TrainConfig, names: Sequence[str]) -> dict[str, MethodFactory]:
-    """Factories of the learned methods named in ``hp["cv_methods"]`` (ours_all, ours_sfs)."""
+def cv_methods(hp: Mapping[str, Any], cfg: TrainConfig, names: Sequence[str],
+               methods: Sequence[str]) -> dict[str, MethodFactory]:
+    """Factories of the learned ``methods`` (the evaluation setting ``cv_methods``: ours_all, ours_sfs)."""
     return {key: (lambda selection=selection: learned_method(hp, cfg, selection, names))
-            for key, selection in LEARNED_METHODS.items() if key in hp["cv_methods"]}
+            for key, selection in LEARNED_METHODS.items() if key in methods}
 
 
-def task_baselines(hp: Mapping[str, Any]) -> dict[str, tuple[str, float]] | None:
-    """``hp["baselines"]`` as name -> (feature, sign), or None for the thesis's defaults."""
-    b = hp["baselines"]
-    return None if b is None else {k: (str(v[0]), float(v[1])) for k, v in b.items()}
+def task_baselines(baselines: Mapping[str, Sequence] | None) -> dict[str, tuple[str, float]] | None:
+    """The evaluation setting ``baselines`` as name -> (feature, sign), or None for the thesis's defaults."""
+    return None if baselines is None else {k: (str(v[0]), float(v[1])) for k, v in baselines.items()}
