@@ -29,6 +29,11 @@ sides of a 320x240 image, centred), the person 3.2 m in front of it, facing it.
 ``--multi-start``: :func:`lit3d.body.fit.fit_best` (four starts probed, the lowest loss goes on) in
 place of the single fit from the mean body; CPU seconds count every start.
 
+``--init CKPT`` (a :mod:`lit3d.body.regressor` checkpoint): two more rows beside the optimisation
+alone: the regressor alone (its parameters, no step) and the regressor + refinement
+(:func:`lit3d.body.regressor.fit_from_regressor`, ``--refine-global`` + ``--refine-full`` steps),
+each with its CPU seconds (the crop and network included).
+
 Writes ``DIR/body_eval.json`` (every item) and ``DIR/body_eval.md`` (medians, quartiles), both
 rewritten after every item (a stopped run keeps what it measured).
 """
@@ -36,9 +41,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -48,17 +51,18 @@ from datamodules.canonical.posesets import index_faust
 from lit3d.body.fit import FitConfig, fit_best, fit_body
 from lit3d.body.model import PHENOTYPES, Body
 from lit3d.body.points import observe
+from lit3d.body.regressor import REFINE_FULL_ITERS, REFINE_GLOBAL_ITERS, fit_from_regressor, load_regressor, \
+    refine_config, regress
 from lit3d.body.results import fit_outputs
+from lit3d.body.synthetic import FLIP, HEIGHT, WIDTH, Camera, render, sensed_depth
 from lit3d.metrics.mesh import surface_samples
 from lit3d.metrics.pointcloud import nearest
 from lit3d.metrics.surface import fscores
-from lit3d.render.camera import render_pinhole_depth
-from lit3d.sensing.sensor import RAW_RES, RECGAN_FOV_DEG, SENSORS, hole_mask
+from lit3d.sensing.sensor import SENSORS
 
-WIDTH, HEIGHT = 320, 240
 DISTANCE = 3.2        # metres from the camera to the person's centre
 FAUST_HEIGHT = 1.7    # metres: each FAUST subject's pose-0 standing height
-FLIP = np.array([1.0, -1.0, -1.0])  # y up, facing +z  <->  camera frame (y down, z forward), facing the camera
+METHODS = ("fit", "mean", "init", "refined")  # optimisation alone, mean body, regressor alone, regressor + refinement
 
 
 # ------------------------------------------------------------------ metrics
@@ -95,60 +99,32 @@ def phenotype_error(fitted, truth: dict) -> dict[str, float]:
     return {k: abs(float(fitted[k]) - float(v)) for k, v in truth.items()}
 
 
-# ------------------------------------------------------------------ camera, sensing
-@dataclass(frozen=True)
-class Camera:
-    """Pinhole intrinsics (pixel centres at integers, as :mod:`lit3d.body.points`)."""
-
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-
-    @classmethod
-    def default(cls, width: int = WIDTH, height: int = HEIGHT, fov_deg: float = RECGAN_FOV_DEG) -> "Camera":
-        t = 2.0 * math.tan(math.radians(fov_deg) / 2)  # as lit3d.reconstruct.backproject.Intrinsics.from_fov
-        return cls(width / t, height / t, width / 2.0, height / 2.0)
-
-
-def render(verts_cam: np.ndarray, faces: np.ndarray, cam: Camera, width: int = WIDTH, height: int = HEIGHT) -> np.ndarray:
-    """``(H, W) float32`` z-depth (metres, 0 = background) of a camera-frame mesh."""
-
-    depth = render_pinhole_depth(np.asarray(verts_cam, np.float64) * FLIP, faces, np.eye(4), width, height,
-                                 cam.fx, cam.fy, cam.cx + 0.5, cam.cy + 0.5, znear=0.05, zfar=100.0)
-    return depth.astype(np.float32)
-
-
-def sensed_depth(verts_cam: np.ndarray, faces: np.ndarray, cam: Camera, rng: np.random.Generator,
-                 sensor: str = "recgan") -> tuple[np.ndarray, dict]:
-    """The depth image of a camera-frame mesh through ``sensor``'s noise (module doc), and what was applied."""
-    s = SENSORS[sensor]
-    voxel = float(np.ptp(verts_cam, axis=0).max()) / RAW_RES
-    shift = rng.uniform(-1.0, 1.0, 3) * s.misregistration * voxel
-    depth = render(verts_cam + shift, faces, cam).astype(np.float64)
-    fg = depth > 0
-    hole_px = s.hole_size * voxel * cam.fy / float(np.median(depth[fg])) if fg.any() else 0.0
-    if s.hole_fraction:
-        fg &= ~hole_mask(fg, s.hole_fraction, hole_px, rng)
-    noise = rng.normal(0.0, s.depth_noise * voxel, depth.shape) if s.depth_noise else 0.0
-    depth = np.where(fg, depth + noise, 0.0).astype(np.float32)
-    return depth, {"sensor": sensor, "voxel_m": voxel, "shift_m": shift.tolist(), "hole_px": hole_px,
-                   "depth_noise_m": s.depth_noise * voxel}
-
-
 # ------------------------------------------------------------------ fits
-def fit(body, depth: np.ndarray, cam: Camera, label: str, multi_start: bool = False) -> dict:
-    """The fit and the mean-body baseline of one depth image, with CPU and wall seconds."""
+def fit(body, depth: np.ndarray, cam: Camera, label: str, multi_start: bool = False, init=None) -> dict:
+    """The fit and the mean-body baseline of one depth image, with CPU and wall seconds; ``init``:
+    ``(Regressor, refinement FitConfig)`` adds ``init`` (the regressor alone) and ``refined``, with
+    ``init_cpu_s`` and ``refined_cpu_s``."""
 
     obs = observe(depth, cam, label=label)
     mean = fit_body(body, obs, FitConfig(full_iters=0))
     c0, t0 = time.process_time(), time.perf_counter()
     res = fit_best(body, obs) if multi_start else fit_body(body, obs)
-    return {"obs": obs, "mean": mean, "fit": res, "cpu_s": time.process_time() - c0, "wall_s": time.perf_counter() - t0}
+    out = {"obs": obs, "mean": mean, "fit": res, "cpu_s": time.process_time() - c0, "wall_s": time.perf_counter() - t0}
+    if init is not None:
+        reg, cfg = init
+        for name, run in (("init", lambda: regress(body, reg, obs)), ("refined", lambda: fit_from_regressor(body, reg, obs, cfg))):
+            c0 = time.process_time()
+            out[name] = run()
+            out[f"{name}_cpu_s"] = time.process_time() - c0
+    return out
+
+
+def _methods(r: dict) -> list[str]:
+    return [m for m in METHODS if m in r]
 
 
 def anny_items(body, n: int, body_seed: int, pose_seed: int, cam: Camera, sensor: str, say,
-               rows: list | None = None, multi_start: bool = False) -> list[dict]:
+               rows: list | None = None, multi_start: bool = False, init=None) -> list[dict]:
     """Fit ``n`` held-out Anny people (module doc); one dict of measures per person, appended to ``rows``."""
 
     rows = [] if rows is None else rows
@@ -158,16 +134,20 @@ def anny_items(body, n: int, body_seed: int, pose_seed: int, cam: Camera, sensor
         posed_y, rest_y = body.model.vertices(pheno, [pose, None])
         truth = posed_y.astype(np.float64) * FLIP + np.array([0.0, 0.0, DISTANCE])
         depth, noise = sensed_depth(truth, body.faces, cam, np.random.default_rng([body_seed, i, 71]), sensor)
-        r = fit(body, depth, cam, f"anny {i}", multi_start)
+        r = fit(body, depth, cam, f"anny {i}", multi_start, init)
         row = {"item": i, "phenotype": pheno, "noise": noise, "cpu_s": r["cpu_s"], "wall_s": r["wall_s"],
                "points": len(r["obs"].points)}
-        for name, f in (("fit", r["fit"]), ("mean", r["mean"])):
+        for name in _methods(r):
+            f = r[name]
             row[name] = {"canonical_mm": 1000 * float(np.median(per_vertex_error(body.rest_y_up(f.params), rest_y))),
                          "posed_mm": 1000 * float(np.median(per_vertex_error(f.vertices, truth))),
-                         "phenotype_abs": phenotype_error(f.params.phenotype.numpy(), pheno)}
+                         "phenotype_abs": phenotype_error(f.params.phenotype.numpy(), pheno),
+                         "cpu_s": r.get(f"{name}_cpu_s", r["cpu_s"] if name == "fit" else None)}
         rows.append(row)
+        extra = "".join(f"; {m}: canonical {row[m]['canonical_mm']:.0f} mm, posed {row[m]['posed_mm']:.0f} mm, "
+                        f"{row[m]['cpu_s']:.2f} s CPU" for m in ("init", "refined") if m in row)
         say(f"anny {i}: canonical {row['fit']['canonical_mm']:.0f} mm (mean body {row['mean']['canonical_mm']:.0f}), "
-            f"posed {row['fit']['posed_mm']:.0f} mm, {row['cpu_s']:.1f} s CPU")
+            f"posed {row['fit']['posed_mm']:.0f} mm, {row['cpu_s']:.1f} s CPU{extra}")
     return rows
 
 
@@ -189,17 +169,19 @@ def faust_meshes(root: Path) -> list[tuple[str, np.ndarray, np.ndarray]]:
 
 
 def faust_items(body, root: Path, cam: Camera, samples: int, canon_dir: Path | None, say,
-                limit: int = 0, rows: list | None = None, multi_start: bool = False, first: int = 0) -> list[dict]:
+                limit: int = 0, rows: list | None = None, multi_start: bool = False, first: int = 0,
+                init=None) -> list[dict]:
     """Fit every FAUST mesh seen from the front (module doc), pose by pose (every subject of pose 0,
     then of pose 1...), from the ``first``-th, at most ``limit`` (0: all); one dict of measures per mesh,
-    appended to ``rows``."""
+    appended to ``rows``; ``init``: as :func:`fit` (the refined fits' canonical depth images go to
+    ``canon_dir`` + ``_refined``)."""
 
     taus = (0.01 * FAUST_HEIGHT, 0.02 * FAUST_HEIGHT)
     rows = [] if rows is None else rows
     meshes = faust_meshes(root)[first:]
     for stem, verts, faces in meshes[:limit] if limit else meshes:
         depth = render(verts, faces, cam)
-        r = fit(body, depth, cam, stem, multi_start)
+        r = fit(body, depth, cam, stem, multi_start, init)
         truth = surface_points(verts, faces, samples)
         out = fit_outputs(body, r["fit"], r["obs"])
         if canon_dir is not None:
@@ -207,14 +189,23 @@ def faust_items(body, root: Path, cam: Camera, samples: int, canon_dir: Path | N
             np.save(canon_dir / f"{stem}_body_canonical_depth.npy", out.canonical_depth)
         row = {"item": stem, "cpu_s": r["cpu_s"], "wall_s": r["wall_s"], "points": len(r["obs"].points),
                "poor_fit": out.quality["poor_fit"], "silhouette_iou": out.quality["silhouette_iou"]}
-        for name, pts in (("fit", surface_points(r["fit"].vertices, body.faces, samples, 1)),
-                          ("mean", surface_points(r["mean"].vertices, body.faces, samples, 1)),
-                          ("points", r["obs"].points)):
+        sets = {m: surface_points(r[m].vertices, body.faces, samples, 1) for m in _methods(r)}
+        for name, pts in (*sets.items(), ("points", r["obs"].points)):
             row[name] = {k: 1000 * v if k in ("chamfer", "pred_to_truth", "truth_to_pred") else v
                          for k, v in chamfer_fscore(pts, truth, taus).items()}
+        for m in ("init", "refined"):
+            if m in r:
+                q = fit_outputs(body, r[m], r["obs"])
+                row[m].update(cpu_s=r[f"{m}_cpu_s"], poor_fit=q.quality["poor_fit"])
+                if canon_dir is not None and m == "refined":
+                    (canon_dir.parent / f"{canon_dir.name}_refined").mkdir(parents=True, exist_ok=True)
+                    np.save(canon_dir.parent / f"{canon_dir.name}_refined" / f"{stem}_body_canonical_depth.npy",
+                            q.canonical_depth)
         rows.append(row)
+        extra = "".join(f"; {m}: Chamfer {row[m]['chamfer']:.0f} mm, F@2% {row[m]['f@0.034']:.2f}, "
+                        f"{row[m]['cpu_s']:.2f} s CPU" for m in ("init", "refined") if m in row)
         say(f"{stem}: Chamfer {row['fit']['chamfer']:.0f} mm (points {row['points']['chamfer']:.0f}, mean body "
-            f"{row['mean']['chamfer']:.0f}), F@2% {row['fit']['f@0.034']:.2f}, {row['cpu_s']:.1f} s CPU")
+            f"{row['mean']['chamfer']:.0f}), F@2% {row['fit']['f@0.034']:.2f}, {row['cpu_s']:.1f} s CPU{extra}")
     return rows
 
 
@@ -238,14 +229,32 @@ def summarise(anny: list[dict], faust: list[dict]) -> dict:
         out["anny"] = {m: {"canonical_mm": spread([r[m]["canonical_mm"] for r in anny]),
                            "posed_mm": spread([r[m]["posed_mm"] for r in anny]),
                            "phenotype_abs": {k: spread([r[m]["phenotype_abs"][k] for r in anny]) for k in PHENOTYPES}}
-                       for m in ("fit", "mean")}
+                       for m in _methods(anny[0])}
         out["anny"]["cpu_s"] = spread([r["cpu_s"] for r in anny])
     if faust:
         keys = ("chamfer", "f@0.017", "f@0.034", "pred_to_truth", "truth_to_pred")
-        out["faust"] = {m: {k: spread([r[m][k] for r in faust]) for k in keys} for m in ("fit", "mean", "points")}
+        out["faust"] = {m: {k: spread([r[m][k] for r in faust]) for k in keys} for m in (*_methods(faust[0]), "points")}
         out["faust"]["cpu_s"] = spread([r["cpu_s"] for r in faust])
         out["faust"]["poor_fit"] = int(sum(r["poor_fit"] for r in faust))
+    for task, rows in (("anny", anny), ("faust", faust)):
+        for m in ("init", "refined"):
+            if rows and m in rows[0]:
+                out[task][m]["cpu_s"] = spread([r[m]["cpu_s"] for r in rows])
+                if task == "faust":
+                    out[task][m]["poor_fit"] = int(sum(r[m]["poor_fit"] for r in rows))
     return out
+
+
+def _labels(meta: dict, faust: bool = False) -> dict[str, str]:
+    alone = "optimisation alone: " if "init" in meta else ""
+    return {"fit": alone + ("Anny fit, posed body" if faust else "Anny fit") + f" ({meta['starts']})",
+            "init": "regressor alone", "refined": f"regressor + refinement ({meta.get('refine', '')})",
+            "points": "visible input points", "mean": "mean body (placed, scaled)"}
+
+
+def _seconds(s: dict, m: str) -> str:
+    c = s["cpu_s"] if m == "fit" else s[m].get("cpu_s")
+    return "-" if c is None else f"{c['median']:.2f} [{c['q25']:.2f}-{c['q75']:.2f}]"
 
 
 def markdown(summary: dict, meta: dict) -> str:
@@ -258,11 +267,14 @@ def markdown(summary: dict, meta: dict) -> str:
                   f"{meta['pose_seed']}, sensor {meta['sensor']})\n",
                   "Median over people of each person's median per-vertex error (mm), [quartiles over people]; "
                   "phenotype: mean over people of |error| (phenotype units, [0, 1]).\n",
-                  "| method | canonical body (mm) | posed body (mm) | " + " | ".join(PHENOTYPES) + " |",
-                  "|---" * (3 + len(PHENOTYPES)) + "|"]
-        for m, label in (("fit", f"Anny fit ({meta['starts']})"), ("mean", "mean body (placed, scaled)")):
+                  "| method | canonical body (mm) | posed body (mm) | " + " | ".join(PHENOTYPES) + " | CPU s/image |",
+                  "|---" * (4 + len(PHENOTYPES)) + "|"]
+        for m in ("fit", "init", "refined", "mean"):
+            if m not in a:
+                continue
             ph = " | ".join(f"{a[m]['phenotype_abs'][k]['mean']:.3f}" for k in PHENOTYPES)
-            lines.append(f"| {label} | {_cell(a[m]['canonical_mm'])} | {_cell(a[m]['posed_mm'])} | {ph} |")
+            lines.append(f"| {_labels(meta)[m]} | {_cell(a[m]['canonical_mm'])} | {_cell(a[m]['posed_mm'])} | {ph} | "
+                         f"{_seconds(a, m)} |")
         c = a["cpu_s"]
         lines.append(f"\nFit CPU time per image: median {c['median']:.1f} s (range {c['min']:.1f}-{c['max']:.1f}).\n")
     if "faust" in summary:
@@ -270,14 +282,18 @@ def markdown(summary: dict, meta: dict) -> str:
         lines += [f"## FAUST faust_a (N = {f['cpu_s']['n']}, 1.7 m, front view, whole surface as truth)\n",
                   "Median [quartiles] over meshes; Chamfer = mean of the two directed mean distances (mm); "
                   "F-score at 17 mm (1%) and 34 mm (2%).\n",
-                  "| method | Chamfer (mm) | F@1% | F@2% | pred->truth (mm) | truth->pred (mm) |", "|---|---|---|---|---|---|"]
-        for m, label in (("fit", f"Anny fit, posed body ({meta['starts']})"), ("points", "visible input points"),
-                         ("mean", "mean body (placed, scaled)")):
-            lines.append(f"| {label} | {_cell(f[m]['chamfer'])} | {_cell(f[m]['f@0.017'], '.2f')} | "
-                         f"{_cell(f[m]['f@0.034'], '.2f')} | {_cell(f[m]['pred_to_truth'])} | {_cell(f[m]['truth_to_pred'])} |")
+                  "| method | Chamfer (mm) | F@1% | F@2% | pred->truth (mm) | truth->pred (mm) | CPU s/image |",
+                  "|---|---|---|---|---|---|---|"]
+        for m in ("fit", "init", "refined", "points", "mean"):
+            if m not in f:
+                continue
+            lines.append(f"| {_labels(meta, True)[m]} | {_cell(f[m]['chamfer'])} | {_cell(f[m]['f@0.017'], '.2f')} | "
+                         f"{_cell(f[m]['f@0.034'], '.2f')} | {_cell(f[m]['pred_to_truth'])} | {_cell(f[m]['truth_to_pred'])} "
+                         f"| {_seconds(f, m) if m != 'points' else '-'} |")
         c = f["cpu_s"]
         lines.append(f"\nFit CPU time per image: median {c['median']:.1f} s (range {c['min']:.1f}-{c['max']:.1f}); "
-                     f"flagged poor_fit: {f['poor_fit']} of {c['n']}.\n")
+                     f"flagged poor_fit: {f['poor_fit']} of {c['n']}"
+                     + "".join(f"; {_labels(meta)[m]}: {f[m]['poor_fit']}" for m in ("init", "refined") if m in f) + ".\n")
     return "\n".join(lines)
 
 
@@ -298,6 +314,10 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--samples", type=int, default=20000, help="surface samples per mesh for Chamfer/F-score")
     ap.add_argument("--multi-start", action="store_true",
                     help="fit from 4 starts (mean body, yaw -/+0.4 rad, arms lowered; lit3d.body.fit.fit_best)")
+    ap.add_argument("--init", type=Path, default=None, help="body regressor checkpoint (lit3d.body.train_regressor): "
+                    "adds the rows 'regressor alone' and 'regressor + refinement'")
+    ap.add_argument("--refine-global", type=int, default=REFINE_GLOBAL_ITERS, help="rigid steps of the refinement")
+    ap.add_argument("--refine-full", type=int, default=REFINE_FULL_ITERS, help="full steps of the refinement")
     ap.add_argument("--threads", type=int, default=1, help="torch CPU threads")
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
@@ -305,12 +325,15 @@ def main(argv: list[str] | None = None) -> None:
     def say(line):
         print(line, file=sys.stderr, flush=True)
 
+    init = None if args.init is None else (load_regressor(args.init), refine_config(args.refine_global, args.refine_full))
     cam, body = Camera.default(), Body()
     args.out.mkdir(parents=True, exist_ok=True)
     meta = {"command": "python -m lit3d.body.evaluate " + " ".join(argv if argv is not None else sys.argv[1:]),
             "body_seed": args.body_seed, "pose_seed": args.pose_seed, "sensor": args.sensor,
             "starts": "4 starts, best probe kept" if args.multi_start else "one start: the mean body",
             "camera": {**cam.__dict__, "width": WIDTH, "height": HEIGHT, "distance_m": DISTANCE}, "threads": args.threads}
+    if init is not None:
+        meta.update(init=str(args.init), refine=f"{args.refine_global} + {args.refine_full} steps")
     anny: list[dict] = []
     faust: list[dict] = []
 
@@ -327,10 +350,10 @@ def main(argv: list[str] | None = None) -> None:
         write()
 
     if args.anny:
-        anny_items(body, args.anny, args.body_seed, args.pose_seed, cam, args.sensor, note, anny, args.multi_start)
+        anny_items(body, args.anny, args.body_seed, args.pose_seed, cam, args.sensor, note, anny, args.multi_start, init)
     if args.faust is not None:
         faust_items(body, args.faust, cam, args.samples, args.out / "faust_canonical", note,
-                    args.faust_limit, faust, args.multi_start, args.faust_first)
+                    args.faust_limit, faust, args.multi_start, args.faust_first, init)
     print(write())
 
 

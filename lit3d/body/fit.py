@@ -87,12 +87,17 @@ def _loss(body: Body, verts: torch.Tensor, p: Params, obs: Observation, pts: tor
     return total, {k: float(v.detach()) for k, v in terms.items()}
 
 
+def start_centre(points: np.ndarray, depth_offset: float) -> np.ndarray:
+    """``(3,)``: the centre of camera-frame ``points`` ``(N, 3)``'s bounding box in x and y, their
+    median depth pushed back by ``depth_offset`` metres in z (where a start body's centre goes)."""
+    lo, hi = points.min(0), points.max(0)
+    return np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, np.median(points[:, 2]) + depth_offset])
+
+
 def start_params(obs: Observation, cfg: FitConfig) -> Params:
     """The mean body, upright, facing the camera, centred on the points' bounding box (x, y) and
-    their median depth pushed back by ``cfg.depth_offset``."""
-    lo, hi = obs.points.min(0), obs.points.max(0)
-    centre = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, np.median(obs.points[:, 2]) + cfg.depth_offset])
-    return Params.mean(tuple(float(c) for c in centre))
+    their median depth pushed back by ``cfg.depth_offset`` (:func:`start_centre`)."""
+    return Params.mean(tuple(float(c) for c in start_centre(obs.points, cfg.depth_offset)))
 
 
 def fit_body(body: Body, obs: Observation, cfg: FitConfig | None = None, start: Params | None = None) -> FitResult:

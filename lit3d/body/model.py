@@ -129,6 +129,21 @@ class Body:
         pheno = {k: phenotype[i].clamp(0.0, 1.0)[None] for i, k in enumerate(PHENOTYPES)}
         return anny(pose_parameters=params[None], phenotype_kwargs=pheno)["vertices"][0]
 
+    def batch_anny_vertices(self, phenotype: torch.Tensor, theta: torch.Tensor) -> torch.Tensor:
+        """``(B, V, 3)`` Anny-frame vertices of ``B`` bodies at once: ``phenotype`` ``(B, 6)`` in
+        poses ``theta`` ``(B, D)`` (as :meth:`anny_vertices`, one forward pass)."""
+        import roma
+
+        anny = self.model.model
+        b = phenotype.shape[0]
+        rot = roma.rotvec_to_rotmat(torch.einsum("skd,bd->bsk", self.dof_axes, theta))  # (B, B_sel, 3, 3)
+        full = torch.nn.functional.pad(rot, (0, 1, 0, 1))
+        full[..., 3, 3] = 1.0
+        params = torch.eye(4).repeat(b, anny.bone_count, 1, 1)
+        params[:, self.bone_index] = full
+        pheno = {k: phenotype[:, i].clamp(0.0, 1.0) for i, k in enumerate(PHENOTYPES)}
+        return anny(pose_parameters=params, phenotype_kwargs=pheno)["vertices"]
+
     def place(self, anny_verts: torch.Tensor, p: Params) -> torch.Tensor:
         """``(V, 3)`` Anny-frame vertices -> camera frame by the similarity of ``p``."""
         import roma

@@ -1,9 +1,9 @@
 """A depth image as the fit sees it: camera-frame foreground points and a silhouette distance map.
 
-Camera frame (as :mod:`lit3d.reconstruct.backproject`): ``x`` right, ``y`` down, ``z`` forward,
-metres; pixel ``(u, v)`` (column, row) has its centre at ``(u, v)``: a point projects to
-``u = fx x / z + cx``, ``v = fy y / z + cy``. ``intr`` is any object with ``fx fy cx cy``
-attributes (:class:`lit3d.reconstruct.backproject.Intrinsics`).
+Camera frame (as :mod:`lit3d.sensing.camera`, whose :func:`~lit3d.sensing.camera.backproject` this
+uses): ``x`` right, ``y`` down, ``z`` forward, metres; pixel ``(u, v)`` (column, row) has its centre
+at ``(u, v)``: a point projects to ``u = fx x / z + cx``, ``v = fy y / z + cy``. ``intr`` is any
+object with ``fx fy cx cy`` attributes (:class:`lit3d.sensing.camera.Intrinsics`).
 
     obs = observe(depth, intr, keep, label="scan.png")   # Observation
     obs.points       (N, 3) float64   every foreground pixel, back-projected
@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lit3d.body.errors import BodyFitError
+from lit3d.sensing.camera import backproject
 
 MIN_POINTS = 200  # fewer foreground pixels than this: no body is fitted
 MAX_POINTS = 1500  # points the loss uses per iteration
@@ -45,13 +46,6 @@ def foreground(depth: np.ndarray, keep: np.ndarray | None = None) -> np.ndarray:
     """``(H, W) bool``: pixels with a depth reading (``depth > 0``), within ``keep`` when given."""
     fg = np.asarray(depth) > 0
     return fg if keep is None else fg & np.asarray(keep, bool)
-
-
-def backproject(depth: np.ndarray, intr, mask: np.ndarray) -> np.ndarray:
-    """``(H, W)`` depth in metres and ``(H, W) bool`` mask -> ``(N, 3) float64`` camera-frame points."""
-    v, u = np.nonzero(mask)
-    z = np.asarray(depth, np.float64)[v, u]
-    return np.stack([(u - intr.cx) * z / intr.fx, (v - intr.cy) * z / intr.fy, z], axis=1)
 
 
 def subsample(points: np.ndarray, n: int, seed: int = 0) -> np.ndarray:

@@ -8,6 +8,7 @@ Examples::
     lit3d-reconstruct d.png --ckpt CKPT --out out/ --reference chair.obj --quality-ckpt Q.ckpt
     lit3d-reconstruct d.png --ckpt CKPT --out out/ --canonical logs/canonical/.../best.ckpt
     lit3d-reconstruct person.png --body --out out/     # Anny body fit (lit3d.reconstruct.body)
+    lit3d-reconstruct person.png --body --body-init body_regressor.ckpt --out out/
 
 Inputs: 16-bit PNG/TIFF and integer .npy/.npz (depth units x --depth-scale metres, default
 millimetres), float .npy/.npz metres, .exr metres; 0 and an integer type's maximum (65535:
@@ -42,7 +43,8 @@ def _parser() -> argparse.ArgumentParser:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("depth", nargs="+", help="depth image(s) or folder(s) of them")
     p.add_argument("--ckpt", help="completion checkpoint (lit3d-train task=completion; not with --body)")
-    p.add_argument("--body", action="store_true", help="fit the Anny body model instead (a person; no checkpoint)")
+    p.add_argument("--body", action="store_true", help="fit the Anny body model instead (a person)")
+    p.add_argument("--body-init", metavar="CKPT", help="with --body: start from this body regressor (lit3d.body.regressor)")
     p.add_argument("--out", required=True, help="output folder")
     cam = p.add_argument_group("camera")
     cam.add_argument("--fov", type=float, default=None, help="field of view in degrees (default 49.124)")
@@ -114,6 +116,8 @@ def _check_args(args) -> None:
         raise InputError(f"--depth-scale {args.depth_scale:g}: expected a positive number of metres per unit")
     if bool(args.ckpt) == bool(args.body) or (args.body and (args.canonical or args.reference)):
         raise InputError("give --ckpt CKPT (completion) or --body (Anny fit; not with --canonical/--reference)")
+    if args.body_init and not args.body:
+        raise InputError("--body-init CKPT: needs --body (it starts the Anny body fit)")
     if args.quality_ckpt and not args.reference:
         raise InputError("--quality-ckpt needs --reference (the shape to score against)")
     if not 64 <= args.size <= 2048:
@@ -226,7 +230,7 @@ def _report(exc: Exception, prefix: str = "") -> int:
 def _protected(args, inputs: list[Path]) -> list[Path]:
     """Every file the run reads: no output may replace one."""
     out = list(inputs)
-    for extra in (args.ckpt, args.canonical, args.reference, args.quality_ckpt):
+    for extra in (args.ckpt, args.canonical, args.reference, args.quality_ckpt, args.body_init):
         if extra:
             out.append(Path(extra))
     if args.mask:
@@ -293,10 +297,11 @@ def _run(args) -> int:
         return 0
     from tqdm import tqdm
 
-    from lit3d.reconstruct.body import Body, body_one
+    from lit3d.reconstruct.body import Body, body_one, load_regressor
     from lit3d.reconstruct.pipeline import load_completer
 
     completer = None if args.body else load_completer(args.ckpt, args.device)
+    regressor = load_regressor(args.body_init) if args.body_init else None  # a bad file: one line, exit 2
     body = functools.cache(Body) if args.body else None  # anny loads at the first image that gets to the fit
     for note in [] if args.body else completer.notes:
         _say(f"note: {note}")
@@ -318,7 +323,7 @@ def _run(args) -> int:
             try:
                 if body is not None:
                     s = body_one(args, path, name, body, protected, lambda w, h, lb: _intrinsics(args, w, h, lb),
-                                 _camera_source(args), _say)
+                                 _camera_source(args), _say, regressor)
                 else:
                     s = _one(args, path, name, completer, mapper, scorer, protected)
                 done.append(name)

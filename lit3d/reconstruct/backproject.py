@@ -1,74 +1,22 @@
-"""Pinhole intrinsics and back-projection of a depth image to camera-frame points.
+"""lit3d-reconstruct's camera: :mod:`lit3d.sensing.camera` (pinhole intrinsics, back-projection,
+projection; the conventions are described there), whose checks raise lit3d-reconstruct's
+:class:`~lit3d.reconstruct.depth_io.InputError` here.
 
-Camera frame (OpenCV / depth-sensor convention): ``x`` right, ``y`` down in the image,
-``z`` forward along the optical axis, in metres. Pixel ``(u, v)`` (column, row) has its
-centre at image coordinates ``(u, v)``; a point projects to ``u = fx x / z + cx``,
-``v = fy y / z + cy``.
-
-The default camera is 3D-RecGAN++'s (``Data_preprocess/depth_2_pc_2_vox.py`` of its release):
-a field of view of 49.124 degrees across both the width and the height of the image,
-``fx = W / (2 tan(fov / 2))``, ``fy = H / (2 tan(fov / 2))``, ``cx = W / 2``, ``cy = H / 2``.
+Camera frame (OpenCV / depth-sensor convention): ``x`` right, ``y`` down in the image, ``z`` forward,
+metres; pixel ``(u, v)`` has its centre at ``(u, v)``. The default camera is 3D-RecGAN++'s (a field
+of view of :data:`RECGAN_FOV_DEG` degrees across both image sides, centred).
 """
 from __future__ import annotations
 
-import math
-from dataclasses import asdict, dataclass
+from typing import ClassVar
 
-import numpy as np
-
-from lit3d.sensing.sensor import RECGAN_FOV_DEG  # noqa: F401 (re-exported: the camera the data was made with)
 from lit3d.reconstruct.depth_io import InputError
+from lit3d.sensing import camera
+from lit3d.sensing.camera import backproject, project  # noqa: F401 (re-exported)
+from lit3d.sensing.sensor import RECGAN_FOV_DEG  # noqa: F401 (re-exported: the camera the data was made with)
 
 
-@dataclass(frozen=True)
-class Intrinsics:
-    """Pinhole intrinsics in pixels (see the module doc for the convention)."""
+class Intrinsics(camera.Intrinsics):
+    """:class:`lit3d.sensing.camera.Intrinsics` whose checks raise :class:`InputError`."""
 
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-
-    @classmethod
-    def from_fov(cls, fov_deg: float, width: int, height: int) -> "Intrinsics":
-        """3D-RecGAN++-style intrinsics: one field of view across both image sides, centred."""
-        if not 0 < fov_deg < 180:
-            raise InputError(f"--fov {fov_deg}: expected a field of view in (0, 180) degrees")
-        t = 2.0 * math.tan(math.radians(fov_deg) / 2)
-        return cls(width / t, height / t, width / 2.0, height / 2.0)
-
-    def check(self, width: int, height: int, label: str = "intrinsics") -> "Intrinsics":
-        """Raise :class:`InputError` unless the focal lengths are positive and finite and the
-        principal point lies inside the ``width x height`` image."""
-        vals = asdict(self)
-        if not all(np.isfinite(v) for v in vals.values()):
-            raise InputError(f"{label}: intrinsics must be finite numbers, got {vals}")
-        if self.fx <= 0 or self.fy <= 0:
-            raise InputError(f"{label}: focal lengths must be positive (fx={self.fx:g}, fy={self.fy:g} px)")
-        if not (0 <= self.cx <= width and 0 <= self.cy <= height):
-            raise InputError(f"{label}: principal point ({self.cx:g}, {self.cy:g}) lies outside the "
-                             f"{width}x{height} image (wrong intrinsics for this image size?)")
-        return self
-
-    def as_dict(self) -> dict:
-        return {k: float(v) for k, v in asdict(self).items()}
-
-
-def backproject(depth: np.ndarray, intr: Intrinsics, keep: np.ndarray | None = None) -> np.ndarray:
-    """Foreground pixels -> ``(N, 3) float64`` camera-frame points in metres.
-
-    Args:
-        depth: ``(H, W) float32`` metres along the optical axis (z), 0 = background.
-        intr: the camera.
-        keep: optional ``(H, W) bool``: only these pixels (and ``depth > 0``) are used.
-    """
-    sel = depth > 0 if keep is None else keep & (depth > 0)
-    v, u = np.nonzero(sel)
-    z = depth[v, u].astype(np.float64)
-    return np.stack([(u - intr.cx) * z / intr.fx, (v - intr.cy) * z / intr.fy, z], axis=1)
-
-
-def project(points: np.ndarray, intr: Intrinsics) -> np.ndarray:
-    """``(N, 3)`` camera-frame points (z > 0) -> ``(N, 2) float64`` pixel coordinates ``(u, v)``."""
-    z = points[:, 2]
-    return np.stack([intr.fx * points[:, 0] / z + intr.cx, intr.fy * points[:, 1] / z + intr.cy], axis=1)
+    error: ClassVar[type[Exception]] = InputError

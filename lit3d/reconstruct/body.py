@@ -10,8 +10,10 @@ Per input NAME, DIR gets (written together, as one set: :func:`lit3d.reconstruct
 - ``NAME_body.png``: input points | fit and points (camera view, side view) | canonical body;
 - ``NAME_body.json``: parameters, fit quality (``poor_fit``), timings, camera, request key.
 
-No checkpoint: the fit starts from the mean body (:mod:`lit3d.body.fit`). A poor fit (not a
-person, a bad cut) is written with ``poor_fit: true`` and said on one line.
+The fit starts from the mean body (:mod:`lit3d.body.fit`), or with ``--body-init CKPT`` from a body
+regressor's prediction (:mod:`lit3d.body.regressor`), refined by fewer steps
+(:func:`lit3d.body.regressor.fit_from_regressor`). A poor fit (not a person, a bad cut) is written
+with ``poor_fit: true`` and said on one line.
 """
 from __future__ import annotations
 
@@ -25,6 +27,7 @@ import numpy as np
 from lit3d.body.fit import fit_body
 from lit3d.body.model import Body  # noqa: F401 (re-exported for lit3d.cli.reconstruct)
 from lit3d.body.points import observe
+from lit3d.body.regressor import fit_from_regressor, load_regressor  # noqa: F401 (load_regressor: for lit3d.cli)
 from lit3d.body.results import BodyOutputs, fit_outputs
 from lit3d.geometry.normalise import bounding_frame
 from lit3d.reconstruct.depth_io import find_mask, read_depth_info, read_mask
@@ -115,11 +118,12 @@ def body_figure(points: np.ndarray, out: BodyOutputs, title: str, size: int = 25
     return buf.getvalue()
 
 
-def body_one(args, path: Path, name: str, body, protected, intrinsics, camera: str, say) -> dict:
+def body_one(args, path: Path, name: str, body, protected, intrinsics, camera: str, say, regressor=None) -> dict:
     """Fit one depth image and write its set (module doc). ``body()`` gives the
     :class:`~lit3d.body.model.Body` (called once the image is read and cut: a bad image fails
     before Anny loads); ``intrinsics(w, h, label)`` gives its camera, ``camera`` says where that
-    came from, ``say(line)`` prints a note. Returns the summary."""
+    came from, ``say(line)`` prints a note; ``regressor``: a loaded
+    :class:`~lit3d.body.regressor.Regressor` to start from (None: the mean body). Returns the summary."""
     t_all = time.perf_counter()
     depth, units = read_depth_info(path, args.depth_scale)
     h, w = depth.shape
@@ -131,7 +135,7 @@ def body_one(args, path: Path, name: str, body, protected, intrinsics, camera: s
     obs = observe(depth, intr, keep, str(path))
     body = body()
     t0, c0 = time.perf_counter(), time.process_time()
-    fit = fit_body(body, obs)
+    fit = fit_body(body, obs) if regressor is None else fit_from_regressor(body, regressor, obs)
     fit_cpu = time.process_time() - c0
     out = fit_outputs(body, fit, obs)
     timings = {"fit": fit.seconds, "fit_cpu": fit_cpu, "outputs": time.perf_counter() - t0 - fit.seconds}
@@ -152,6 +156,7 @@ def body_one(args, path: Path, name: str, body, protected, intrinsics, camera: s
                "mask": None if mask is None else str(args.mask), "counts": {**info, "points": len(obs.points),
                                                                             "loss_points": len(obs.sample)},
                "quality": q, "poor_fit": q["poor_fit"], "params": out.params, "timings_s": timings,
+               "start": "mean body" if regressor is None else f"body regressor {regressor.path}",
                "mesh_frame": "NAME_body: camera (x right, y down, z forward), metres; NAME_body_canonical: "
                              "Anny rest pose, y up, facing +z, metres",
                "canonical_depth": "(128, 128) float32 in [0, 1], 0 = background: the canonical task's Anny "

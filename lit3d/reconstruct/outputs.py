@@ -56,7 +56,7 @@ def output_files(name: str, fmt: str, figure: bool = True) -> list[str]:
     return [f"{name}.{fmt}", f"{name}_occupancy.npz"] + ([f"{name}.png"] if figure else []) + [f"{name}.json"]
 
 
-REQUEST_FILES = ("ckpt", "canonical", "reference", "quality_ckpt", "mask")  # options naming files the run reads
+REQUEST_FILES = ("ckpt", "canonical", "reference", "quality_ckpt", "mask", "body_init")  # options naming files the run reads
 REQUEST_IGNORED = ("depth", "out", "debug", "device", "overwrite")  # options that do not change a set
 
 

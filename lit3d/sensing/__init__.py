@@ -7,6 +7,8 @@ places an object in the grid exactly as the training data did, from named consta
 
 - :mod:`lit3d.sensing.sensor`: :class:`~lit3d.sensing.sensor.Sensor` (camera, handedness, noise),
   the named settings :data:`~lit3d.sensing.sensor.SENSORS`, 3D-RecGAN++'s field of view.
+- :mod:`lit3d.sensing.camera`: pinhole :class:`~lit3d.sensing.camera.Intrinsics`, back-projection
+  of a depth image and projection (``lit3d-reconstruct`` and the body fit).
 - :mod:`lit3d.sensing.views`: the view geometry: :data:`~lit3d.sensing.views.GRID_MARGIN` and
   :data:`~lit3d.sensing.views.SURFACE_PUSH` (the placement every synthetic sample is made with) and
   :func:`~lit3d.sensing.views.camera_rotation`.
