@@ -58,17 +58,23 @@ def test_identity_settings_are_checked(compose_cfg):
     assert CanonicalTask(net=_net(compose_cfg)).identity_head is None  # off by default
 
 
+def _step_losses(compose_cfg, batch, weights, **task_kw):
+    """``({weight: training_step loss}, the last task)``: one task per weight (``task_kw`` names the weight
+    with ``{w}``), same seed, the same batch."""
+    losses = {}
+    for w in weights:
+        torch.manual_seed(0)
+        task = CanonicalTask(net=_net(compose_cfg), mask_loss="bce", use_phases=False,
+                             **{k: (w if v == "{w}" else v) for k, v in task_kw.items()})
+        task.log = lambda *a, **k: None  # no trainer here: logging is not what these tests check
+        losses[w] = task.training_step(batch, 0)
+    return losses, task
+
+
 def test_training_step_adds_the_weighted_identity_term(compose_cfg):
     batch = _batch()
-    losses = {}
-    for w in (0.0, 2.0):
-        torch.manual_seed(0)
-        task = CanonicalTask(net=_net(compose_cfg), mask_loss="bce", use_phases=False, identity_weight=w,
-                             identity_classes=4)
-        task.log = lambda *a, **k: None  # no trainer here: logging is not what this test checks
-        losses[w] = task.training_step(batch, 0)
-        if w:
-            ce = task._identity_loss(task.net(batch["depth"], batch["mask"]).latent, batch["subject_idx"])
+    losses, task = _step_losses(compose_cfg, batch, (0.0, 2.0), identity_weight="{w}", identity_classes=4)
+    ce = task._identity_loss(task.net(batch["depth"], batch["mask"]).latent, batch["subject_idx"])
     assert losses[2.0].item() == pytest.approx(losses[0.0].item() + 2.0 * ce.item(), rel=1e-4)
 
 
@@ -102,13 +108,7 @@ def test_phenotype_regression_reaches_the_encoder_and_learns_the_shapes(compose_
 
 def test_training_step_adds_the_weighted_phenotype_term_and_needs_targets(compose_cfg):
     batch = _pheno_batch()
-    losses = {}
-    for w in (0.0, 3.0):
-        torch.manual_seed(0)
-        task = CanonicalTask(net=_net(compose_cfg), mask_loss="bce", use_phases=False, phenotype_weight=w,
-                             phenotype_dims=2)
-        task.log = lambda *a, **k: None
-        losses[w] = task.training_step(batch, 0)
+    losses, task = _step_losses(compose_cfg, batch, (0.0, 3.0), phenotype_weight="{w}", phenotype_dims=2)
     mse = task._phenotype_error(task.net(batch["depth"], batch["mask"]).latent, batch).pow(2).mean()
     assert losses[3.0].item() == pytest.approx(losses[0.0].item() + 3.0 * mse.item(), rel=1e-4)
     with pytest.raises(ValueError, match="data.phenotype_targets=true"):
