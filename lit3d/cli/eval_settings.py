@@ -36,14 +36,14 @@ _ABSENT = object()
 
 
 def command_line_overrides(cfg: DictConfig | None = None) -> list[str]:
-    """This command's Hydra overrides: Hydra's runtime record, else ``cfg.hydra.overrides.task`` of a
-    config composed with its ``hydra`` node, else none."""
+    """This command's Hydra overrides: ``cfg.hydra.overrides.task`` of a config composed with its ``hydra``
+    node, else Hydra's runtime record, else none."""
     from hydra.core.hydra_config import HydraConfig
 
-    if HydraConfig.initialized():
-        return list(HydraConfig.get().overrides.task)
     found = OmegaConf.select(cfg, "hydra.overrides.task", default=None) if cfg is not None else None
-    return list(found or [])
+    if found is not None:  # the config's own record wins over a Hydra state left by another run in this process
+        return list(found)
+    return list(HydraConfig.get().overrides.task) if HydraConfig.initialized() else []
 
 
 def command_line_keys(overrides: Sequence[str]) -> list[str]:
