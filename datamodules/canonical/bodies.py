@@ -99,13 +99,21 @@ def sample_phenotype(seed: int, index: int, mode: str = "uniform", model=None) -
     if mode != "adult":
         raise ValueError(f"unknown phenotype mode '{mode}' ({', '.join(PHENOTYPE_MODES)})")
     import torch
+
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(int(np.random.default_rng([int(seed), int(index), 37]).integers(2**31)))
+        _, pheno = adult_shape_distribution(model).sample(1)
+    return {k: float(pheno[k][0]) for k in PHENOTYPE_RANGES}
+
+
+def adult_shape_distribution(model):
+    """Anny's own shape distribution (``SimpleShapeDistribution`` of the loaded Anny ``model``) at
+    morphological ages :data:`ADULT_AGES`: the ``adult`` phenotype draw."""
+    import torch
     from anny.shape_distribution import SimpleShapeDistribution
 
     ages = torch.distributions.Uniform(torch.tensor(ADULT_AGES[0]), torch.tensor(ADULT_AGES[1]))
-    with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(int(np.random.default_rng([int(seed), int(index), 37]).integers(2**31)))
-        _, pheno = SimpleShapeDistribution(model, morphological_age_distribution=ages).sample(1)
-    return {k: float(pheno[k][0]) for k in PHENOTYPE_RANGES}
+    return SimpleShapeDistribution(model, morphological_age_distribution=ages)
 
 
 def sample_pose(pose_seed: int, index: int, strength: float = 1.0, yaw_range: float = 15.0,

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from datamodules.canonical.bodies import ADULT_AGES, sample_pose
+from datamodules.canonical.bodies import adult_shape_distribution, sample_pose
 from lit3d.body.fit import start_centre
 from lit3d.body.model import ANNY_TO_CAMERA, DOFS, PHENOTYPES, Body
 from lit3d.body.points import MIN_POINTS
@@ -51,10 +51,7 @@ def pose_params(pose: dict) -> tuple[np.ndarray, np.ndarray]:
 
 def shape_distribution(body: Body):
     """Anny's adult shape distribution (as ``sample_phenotype(..., "adult")``)."""
-    from anny.shape_distribution import SimpleShapeDistribution
-
-    ages = torch.distributions.Uniform(torch.tensor(ADULT_AGES[0]), torch.tensor(ADULT_AGES[1]))
-    return SimpleShapeDistribution(body.model.model, morphological_age_distribution=ages)
+    return adult_shape_distribution(body.model.model)
 
 
 def draw(body: Body, dist, seed: int, first: int, n: int, cam, prep: Preprocess, distance=(2.6, 4.0),
