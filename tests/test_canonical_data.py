@@ -86,6 +86,9 @@ def test_datamodule_cache_manifest_and_strict_split(tmp_path):
     assert b["depth"].shape == b["canon_mask"].shape == (4, 1, 32, 32)
     assert float(b["depth"].max()) <= 1 and float(b["depth"][b["mask"] > 0].min()) >= 0.1 - 1e-3
     assert ((b["depth"] > 0) == (b["mask"] > 0)).all()
+    dm.hparams.batch_poses = 2  # data.batch_poses: 2 subjects x 2 poses a batch
+    for b in dm.train_dataloader():
+        assert b["subject_idx"][0] == b["subject_idx"][1] and b["subject_idx"][2] == b["subject_idx"][3]
     png = dm.show(3, tmp_path / "show.png")
     assert png.stat().st_size > 100
     # a second module with the same config reuses the cache (no rendering)

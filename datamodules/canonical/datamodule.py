@@ -20,6 +20,8 @@ training poses (:mod:`datamodules.canonical.blends`; one connectivity per subjec
 ``train_pose_fraction``: train on that share of each subject's training poses (a learning curve).
 ``flow_targets``: also cache, for every pose whose mesh corresponds to the canonical one, the backward
 flow and visibility of the warp head (:mod:`datamodules.canonical.flow`); items then carry them.
+``batch_poses`` K >= 2: training batches of ``batch_size / K`` subjects with K poses each
+(:class:`~datamodules.canonical.batches.SubjectGroupedBatches`; for ``task.contrastive_weight``).
 
 Batches (``B`` samples, ``S = image_size``):
     depth, mask              (B, 1, S, S) float32   posed input; mask in {0, 1}
@@ -57,6 +59,7 @@ from tqdm import tqdm
 
 from datamodules.cache import CacheBuilder, DataError, atomic_save_npz
 from datamodules.canonical import bodies
+from datamodules.canonical.batches import SubjectGroupedBatches
 from datamodules.canonical.blends import add_blends
 from datamodules.canonical.dataset import CanonicalPairDataset, mirror_views, subject_balanced_sampler
 from datamodules.canonical.images import (depth_image_problem, depth_pairs_png, read_subject, remove_legacy_subject_files,
@@ -131,6 +134,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         phenotypes: str = "uniform",
         pose_draw: str = "shared",
         phenotype_targets: bool = False,
+        batch_poses: int = 0,
     ):
         super().__init__()
         self.save_hyperparameters()
@@ -351,11 +355,16 @@ class CanonicalDataModule(pl.LightningDataModule):
                           num_workers=self.hparams.num_workers, persistent_workers=self.hparams.num_workers > 0)
 
     def train_dataloader(self):
+        workers = dict(num_workers=self.hparams.num_workers, persistent_workers=self.hparams.num_workers > 0)
+        if self.hparams.batch_poses:  # several poses of each subject per batch (a contrastive identity term)
+            return DataLoader(self.datasets["train"], batch_sampler=SubjectGroupedBatches(
+                self.datasets["train"].records, self.hparams.batch_size, self.hparams.batch_poses, self.hparams.seed),
+                **workers)
         if not self.hparams.balance_subjects:
             return self._loader("train", True)
         return DataLoader(self.datasets["train"], batch_size=self.hparams.batch_size,
                           sampler=subject_balanced_sampler(self.datasets["train"].records, self.hparams.seed),
-                          num_workers=self.hparams.num_workers, persistent_workers=self.hparams.num_workers > 0)
+                          **workers)
 
     def val_dataloader(self):
         return self._loader("val", False)

@@ -15,7 +15,8 @@ A NaN/Inf loss term stops training with the step and the term named
 ``phenotype_weight > 0`` adds a linear regression of the body's phenotypes (``phenotype_dims``; Anny's
 6, ``data.phenotype_targets``) from the MSFE latent and its mean squared error, times that weight: a
 body-shape code that, unlike a closed-set subject classifier, means the same for people never seen
-(``val/phenotype_mae`` on the validation subjects).
+(``val/phenotype_mae`` on the validation subjects). ``contrastive_weight > 0`` adds the supervised contrastive
+loss across the poses of one subject in the batch (:mod:`lit3d.canonical.contrastive`; ``data.batch_poses``).
 
 ``identity_weight > 0`` adds a subject classifier (one linear layer, ``identity_classes`` outputs)
 on the MSFE's fused latent and its cross-entropy, times that weight, to the loss: the targets
@@ -31,7 +32,7 @@ flow, visibility and smoothness terms (:mod:`lit3d.canonical.losses`), times ``f
 ``vis_weight`` and ``smooth_weight``, join the loss where the batch has flow targets
 (``data.flow_targets``; items without them train on depth and mask only).
 
-Logged: ``train/loss|depth_loss|mask_loss|alpha|beta`` (``identity_loss`` with the classifier;
+Logged: ``train/loss|depth_loss|mask_loss|alpha|beta`` (``identity_loss`` with the classifier, ``contrastive_loss``;
 ``flow_loss|vis_loss|smooth_loss`` and ``val/flow_epe`` in pixels with the warp head); ``val/`` and ``test/`` ``depth_mse``
 (masked depth error, :class:`lit3d.metrics.depth.MaskedDepthMSE`), ``iou`` (mask IoU,
 :class:`lit3d.metrics.depth.MaskIoU`), and the same with suffix ``_input`` for the posed-input
@@ -54,6 +55,7 @@ import lightning.pytorch as pl
 import torch
 
 from lit3d.callbacks.nonfinite import guard_step, validate_mode
+from lit3d.canonical.contrastive import ContrastiveEmbedder, supervised_contrastive
 from lit3d.canonical.figures import validation_panel
 from lit3d.canonical.loss_phases import THESIS_FRACTIONS, LossPhases
 from lit3d.canonical.factory import build_canonical_net, summarize
@@ -137,6 +139,11 @@ class CanonicalTask(pl.LightningModule):
         offset_smooth_weight: float = 0.0,
         phenotype_weight: float = 0.0,
         phenotype_dims: int = 0,
+        contrastive_weight: float = 0.0,
+        contrastive_on: str = "latent",
+        contrastive_temperature: float = 0.1,
+        contrastive_dim: int = 0,
+        contrastive_channels: Sequence[int] = (),
         unet_baseline: bool = False,
         **legacy_evaluation,
     ):
@@ -172,6 +179,10 @@ class CanonicalTask(pl.LightningModule):
                 raise ValueError("phenotype_weight > 0 needs arch=canonical with the MSFE and phenotype_dims >= 1 "
                                  f"(Anny: 6); got arch={arch}, use_msfe={use_msfe}, phenotype_dims={phenotype_dims}")
             self.phenotype_head = torch.nn.Linear(int(cfg.get("fuser_out", 500)), int(phenotype_dims))
+        self.contrastive_head = None  # poses of one subject pull together (contrastive_weight > 0)
+        if contrastive_weight > 0:
+            self.contrastive_head = ContrastiveEmbedder(contrastive_on, int(cfg.get("fuser_out", 500)),
+                                                        int(contrastive_dim), contrastive_channels)
         # set by LossPhases each epoch; constant weights when phases are off
         self.loss_alpha, self.loss_beta = float(alpha), float(beta)
         self.val_metrics = self._image_metrics(mask_threshold)
@@ -235,6 +246,11 @@ class CanonicalTask(pl.LightningModule):
         if self.phenotype_head is not None:
             terms["phenotype"] = self._phenotype_error(out.latent, batch).pow(2).mean()
             terms["loss"] = terms["loss"] + self.hparams.phenotype_weight * terms["phenotype"]
+        if self.contrastive_head is not None:
+            labels = torch.as_tensor(batch["subject_idx"], device=out.depth.device)
+            terms["contrastive"] = supervised_contrastive(self.contrastive_head(out), labels,
+                                                          self.hparams.contrastive_temperature)
+            terms["loss"] = terms["loss"] + self.hparams.contrastive_weight * terms["contrastive"]
         if out.flow is not None:  # the warp head: each of its terms times its weight
             warp = self._warp_terms(out, batch)
             terms.update(warp)
@@ -245,10 +261,7 @@ class CanonicalTask(pl.LightningModule):
         bs = batch["depth"].shape[0]
         self.log_dict({"train/loss": terms["loss"], "train/depth_loss": losses["depth"],
                        "train/mask_loss": losses["mask"]}, on_step=True, on_epoch=True, batch_size=bs)
-        for k in ("identity", "phenotype"):
-            if k in terms:
-                self.log(f"train/{k}_loss", terms[k], on_step=False, on_epoch=True, batch_size=bs)
-        for k in WARP_TERMS:
+        for k in ("identity", "phenotype", "contrastive", *WARP_TERMS):
             if k in terms:
                 self.log(f"train/{k}_loss", terms[k], on_step=False, on_epoch=True, batch_size=bs)
         if not self.hparams.use_phases:
