@@ -116,31 +116,20 @@ class Body:
     def anny_vertices(self, phenotype: torch.Tensor, theta: torch.Tensor | None) -> torch.Tensor:
         """``(V, 3)`` vertices in Anny's frame (z up, metres) of ``phenotype`` ``(6,)`` in pose
         ``theta`` ``(D,)`` (None: the rest pose)."""
+        return self.batch_anny_vertices(phenotype[None], None if theta is None else theta[None])[0]
+
+    def batch_anny_vertices(self, phenotype: torch.Tensor, theta: torch.Tensor | None) -> torch.Tensor:
+        """``(B, V, 3)`` Anny-frame vertices of ``B`` bodies in one forward pass: ``phenotype`` ``(B, 6)``
+        in poses ``theta`` ``(B, D)`` (None: the rest pose)."""
         import roma
 
         anny = self.model.model
-        params = torch.eye(4).repeat(anny.bone_count, 1, 1)
+        params = torch.eye(4).repeat(phenotype.shape[0], anny.bone_count, 1, 1)
         if theta is not None:
-            rot = roma.rotvec_to_rotmat(self.bone_rotvecs(theta))  # (B_sel, 3, 3)
-            full = torch.zeros(len(self.bones), 4, 4)
-            full[:, 3, 3] = 1.0
-            full = full + torch.nn.functional.pad(rot, (0, 1, 0, 1))
-            params = params.index_copy(0, self.bone_index, full)
-        pheno = {k: phenotype[i].clamp(0.0, 1.0)[None] for i, k in enumerate(PHENOTYPES)}
-        return anny(pose_parameters=params[None], phenotype_kwargs=pheno)["vertices"][0]
-
-    def batch_anny_vertices(self, phenotype: torch.Tensor, theta: torch.Tensor) -> torch.Tensor:
-        """``(B, V, 3)`` Anny-frame vertices of ``B`` bodies at once: ``phenotype`` ``(B, 6)`` in
-        poses ``theta`` ``(B, D)`` (as :meth:`anny_vertices`, one forward pass)."""
-        import roma
-
-        anny = self.model.model
-        b = phenotype.shape[0]
-        rot = roma.rotvec_to_rotmat(torch.einsum("skd,bd->bsk", self.dof_axes, theta))  # (B, B_sel, 3, 3)
-        full = torch.nn.functional.pad(rot, (0, 1, 0, 1))
-        full[..., 3, 3] = 1.0
-        params = torch.eye(4).repeat(b, anny.bone_count, 1, 1)
-        params[:, self.bone_index] = full
+            rot = roma.rotvec_to_rotmat(torch.einsum("skd,bd->bsk", self.dof_axes, theta))  # (B, B_sel, 3, 3)
+            full = torch.nn.functional.pad(rot, (0, 1, 0, 1))
+            full[..., 3, 3] = 1.0
+            params[:, self.bone_index] = full
         pheno = {k: phenotype[:, i].clamp(0.0, 1.0) for i, k in enumerate(PHENOTYPES)}
         return anny(pose_parameters=params, phenotype_kwargs=pheno)["vertices"]
 

@@ -10,6 +10,7 @@ import numpy as np
 import torch
 
 from lit3d.body.points import Observation
+from lit3d.sensing.camera import pixel_coordinates
 
 
 def vertex_normals(verts: np.ndarray, faces: np.ndarray, incidence=None) -> np.ndarray:
@@ -60,8 +61,7 @@ def silhouette_excess(verts: torch.Tensor, obs: Observation, outside: torch.Tens
     ``outside`` is ``obs.outside_px`` as a ``(1, 1, H, W)`` tensor."""
     h, w = obs.shape
     z = verts[:, 2].clamp(min=1e-3)
-    u = obs.fx * verts[:, 0] / z + obs.cx
-    v = obs.fy * verts[:, 1] / z + obs.cy
+    u, v = pixel_coordinates(verts[:, 0], verts[:, 1], z, obs)
     grid = torch.stack([u / max(w - 1, 1) * 2 - 1, v / max(h - 1, 1) * 2 - 1], 1)[None, None]
     px = torch.nn.functional.grid_sample(outside, grid, mode="bilinear", padding_mode="border", align_corners=True)
     return px[0, 0, 0] * z / obs.fx

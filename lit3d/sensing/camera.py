@@ -81,7 +81,12 @@ def backproject(depth: np.ndarray, intr, keep: np.ndarray | None = None) -> np.n
     return np.stack([(u - intr.cx) * z / intr.fx, (v - intr.cy) * z / intr.fy, z], axis=1)
 
 
+def pixel_coordinates(x, y, z, intr):
+    """The pinhole projection ``(u, v)`` of camera-frame coordinates ``x, y, z`` ``(N,)`` (z > 0), NumPy arrays
+    or torch tensors alike (differentiable for tensors); ``intr``: anything with fx, fy, cx, cy."""
+    return intr.fx * x / z + intr.cx, intr.fy * y / z + intr.cy
+
+
 def project(points: np.ndarray, intr) -> np.ndarray:
     """``(N, 3)`` camera-frame points (z > 0) -> ``(N, 2) float64`` pixel coordinates ``(u, v)``."""
-    z = points[:, 2]
-    return np.stack([intr.fx * points[:, 0] / z + intr.cx, intr.fy * points[:, 1] / z + intr.cy], axis=1)
+    return np.stack(pixel_coordinates(points[:, 0], points[:, 1], points[:, 2], intr), axis=1)
