@@ -24,7 +24,12 @@ def signal_when(proc: subprocess.Popen, ready: Callable[[], object], log: Path, 
             if i:
                 time.sleep(gap)
             proc.send_signal(sig)
-        return proc.wait(timeout=180)
+        try:
+            return proc.wait(timeout=180)
+        except subprocess.TimeoutExpired:  # say what the process was doing when it did not stop
+            raise AssertionError(f"still running 180 s after {[int(s) for s in signals]}; its stderr ends:\n"
+                                 + log.with_suffix(".err").read_text()[-3000:]
+                                 + "\nstdout ends:\n" + log.with_suffix(".out").read_text()[-1500:]) from None
     finally:
         if proc.poll() is None:
             proc.kill()
