@@ -193,3 +193,13 @@ def test_scanner_sees_nested_and_relative_imports(tmp_path, monkeypatch):
     monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
     assert function_local_imports() == [("lit3d/toy/mod.py", 4, "lit3d.toy"),
                                         ("lit3d/toy/mod.py", 8, "datamodules.cache")]
+
+
+MAX_LINES = 400  # issue 34: small modules with one job
+
+
+def test_no_python_file_over_400_lines():
+    folders = ("lit3d", "datamodules", "scripts", "benchmarks", "tests")
+    long = {str(p.relative_to(ROOT)): n for f in folders for p in (ROOT / f).rglob("*.py")
+            if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_LINES}
+    assert not long, f"files over {MAX_LINES} lines (split them by job): {long}"
