@@ -8,6 +8,7 @@ import torch
 from PIL import Image
 
 from lit3d.canonical import report
+from lit3d.utils.io import STAGE_PREFIX
 
 SOURCES = ("model", "unet", "input", "target", "cmds", "smacof", "gps", "posed", "chance")
 
@@ -69,6 +70,12 @@ def test_results_dataset_from_run_config_and_missing_values(tmp_path):
     other.mkdir()
     text = report.write_results(m, other).read_text()
     assert all("lit3d model (ours)" in _section(text, n) for n in ("5.1", "5.2", "5.3"))
+    # an evaluation writes into a staging folder inside the run dir: the run's source still picks the table
+    (tmp_path / "config.yaml").write_text("data:\n  source: tosca\n")
+    stage = tmp_path / f"{STAGE_PREFIX}123.abc.tmp"
+    stage.mkdir()
+    text = report.write_results(m, stage).read_text()
+    assert "lit3d model (ours)" in _section(text, "5.3") and "(ours)" not in _section(text, "5.1")
 
 
 def test_report_main_regenerates_from_metrics_json(tmp_path):

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from lit3d.canonical.figures import subject_sheets
 from lit3d.utils.tables import fmt, markdown_table
-from lit3d.utils.io import atomic_write_bytes, atomic_write_text
+from lit3d.utils.io import STAGE_PREFIX, atomic_write_bytes, atomic_write_text
 
 COLS = ("nn", "ft", "st", "dcg")
 THESIS = {
@@ -53,8 +53,11 @@ def retrieval_rows(metrics: dict) -> list[list[str]]:
 
 
 def _dataset_from_run_dir(out_dir: Path) -> str | None:
-    """``data.source`` from the run dir's config.yaml (written by lit3d-train / lit3d-eval), if any."""
-    path = Path(out_dir) / "config.yaml"
+    """``data.source`` from the run dir's config.yaml (written by lit3d-train / lit3d-eval), if any; an
+    evaluation's staging folder (:data:`lit3d.utils.io.STAGE_PREFIX`) reads its run dir's."""
+    out_dir = Path(out_dir)
+    run_dir = out_dir.parent if out_dir.name.startswith(STAGE_PREFIX) else out_dir
+    path = run_dir / "config.yaml"
     if not path.is_file():
         return None
     try:

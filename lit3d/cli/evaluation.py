@@ -21,7 +21,7 @@ from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 
 from lit3d.cli.registry import evaluator_module
-from lit3d.utils.io import TMP_SUFFIX, atomic_write_text, repair_sets, write_file_set, write_json
+from lit3d.utils.io import STAGE_PREFIX, TMP_SUFFIX, atomic_write_text, repair_sets, write_file_set, write_json
 from lit3d.utils.stops import check_stop, shielded
 
 log = logging.getLogger("lit3d")
@@ -46,7 +46,7 @@ def staged_outputs(out_dir: Path, last: str = METRICS) -> Iterator[Path]:
     out_dir.mkdir(parents=True, exist_ok=True)
     for note in repair_sets(out_dir):  # a set an earlier, killed evaluation left half renamed
         log.info(note)
-    stage = Path(tempfile.mkdtemp(dir=out_dir, prefix=f".evaluation.{os.getpid()}.", suffix=TMP_SUFFIX))
+    stage = Path(tempfile.mkdtemp(dir=out_dir, prefix=f"{STAGE_PREFIX}{os.getpid()}.", suffix=TMP_SUFFIX))
     try:
         try:
             yield stage

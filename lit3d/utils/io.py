@@ -24,6 +24,7 @@ from typing import Any, BinaryIO
 from lit3d.utils.errors import Lit3dError
 
 TMP_SUFFIX = ".tmp"
+STAGE_PREFIX = ".evaluation."  # an evaluation's staging folder inside its run dir (lit3d.cli.evaluation.staged_outputs)
 
 
 class OutputError(Lit3dError, ValueError):
