@@ -8,7 +8,7 @@ import torch
 
 from datamodules.canonical.batches import SubjectGroupedBatches
 from datamodules.cache import DataError
-from lit3d.canonical.contrastive import ContrastiveEmbedder, positive_share, supervised_contrastive
+from lit3d.canonical.contrastive import ContrastiveEmbedder, supervised_contrastive
 from lit3d.canonical.module import CanonicalTask
 from test_canonical_identity import _batch, _net, _step_losses
 
@@ -38,7 +38,6 @@ def test_loss_matches_the_formula_and_orders_embeddings():
     lab = torch.tensor([0, 0, 1, 1, 2, 2, 3, 3])
     clustered = centres[lab] + 0.1 * torch.randn(8, 4, generator=g)
     assert supervised_contrastive(clustered, lab, 0.1) < supervised_contrastive(clustered, lab[[0, 2, 4, 6, 1, 3, 5, 7]], 0.1)
-    assert positive_share(torch.tensor(labels)) == pytest.approx(0.8)
 
 
 def test_loss_without_positives_is_zero_and_differentiable():

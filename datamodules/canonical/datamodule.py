@@ -347,24 +347,25 @@ class CanonicalDataModule(pl.LightningDataModule):
         """``"subject/pose/view"`` of :meth:`held_out_records`."""
         return [f"{r['subject']}/{int(r['pose'])}/{r['view']}" for r in self.held_out_records()]
 
+    @property
+    def _workers(self) -> dict:
+        """The loaders' worker settings (``num_workers``, kept alive between epochs when there are any)."""
+        return dict(num_workers=self.hparams.num_workers, persistent_workers=self.hparams.num_workers > 0)
+
     def _loader(self, split: str, shuffle: bool) -> DataLoader:
         if not shuffle:  # val/test: every item once, also under DDP
-            return evaluation_loader(self.datasets[split], self.hparams.batch_size, self.hparams.num_workers,
-                                     persistent_workers=self.hparams.num_workers > 0)
-        return DataLoader(self.datasets[split], batch_size=self.hparams.batch_size, shuffle=shuffle,
-                          num_workers=self.hparams.num_workers, persistent_workers=self.hparams.num_workers > 0)
+            return evaluation_loader(self.datasets[split], self.hparams.batch_size, **self._workers)
+        return DataLoader(self.datasets[split], batch_size=self.hparams.batch_size, shuffle=shuffle, **self._workers)
 
     def train_dataloader(self):
-        workers = dict(num_workers=self.hparams.num_workers, persistent_workers=self.hparams.num_workers > 0)
-        if self.hparams.batch_poses:  # several poses of each subject per batch (a contrastive identity term)
-            return DataLoader(self.datasets["train"], batch_sampler=SubjectGroupedBatches(
-                self.datasets["train"].records, self.hparams.batch_size, self.hparams.batch_poses, self.hparams.seed),
-                **workers)
-        if not self.hparams.balance_subjects:
-            return self._loader("train", True)
-        return DataLoader(self.datasets["train"], batch_size=self.hparams.batch_size,
-                          sampler=subject_balanced_sampler(self.datasets["train"].records, self.hparams.seed),
-                          **workers)
+        train, hp = self.datasets["train"], self.hparams
+        if hp.batch_poses:  # several poses of each subject per batch (a contrastive identity term)
+            return DataLoader(train, batch_sampler=SubjectGroupedBatches(train.records, hp.batch_size, hp.batch_poses,
+                                                                         hp.seed), **self._workers)
+        if hp.balance_subjects:
+            return DataLoader(train, batch_size=hp.batch_size, sampler=subject_balanced_sampler(train.records, hp.seed),
+                              **self._workers)
+        return self._loader("train", True)
 
     def val_dataloader(self):
         return self._loader("val", False)

@@ -16,7 +16,7 @@ seen in training (unlike the closed-set classifier).
   through a small strided CNN: the image that retrieval reads must tell them apart, whatever the pose.
 
 Batches need several poses of each subject (``data.batch_poses``, see
-:func:`datamodules.canonical.batches.subject_grouped_batches`); anchors without a positive in the
+:class:`datamodules.canonical.batches.SubjectGroupedBatches`); anchors without a positive in the
 batch do not count, and a batch without any gives 0.
 """
 from __future__ import annotations
@@ -48,13 +48,6 @@ def supervised_contrastive(embeddings: torch.Tensor, labels: torch.Tensor, tempe
         return z.sum() * 0.0
     pos_log_prob = log_prob.masked_fill(~positives, 0.0).sum(1)
     return -(pos_log_prob[anchors] / n_pos[anchors]).mean()
-
-
-def positive_share(labels: torch.Tensor) -> float:
-    """Share of the items of ``labels`` ``(B,)`` that have another item with their label in the batch."""
-    labels = labels.view(-1)
-    same = labels[:, None] == labels[None, :]
-    return float(((same.sum(1) - 1) > 0).float().mean())
 
 
 class ContrastiveEmbedder(nn.Module):

@@ -247,8 +247,8 @@ class CanonicalTask(pl.LightningModule):
             terms["phenotype"] = self._phenotype_error(out.latent, batch).pow(2).mean()
             terms["loss"] = terms["loss"] + self.hparams.phenotype_weight * terms["phenotype"]
         if self.contrastive_head is not None:
-            labels = torch.as_tensor(batch["subject_idx"], device=out.depth.device)
-            terms["contrastive"] = supervised_contrastive(self.contrastive_head(out), labels,
+            subjects = torch.as_tensor(batch["subject_idx"])  # (B,); the loss moves it to the embeddings' device
+            terms["contrastive"] = supervised_contrastive(self.contrastive_head(out), subjects,
                                                           self.hparams.contrastive_temperature)
             terms["loss"] = terms["loss"] + self.hparams.contrastive_weight * terms["contrastive"]
         if out.flow is not None:  # the warp head: each of its terms times its weight
