@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Shape completion in the 3D-RecGAN++ geometry: real Sweet Home 3D furniture for the seen categories when
 # the catalogues are installed (the bootstrap installs them), else procedural shapes (said in one line):
-# generate -> train -> test the best checkpoint -> evaluate from the checkpoint (tables + PNGs).
+# generate -> train -> evaluate the best checkpoint from its file (tables + PNGs).
 #   EXPERIMENT=completion_cpu DEMO_DIR=logs/completion_cpu bash scripts/demo_completion.sh   (the longer CPU run)
 #   COMPLETION_SOURCE=synth|sweethome3d  (default auto: sweethome3d when installed)
 set -euo pipefail
@@ -20,7 +20,8 @@ DATA=(data.source="$SOURCE" "data.data_dir=\${paths.data_dir}/${EXP}_$SOURCE")
 rm -rf "$OUT/train" "$OUT/eval" "$OUT/eval_recgan"
 mkdir -p "$OUT"
 "$BIN/lit3d-data" experiment="$EXP" "${DATA[@]}" data.prepare_workers=2 hydra.run.dir="$OUT/data" --show 8 > "$OUT/data_summary.json"
-"$BIN/lit3d-train" experiment="$EXP" "${DATA[@]}" hydra.run.dir="$OUT/train" "$@"
+# test_after_fit=false: lit3d-eval below tests the same best checkpoint from its file (once, not twice)
+"$BIN/lit3d-train" experiment="$EXP" "${DATA[@]}" hydra.run.dir="$OUT/train" test_after_fit=false "$@"
 CKPT=$(ls "$OUT"/train/checkpoints/best-*.ckpt | head -n 1)
 "$BIN/lit3d-eval" task=completion ckpt_path="$CKPT" hydra.run.dir="$OUT/eval"
 SAMPLE=../shared/data/recgan_sample
@@ -38,7 +39,7 @@ PY
 {
   echo "completion (shape completion from one depth view; test IoU: $HEADLINE)"
   echo "  data preview     $OUT/data/completion_samples.png   (counts: $OUT/data_summary.json)"
-  echo "  training run     $OUT/train   (checkpoints/, metrics.json, results.md, config.yaml, wandb/)"
+  echo "  training run     $OUT/train   (checkpoints/, curves.png, config.yaml, wandb/)"
   echo "  evaluation       $OUT/eval/results.md  $OUT/eval/metrics.json"
   echo "  figures          $(ls "$OUT"/eval/*.png | tr '\n' ' ')"
   if [ -d "$OUT/eval_recgan" ]; then echo "  real sample      $OUT/eval_recgan/results.md  (3D-RecGAN++ sample, same checkpoint)"; fi
