@@ -6,6 +6,7 @@ TORCH_SPEC ?= torch==2.13.0
 TASK ?= all
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+EXTRAS := $(VENV)/.extras
 export VENV TORCH_SPEC
 
 .PHONY: demo test test-all bench bench-gpu install clean lint
@@ -13,26 +14,30 @@ export VENV TORCH_SPEC
 $(STAMP): pyproject.toml scripts/bootstrap.sh
 	bash scripts/bootstrap.sh
 
-install: $(STAMP)
+# the catalogues of data=completion_installed and the Anny cache: for the tests and benchmarks, not the demo
+$(EXTRAS): $(STAMP) scripts/bootstrap_extras.sh
+	bash scripts/bootstrap_extras.sh
+
+install: $(STAMP) $(EXTRAS)
 
 demo: $(STAMP)
 	bash scripts/demo.sh $(TASK)
 
-test: $(STAMP)
+test: $(STAMP) $(EXTRAS)
 	$(BIN)/lint-imports
 	$(BIN)/python -m pytest -q
 
-test-all: $(STAMP)
+test-all: $(STAMP) $(EXTRAS)
 	$(BIN)/python -m pytest -q -m "not gpu"
 
 lint: $(STAMP)
 	$(BIN)/lint-imports
 
-bench: $(STAMP)
+bench: $(STAMP) $(EXTRAS)
 	$(BIN)/python -m benchmarks.run
 
 # On a CUDA machine: only the GPU rows, into benchmarks/gpu_rows.json (the next `make bench` shows them)
-bench-gpu: $(STAMP)
+bench-gpu: $(STAMP) $(EXTRAS)
 	$(BIN)/python -m benchmarks.run --gpu
 
 clean:

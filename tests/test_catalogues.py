@@ -1,5 +1,5 @@
 """Catalogue sources (data.source=installed): rules and frames on small trees written here, and every
-unpacked package (scripts/bootstrap.sh) that is present; each absent one is skipped by name."""
+unpacked package (scripts/bootstrap_extras.sh) that is present; each absent one is skipped by name."""
 from __future__ import annotations
 
 import zipfile
@@ -75,7 +75,7 @@ EXPECTED = {  # package -> categories it must give (at least one model each) whe
 def test_unpacked_catalogue_indexes_and_its_first_model_loads_upright(package):
     root = catalogue_root()
     if package_tree(root, package, CATALOGUES[package][0]) is None:
-        pytest.skip(f"{package} not unpacked in {root} nor installed (scripts/bootstrap.sh unpacks it)")
+        pytest.skip(f"{package} not unpacked in {root} nor installed (scripts/bootstrap_extras.sh unpacks it)")
     models, dropped = index_installed(packages=[package]) if package != "torcs-data" else ([], None)
     if package == "torcs-data":
         with pytest.raises(DataError, match="no catalogue models"):
