@@ -1,0 +1,32 @@
+"""scripts/faust_chain.py (issue 37's chain row): a person-sized mesh goes through lit3d.complete and is
+scored with the body fit's measures; the table has one row with the median and quartiles."""
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+import lit3d
+from lit3d.body.evaluate import DISTANCE, FAUST_HEIGHT
+from lit3d.body.synthetic import Camera
+
+SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "faust_chain.py"
+
+
+def _script():
+    spec = importlib.util.spec_from_file_location("faust_chain", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_a_standing_box_is_completed_and_scored(tmp_path, one_torch_thread):
+    chain = _script()
+    completer = lit3d.load(lit3d.untrained_checkpoint("completion_demo", tmp_path / "c.ckpt"))
+    box = trimesh.creation.box((0.4, FAUST_HEIGHT, 0.3))
+    verts = np.asarray(box.vertices) + np.array([0.0, 0.0, DISTANCE])  # camera frame: centred, 3.2 m ahead
+    row = chain.score_mesh("box", verts, np.asarray(box.faces), completer, Camera.default(), samples=2000)
+    assert row["faces"] > 0 and np.isfinite(row["chamfer"]) and row["chamfer"] > 0
+    assert 0.0 <= row["f@0.017"] <= row["f@0.034"] <= 1.0  # a larger threshold never scores less
+    table = chain.markdown([row, {**row, "chamfer": 3 * row["chamfer"]}], tmp_path / "c.ckpt")
+    assert "| completion chain | " in table and f"{2 * row['chamfer']:.0f} [" in table  # median of the two
