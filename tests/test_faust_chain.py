@@ -30,3 +30,18 @@ def test_a_standing_box_is_completed_and_scored(tmp_path, one_torch_thread):
     assert 0.0 <= row["f@0.017"] <= row["f@0.034"] <= 1.0  # a larger threshold never scores less
     table = chain.markdown([row, {**row, "chamfer": 3 * row["chamfer"]}], tmp_path / "c.ckpt")
     assert "| completion chain | " in table and f"{2 * row['chamfer']:.0f} [" in table  # median of the two
+
+
+def test_body_fit_rows_place_a_y_up_mesh_in_front_of_the_camera():
+    """scripts/body_fit_rows.py: a y-up mesh facing +z becomes camera-frame (y down, z forward), centred on
+    its box, its centre 3.2 m ahead, scaled; the regressor fits go beside the mean-body fits."""
+    spec = importlib.util.spec_from_file_location("body_fit_rows", SCRIPT.parent / "body_fit_rows.py")
+    rows = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(rows)
+    v = np.array([[0.0, 0.0, 0.0], [0.0, 2.0, 0.0], [1.0, 1.0, 0.5]])  # head up at y = 2, nose towards +z
+    cam = rows.camera_frame(v, 0.5)
+    assert np.allclose((cam.min(0) + cam.max(0)) / 2, [0.0, 0.0, DISTANCE])
+    assert cam[1, 1] < cam[0, 1]  # the head is up: smaller y in the camera frame (y down)
+    assert cam[2, 2] < DISTANCE    # the front faces the camera: nearer
+    assert np.isclose(np.ptp(cam[:, 1]), 1.0)  # scaled by 0.5
+    assert rows.refined_dir(Path("/x/fit")) == Path("/x/fit_refined")
