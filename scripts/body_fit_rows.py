@@ -29,19 +29,12 @@ import numpy as np
 import torch
 from omegaconf import OmegaConf
 
-from lit3d.body.evaluate import DISTANCE, FAUST_HEIGHT, fit
+from lit3d.body.evaluate import FAUST_HEIGHT, camera_frame, fit
 from lit3d.body.model import Body
 from lit3d.body.regressor import REFINE_FULL_ITERS, REFINE_GLOBAL_ITERS, load_regressor, refine_config
 from lit3d.body.results import fit_outputs
-from lit3d.body.synthetic import FLIP, Camera, render
+from lit3d.body.synthetic import Camera, render
 from lit3d.canonical.pooled import FOLDER_DEPTH_SUFFIX, build_datamodule, compose
-
-
-def camera_frame(verts: np.ndarray, scale: float) -> np.ndarray:
-    """``(V, 3)`` y-up vertices facing +z -> the camera frame: scaled, centred on their box, 3.2 m ahead."""
-    v = np.asarray(verts, np.float64) * scale
-    v -= (v.min(0) + v.max(0)) / 2
-    return v * FLIP + np.array([0.0, 0.0, DISTANCE])
 
 
 def refined_dir(out: Path) -> Path:
@@ -101,6 +94,7 @@ def main(argv: list[str] | None = None) -> None:
             np.save(tmp, out.canonical_depth)
             tmp.replace(folder / target.name)
             print(f"{subject} pose {pose} ({name}): {cpu_s:.1f} s CPU, poor fit {out.quality['poor_fit']}", flush=True)
+
 
 if __name__ == "__main__":
     main()

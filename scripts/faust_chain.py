@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 import lit3d
-from lit3d.body.evaluate import FAUST_HEIGHT, chamfer_fscore, faust_meshes, spread, surface_points
+from lit3d.body.evaluate import FAUST_HEIGHT, chamfer_fscore, faust_meshes, in_mm, spread, surface_points
 from lit3d.body.synthetic import Camera, render
 
 TAUS = (0.01 * FAUST_HEIGHT, 0.02 * FAUST_HEIGHT)
@@ -39,9 +39,8 @@ def score_mesh(stem: str, verts: np.ndarray, faces: np.ndarray, completer, cam: 
     seconds = time.process_time() - t
     truth = surface_points(verts, faces, samples)
     pred = surface_points(np.asarray(result.mesh.vertices), np.asarray(result.mesh.faces), samples, 1)
-    scores = chamfer_fscore(pred, truth, TAUS)
     return {"item": stem, "seconds": seconds, "faces": int(len(result.mesh.faces)),
-            **{k: (1000 * v if k in ("chamfer", "pred_to_truth", "truth_to_pred") else v) for k, v in scores.items()}}
+            **in_mm(chamfer_fscore(pred, truth, TAUS))}
 
 
 def markdown(rows: list[dict], ckpt: Path) -> str:

@@ -7,21 +7,22 @@ import numpy as np
 import trimesh
 
 import lit3d
-from lit3d.body.evaluate import DISTANCE, FAUST_HEIGHT
+from lit3d.body.evaluate import DISTANCE, FAUST_HEIGHT, camera_frame
 from lit3d.body.synthetic import Camera
 
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "faust_chain.py"
+SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
 
 
-def _script():
-    spec = importlib.util.spec_from_file_location("faust_chain", SCRIPT)
+def _script(name: str):
+    """``scripts/<name>.py`` as a module."""
+    spec = importlib.util.spec_from_file_location(name, SCRIPTS / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
 
 
 def test_a_standing_box_is_completed_and_scored(tmp_path, one_torch_thread):
-    chain = _script()
+    chain = _script("faust_chain")
     completer = lit3d.load(lit3d.untrained_checkpoint("completion_demo", tmp_path / "c.ckpt"))
     box = trimesh.creation.box((0.4, FAUST_HEIGHT, 0.3))
     verts = np.asarray(box.vertices) + np.array([0.0, 0.0, DISTANCE])  # camera frame: centred, 3.2 m ahead
@@ -33,13 +34,12 @@ def test_a_standing_box_is_completed_and_scored(tmp_path, one_torch_thread):
 
 
 def test_body_fit_rows_place_a_y_up_mesh_in_front_of_the_camera():
-    """scripts/body_fit_rows.py: a y-up mesh facing +z becomes camera-frame (y down, z forward), centred on
-    its box, its centre 3.2 m ahead, scaled; the regressor fits go beside the mean-body fits."""
-    spec = importlib.util.spec_from_file_location("body_fit_rows", SCRIPT.parent / "body_fit_rows.py")
-    rows = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(rows)
+    """lit3d.body.evaluate.camera_frame (FAUST and scripts/body_fit_rows.py): a y-up mesh facing +z becomes
+    camera-frame (y down, z forward), centred on its box, its centre 3.2 m ahead, scaled; the script's
+    regressor fits go beside its mean-body fits."""
+    rows = _script("body_fit_rows")
     v = np.array([[0.0, 0.0, 0.0], [0.0, 2.0, 0.0], [1.0, 1.0, 0.5]])  # head up at y = 2, nose towards +z
-    cam = rows.camera_frame(v, 0.5)
+    cam = camera_frame(v, 0.5)
     assert np.allclose((cam.min(0) + cam.max(0)) / 2, [0.0, 0.0, DISTANCE])
     assert cam[1, 1] < cam[0, 1]  # the head is up: smaller y in the camera frame (y down)
     assert cam[2, 2] < DISTANCE    # the front faces the camera: nearer

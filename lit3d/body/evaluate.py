@@ -83,6 +83,11 @@ def chamfer_fscore(pred: np.ndarray, truth: np.ndarray, thresholds) -> dict:
     return out
 
 
+def in_mm(scores: dict) -> dict:
+    """:func:`chamfer_fscore`'s scores with its distances (metres) in millimetres."""
+    return {k: 1000 * v if k in ("chamfer", "pred_to_truth", "truth_to_pred") else v for k, v in scores.items()}
+
+
 def surface_points(verts: np.ndarray, faces: np.ndarray, n: int, seed: int = 0) -> np.ndarray:
     """``(n, 3)`` points uniform by area on the mesh (seeded)."""
     import trimesh
@@ -162,10 +167,16 @@ def faust_meshes(root: Path) -> list[tuple[str, np.ndarray, np.ndarray]]:
     for (subject, pose), m in raw.items():
         ref = raw.get((subject, 0), m)
         scale = FAUST_HEIGHT / float(np.ptp(np.asarray(ref.vertices)[:, 1]))
-        v = np.asarray(m.vertices, np.float64) * scale
-        v -= (v.min(0) + v.max(0)) / 2
-        out.append((f"{subject}_pose{pose}", v * FLIP + np.array([0.0, 0.0, DISTANCE]), np.asarray(m.faces)))
+        out.append((f"{subject}_pose{pose}", camera_frame(m.vertices, scale), np.asarray(m.faces)))
     return out
+
+
+def camera_frame(verts: np.ndarray, scale: float) -> np.ndarray:
+    """``(V, 3)`` y-up vertices facing +z -> the camera frame (y down, z forward): scaled, centred on
+    their box, the centre ``DISTANCE`` m ahead, facing the camera."""
+    v = np.asarray(verts, np.float64) * scale
+    v -= (v.min(0) + v.max(0)) / 2
+    return v * FLIP + np.array([0.0, 0.0, DISTANCE])
 
 
 def faust_items(body, root: Path, cam: Camera, samples: int, canon_dir: Path | None, say,
@@ -191,8 +202,7 @@ def faust_items(body, root: Path, cam: Camera, samples: int, canon_dir: Path | N
                "poor_fit": out.quality["poor_fit"], "silhouette_iou": out.quality["silhouette_iou"]}
         sets = {m: surface_points(r[m].vertices, body.faces, samples, 1) for m in _methods(r)}
         for name, pts in (*sets.items(), ("points", r["obs"].points)):
-            row[name] = {k: 1000 * v if k in ("chamfer", "pred_to_truth", "truth_to_pred") else v
-                         for k, v in chamfer_fscore(pts, truth, taus).items()}
+            row[name] = in_mm(chamfer_fscore(pts, truth, taus))
         for m in ("init", "refined"):
             if m in r:
                 q = fit_outputs(body, r[m], r["obs"])
