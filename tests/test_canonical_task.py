@@ -181,7 +181,7 @@ def test_fine_tuning_starts_from_the_pretrained_net(tmp_path, tiny_net):
 
 def test_warp_terms_join_the_loss_with_their_weights(tiny_net):
     """The warp head's terms: flow, visibility and smoothness always, the depth offset's total variation
-    only with offset_smooth_weight > 0, each times its weight."""
+    only with offset_smooth_weight > 0, the depth's slope only with depth_grad_weight > 0, each times its weight."""
     torch.manual_seed(0)
     kw = dict(net={**tiny_net(), "head": "warp"}, use_phases=False, alpha=1.0, beta=1.0, flow_weight=2.0,
               vis_weight=3.0, smooth_weight=4.0)
@@ -199,7 +199,7 @@ def test_warp_terms_join_the_loss_with_their_weights(tiny_net):
         task.log = task.log_dict = lambda *a, **k: None
     out = base.net(batch["depth"], batch["mask"])
     terms = {k: v.detach() for k, v in base._warp_terms(out, batch).items()}
-    from lit3d.canonical.losses import canonical_loss, flow_smoothness
+    from lit3d.canonical.losses import canonical_loss, depth_gradient_loss, flow_smoothness
 
     image = canonical_loss(out.depth, out.mask, batch["canon_depth"], batch["canon_mask"], 1.0, 1.0, "mse",
                            out.mask_logits)["loss"]
@@ -209,6 +209,13 @@ def test_warp_terms_join_the_loss_with_their_weights(tiny_net):
     assert float(offset_tv) > 0
     got = float(with_offset.training_step(batch, 0).detach())
     assert got == pytest.approx(float(expected + 5.0 * offset_tv), rel=1e-5)
+    with_grad = CanonicalTask(**kw, depth_grad_weight=6.0)
+    with_grad.load_state_dict(base.state_dict())
+    with_grad.log = with_grad.log_dict = lambda *a, **k: None
+    slope = depth_gradient_loss(out.depth, batch["canon_depth"], batch["canon_mask"]).detach()
+    assert float(slope) > 0
+    got = float(with_grad.training_step(batch, 0).detach())
+    assert got == pytest.approx(float(expected + 6.0 * slope), rel=1e-5)
 
 
 def test_validation_retrieval_finds_each_subject_by_its_mask():

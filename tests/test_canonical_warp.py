@@ -246,3 +246,20 @@ def test_normalised_warp_keeps_the_body_depth_at_the_silhouette():
     assert torch.allclose(edge, torch.full_like(edge, 0.5))
     assert torch.allclose(plain[0, 0, :, 3], torch.full((8,), 0.3)) and torch.allclose(normal[0, 0, :, 3], torch.full((8,), 0.6))
     assert normal[0, 0, :, 5:].abs().max() == 0  # background stays background
+
+
+def test_depth_gradient_loss_reads_the_slope_not_the_level():
+    """The slope term against a hand count: a constant offset costs nothing; a ramp of 0.1 a pixel
+    along x against a flat target costs 0.1 on every x-pair inside the mask and nothing along y; pairs
+    leaving the mask are not counted."""
+    from lit3d.canonical.losses import depth_gradient_loss
+
+    mask = torch.zeros(1, 1, 6, 6)
+    mask[..., 1:5, 1:5] = 1.0
+    flat = 0.5 * mask
+    assert float(depth_gradient_loss(flat + 0.3, flat, mask)) == 0.0
+    ramp = 0.1 * torch.arange(6.0).view(1, 1, 1, 6).expand(1, 1, 6, 6)
+    assert float(depth_gradient_loss(flat + ramp, flat, mask)) == pytest.approx(0.1, abs=1e-6)
+    outside = flat.clone()
+    outside[..., 0, :] = 9.0  # a row outside the mask: no pair with both pixels inside touches it
+    assert float(depth_gradient_loss(outside, flat, mask)) == 0.0

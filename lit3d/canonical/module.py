@@ -18,19 +18,17 @@ body-shape code that, unlike a closed-set subject classifier, means the same for
 (``val/phenotype_mae`` on the validation subjects). ``contrastive_weight > 0`` adds the supervised contrastive
 loss across the poses of one subject in the batch (:mod:`lit3d.canonical.contrastive`; ``data.batch_poses``).
 
-``identity_weight > 0`` adds a subject classifier (one linear layer, ``identity_classes`` outputs)
-on the MSFE's fused latent and its cross-entropy, times that weight, to the loss: the targets
-already name the subject (one canonical image each); this asks the latent to say it too.
+``identity_weight > 0`` adds a subject classifier (one linear layer, ``identity_classes`` outputs) on the
+MSFE's fused latent and its cross-entropy, times that weight, to the loss: the latent names the subject too.
 
 ``arch="recall"`` is the closed-set recall row (:mod:`lit3d.canonical.recall`): a subject classifier
 (``identity_classes`` subjects) whose output is the recalled training canonical image; its templates
 are filled from the training data at fit start and saved in the checkpoint; its cross-entropy x
 ``identity_weight`` joins the image loss.
 
-``net.head="warp"`` (:mod:`lit3d.canonical.warp`) moves the posed pixels instead of redrawing them; its
-flow, visibility and smoothness terms (:mod:`lit3d.canonical.losses`), times ``flow_weight``,
-``vis_weight`` and ``smooth_weight``, join the loss where the batch has flow targets
-(``data.flow_targets``; items without them train on depth and mask only).
+``net.head="warp"`` (:mod:`lit3d.canonical.warp`) moves the posed pixels instead of redrawing them; its terms
+(:data:`WARP_TERMS`, :mod:`lit3d.canonical.losses`) times their ``<term>_weight`` join the loss, the flow and
+visibility where the batch has flow targets (``data.flow_targets``).
 
 Logged: ``train/loss|depth_loss|mask_loss|alpha|beta`` (``identity_loss`` with the classifier, ``contrastive_loss``;
 ``flow_loss|vis_loss|smooth_loss`` and ``val/flow_epe`` in pixels with the warp head); ``val/`` and ``test/`` ``depth_mse``
@@ -60,7 +58,7 @@ from lit3d.canonical.figures import validation_panel
 from lit3d.canonical.loss_phases import THESIS_FRACTIONS, LossPhases
 from lit3d.canonical.factory import build_canonical_net, summarize
 from lit3d.canonical.recall import RecallTemplates
-from lit3d.canonical.losses import canonical_loss, flow_loss, flow_smoothness, visibility_loss
+from lit3d.canonical.losses import canonical_loss, depth_gradient_loss, flow_loss, flow_smoothness, visibility_loss
 from lit3d.canonical.warp import pixels_to_grid
 from lit3d.metrics.depth import MaskedDepthMSE, MaskIoU
 from lit3d.metrics.gathered import GatheredTensors, compute_if_updated
@@ -70,8 +68,8 @@ from lit3d.utils.evaluation import legacy_settings
 from lit3d.utils.log_images import log_image, media_loggers
 
 METRICS = ("depth_mse", "iou", "depth_mse_input", "iou_input")
-# the warp head's loss terms (flow_weight, vis_weight, smooth_weight, offset_smooth_weight)
-WARP_TERMS = ("flow", "vis", "smooth", "offset_smooth")
+# the warp head's loss terms (flow_weight, vis_weight, smooth_weight, offset_smooth_weight, depth_grad_weight)
+WARP_TERMS = ("flow", "vis", "smooth", "offset_smooth", "depth_grad")
 # per test item, gathered for the evaluator: prediction (depth, mask probability), posed input,
 # true canonical form ((N, 1, S, S) float32), subject index, pose and view ((N,) int64)
 # "index": the item's place in the test set, so the evaluator sees the items in one order under DDP too
@@ -137,6 +135,7 @@ class CanonicalTask(pl.LightningModule):
         vis_weight: float = 0.0,
         smooth_weight: float = 0.0,
         offset_smooth_weight: float = 0.0,
+        depth_grad_weight: float = 0.0,
         phenotype_weight: float = 0.0,
         phenotype_dims: int = 0,
         contrastive_weight: float = 0.0,
@@ -252,8 +251,7 @@ class CanonicalTask(pl.LightningModule):
                                                           self.hparams.contrastive_temperature)
             terms["loss"] = terms["loss"] + self.hparams.contrastive_weight * terms["contrastive"]
         if out.flow is not None:  # the warp head: each of its terms times its weight
-            warp = self._warp_terms(out, batch)
-            terms.update(warp)
+            terms.update(warp := self._warp_terms(out, batch))
             terms["loss"] = terms["loss"] + sum(self.hparams[f"{k}_weight"] * v for k, v in warp.items())
         where = f"step {self.global_step} (epoch {self.current_epoch}, batch {batch_idx})"
         if not guard_step(self, terms, where, self.hparams.on_nonfinite):
@@ -280,15 +278,18 @@ class CanonicalTask(pl.LightningModule):
 
     def _warp_terms(self, out, batch: dict) -> dict[str, torch.Tensor]:
         """The warp head's :data:`WARP_TERMS` that are on: ``flow`` (end-point distance, grid units),
-        ``vis`` (BCE), ``smooth`` (flow total variation) and, with ``offset_smooth_weight`` > 0,
-        ``offset_smooth`` (the depth offset's total variation); items without flow targets
-        (``has_flow`` false or absent) add to the smoothness terms only."""
+        ``vis`` (BCE), ``smooth`` (flow total variation), with ``offset_smooth_weight`` > 0 ``offset_smooth``
+        (the depth offset's total variation) and with ``depth_grad_weight`` > 0 ``depth_grad`` (the depth's
+        slope against the target's, :func:`~lit3d.canonical.losses.depth_gradient_loss`); items without
+        flow targets (``has_flow`` false or absent) add to the last three only."""
         target, vis, has = self._flow_targets(out, batch)
         terms = {"flow": flow_loss(out.flow, target, vis, has),
                  "vis": visibility_loss(out.vis_logits, vis, batch["canon_mask"], has),
                  "smooth": flow_smoothness(out.flow)}
         if self.hparams.offset_smooth_weight > 0 and out.depth_offset is not None:
             terms["offset_smooth"] = flow_smoothness(out.depth_offset)
+        if self.hparams.depth_grad_weight > 0:
+            terms["depth_grad"] = depth_gradient_loss(out.depth, batch["canon_depth"], batch["canon_mask"])
         return terms
 
     def _identity_loss(self, latent: torch.Tensor, subject_idx) -> torch.Tensor:
