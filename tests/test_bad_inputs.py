@@ -330,10 +330,10 @@ CASES = [
      lambda tmp: [f"paths.data_dir={tmp}/data"]), ["no sheet has both a model-name column"]),
     # configs and options
     ("train-unknown-experiment", _option("experiment=nope"), train_cli,
-     ["experiment=nope", "no such experiment config", "known: canonical_demo"]),
+     ["experiment=nope", "no such experiment config", "known: canonical_animals, canonical_demo"]),
     ("train-unknown-task", _option("task=nope"), train_cli, ["task=nope", "known: canonical, completion, quality"]),
-    ("eval-unknown-experiment", _option("experiment=nope"), eval_cli, ["experiment=nope", "known: canonical_demo"]),
-    ("data-unknown-experiment", _option("experiment=nope"), data_cli, ["experiment=nope", "known: canonical_demo"]),
+    ("eval-unknown-experiment", _option("experiment=nope"), eval_cli, ["experiment=nope", "known: canonical_animals, canonical_demo"]),
+    ("data-unknown-experiment", _option("experiment=nope"), data_cli, ["experiment=nope", "known: canonical_animals, canonical_demo"]),
     ("data-unknown-data", _option("data=nope"), data_cli, ["data=nope", "known: ", "canonical_synth"]),
     ("train-tosca-without-data-root", _option("experiment=canonical_tosca", "data.root"), _subprocess("lit3d-train"),
      ["missing value for data.root", "set data.root="]),

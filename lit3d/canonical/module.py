@@ -22,9 +22,8 @@ loss across the poses of one subject in the batch (:mod:`lit3d.canonical.contras
 MSFE's fused latent and its cross-entropy, times that weight, to the loss: the latent names the subject too.
 
 ``arch="recall"`` is the closed-set recall row (:mod:`lit3d.canonical.recall`): a subject classifier
-(``identity_classes`` subjects) whose output is the recalled training canonical image; its templates
-are filled from the training data at fit start and saved in the checkpoint; its cross-entropy x
-``identity_weight`` joins the image loss.
+(``identity_classes`` subjects) whose output is the recalled training canonical image; its templates are
+filled from the training data at fit start and saved in the checkpoint; its cross-entropy x ``identity_weight`` too.
 
 ``net.head="warp"`` (:mod:`lit3d.canonical.warp`) moves the posed pixels instead of redrawing them; its terms
 (:data:`WARP_TERMS`, :mod:`lit3d.canonical.losses`) times their ``<term>_weight`` join the loss, the flow and
