@@ -147,3 +147,19 @@ def test_mask_match_against_sklearn_jaccard():
     assert out["input"]["iou"] == pytest.approx(ref, abs=1e-6)
     items["pred_mask"] = canon[(idx + 1) % 3].astype(np.float32)
     assert mask_match(items, 0.5)["model"]["nearest_subject"] == 0.0
+
+
+def test_pooled_table_keeps_every_depth_row(tmp_path):
+    """A depth row of any name (``--depth-row body_fit_refined=DIR``) gets its own line in pooled_results.md,
+    before chance; the known rows keep their labels."""
+    from lit3d.canonical.report import write_pooled_results
+
+    scores = {k: (0.5, 0.01) for k in ("nn", "ft", "st", "e", "dcg")}
+    result = {"summary": {"input": scores, "body_fit": scores, "body_fit_refined": dict(scores, nn=(0.46, 0.04)),
+                          "chance": scores},
+              "data": {"source": "tosca"}, "n_items": 36, "n_subjects": 3, "seeds": [0, 1]}
+    lines = write_pooled_results(result, tmp_path).read_text().splitlines()
+    rows = [line.split(" |")[0].lstrip("| ") for line in lines if "ours)" in line and line.startswith("|")]
+    assert rows == ["posed input depth, no canonicalisation (ours)", "Anny body fit, its canonical depth (lit3d.body, ours)",
+                    "body_fit_refined: depth images from --depth-row (ours)", "chance: random distances (ours)"]
+    assert "| 0.46 ± 0.04 |" in next(line for line in lines if "body_fit_refined" in line)

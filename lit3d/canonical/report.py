@@ -148,7 +148,9 @@ def write_pooled_results(result: dict, out_dir: Path) -> Path:
     number = TABLE_OF_SOURCE.get((result.get("data") or {}).get("source") or "", "5.3")
     title, thesis = THESIS[number]
     table = [[f"{k} (thesis)"] + [fmt(v, 2) for v in vals[:3]] + ["–", fmt(vals[3], 2)] for k, vals in thesis.items()]
-    for label, key in POOLED_ROWS:
+    known = {key for _, key in POOLED_ROWS}  # rows of other names (--depth-row ROW=DIR) before chance
+    extra = [(f"{key}: depth images from --depth-row (ours)", key) for key in summary if key not in known]
+    for label, key in (*POOLED_ROWS[:-1], *extra, POOLED_ROWS[-1]):
         if key in summary:
             table.append([label] + [_mean_sd(summary[key][c]) for c in ("nn", "ft", "st", "e", "dcg")])
     secs = ", ".join(f"{k} {v:.0f}s" for k, v in (result.get("seconds") or {}).items())
