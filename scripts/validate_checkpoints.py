@@ -1,7 +1,7 @@
 """Score training checkpoints on their run's validation split, with the task's validation metrics.
 
     python scripts/validate_checkpoints.py RUN/checkpoints/best-011.ckpt OTHER_RUN/checkpoints/last.ckpt \\
-        --all-val --out val.json
+        --all-val --out val.json [--heldout DIR]
 
 Each checkpoint's run folder (``RUN/config.yaml``, written by lit3d-train) gives the data; the task is
 loaded from the checkpoint. ``--all-val``: every validation item (``data.max_val_items=null``), not the
@@ -9,6 +9,12 @@ training run's subset. Prints one JSON line per checkpoint (``val/...`` metrics,
 task's ``val/retrieval_nn``: validation subjects retrieved by mask IoU) and writes them all to ``--out``.
 Use it to compare settings on people never tested (issue 33) with checkpoints trained before a metric
 existed.
+
+``--heldout DIR`` (canonical task): also writes the validation items' predictions as
+``DIR/<i>/heldout.npz`` (``i``: the checkpoint's place on the command line; the layout
+:mod:`lit3d.canonical.heldout` gives test items, with the checkpoint's evaluation settings), so that
+``python -m lit3d.canonical.pooled DIR/<i> --out ...`` ranks settings on validation people with the
+thesis descriptor, the measure the test reports, instead of on the test set.
 """
 from __future__ import annotations
 
@@ -19,18 +25,45 @@ from pathlib import Path
 import lightning.pytorch as pl
 from omegaconf import OmegaConf
 
-from lit3d.cli.common import build_datamodule, import_object
+from lit3d.canonical.evaluator import prediction_source
+from lit3d.canonical.heldout import heldout_arrays, item_ids, save_heldout, settings_of
+from lit3d.cli.common import build_datamodule, import_object, read_checkpoint
+from lit3d.cli.eval_settings import checkpoint_settings
 
 
-def validate(ckpt: Path, all_val: bool) -> dict[str, float]:
-    """``{metric: value}`` of ``ckpt`` on the validation split of its run's data config."""
+def _trainer() -> pl.Trainer:
+    return pl.Trainer(logger=False, enable_progress_bar=False, enable_model_summary=False, accelerator="cpu")
+
+
+def validate(ckpt: Path, all_val: bool, heldout: Path | None = None) -> dict[str, float]:
+    """``{metric: value}`` of ``ckpt`` on the validation split of its run's data config; with ``heldout``
+    (a folder) the validation predictions are written there as ``heldout.npz``."""
     cfg = OmegaConf.load(ckpt.parent.parent / "config.yaml")
     if all_val and "max_val_items" in cfg.data:
         cfg.data.max_val_items = None
     dm = build_datamodule(cfg.data)
-    task = import_object(cfg.task._target_).load_from_checkpoint(str(ckpt), map_location="cpu")
-    trainer = pl.Trainer(logger=False, enable_progress_bar=False, enable_model_summary=False, accelerator="cpu")
-    return {k: round(float(v), 4) for k, v in trainer.validate(task, dm, verbose=False)[0].items()}
+    task_cls = import_object(cfg.task._target_)
+    task = task_cls.load_from_checkpoint(str(ckpt), map_location="cpu")
+    metrics = {k: round(float(v), 4) for k, v in _trainer().validate(task, dm, verbose=False)[0].items()}
+    if heldout is not None:
+        write_validation_heldout(task, dm, ckpt, task_cls, heldout)
+    return metrics
+
+
+def write_validation_heldout(task, dm, ckpt: Path, task_cls, folder: Path) -> Path:
+    """The validation items through the task's test step, saved as ``folder/heldout.npz`` (every
+    validation item is its own expected set: one fold)."""
+    _trainer().test(task, dataloaders=dm.val_dataloader(), verbose=False)
+    outputs = task.test_outputs.compute()
+    order = outputs["index"].cpu().argsort()
+    outputs = {k: v.cpu()[order] for k, v in outputs.items()}
+    names = {i: s for s, i in dm.subject_index.items()}
+    expected = item_ids([names[int(i)] for i in outputs["subject_idx"]], outputs["pose"], outputs["view"])
+    ck, meta = read_checkpoint(ckpt)
+    settings, _ = checkpoint_settings(ck, meta, task_cls)
+    arrays = heldout_arrays(outputs, names, expected.tolist(), prediction_source(task), dict(dm.hparams), 0, 1,
+                            settings_of({"mask_threshold": task.hparams.mask_threshold, **settings}))
+    return save_heldout(folder / "heldout.npz", arrays)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -38,10 +71,11 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("ckpts", nargs="+", type=Path, help="checkpoints RUN/checkpoints/NAME.ckpt")
     p.add_argument("--all-val", action="store_true", help="every validation item, not the run's subset")
     p.add_argument("--out", type=Path, help="write {checkpoint: metrics} here (JSON)")
+    p.add_argument("--heldout", type=Path, help="write each checkpoint's validation predictions to HELDOUT/<i>/")
     args = p.parse_args(argv)
     rows = {}
-    for ckpt in args.ckpts:
-        rows[str(ckpt)] = validate(ckpt, args.all_val)
+    for i, ckpt in enumerate(args.ckpts):
+        rows[str(ckpt)] = validate(ckpt, args.all_val, args.heldout / str(i) if args.heldout else None)
         print(ckpt, json.dumps(rows[str(ckpt)]), flush=True)
     if args.out:
         args.out.write_text(json.dumps(rows, indent=1))

@@ -146,6 +146,25 @@ def test_a_second_signal_stops_at_once_and_later_ones_are_ignored():
             signal.signal(s, handler)
 
 
+def test_a_signal_after_the_last_stop_point_of_preparing_still_stops():
+    """A Ctrl-C that comes after the last item's stop point (the data is complete) stops the command at the
+    end of :func:`lit3d.cli.stops.preparing` instead of being forgotten (the command then trained on: seen
+    once in CI, the Ctrl-C of test_ctrl_c_while_lit3d_train_starts_is_one_line not acted on)."""
+    from lit3d.cli.common import Interrupted
+    from lit3d.cli.stops import preparing
+
+    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with pytest.raises(Interrupted, match=r"data: stopped by SIGINT \(Ctrl-C\) while preparing data; the same"):
+            with preparing("data"):
+                signal.raise_signal(signal.SIGINT)  # recorded; no stop point follows
+        with preparing("data"):  # no signal: the block ends as usual
+            pass
+    finally:
+        for s, handler in before.items():
+            signal.signal(s, handler)
+
+
 def test_a_stopped_canonical_preparation_counts_its_subjects(tmp_path, monkeypatch):
     """The canonical data's stop line says "N of M items done" like the completion data's (M: the subjects)."""
     from datamodules.canonical import CanonicalDataModule

@@ -21,7 +21,8 @@ cross-validated protocol (:mod:`lit3d.canonical.pooled`).
 ``settings`` are the run's evaluation settings (the config's ``evaluation`` node, saved in the checkpoint:
 ``retrieval``: descriptor config or null = off, ``retrieval_min_subjects``, ``chance_trials``,
 ``ceiling_jitter_deg``, ``mesh_baselines``, ``baseline_landmarks``, ``baseline_max_vertices``,
-``baseline_smacof_eps``); the task itself gives only its ``arch`` (the prediction row's name) and
+``baseline_smacof_eps``, ``prediction_smooth_px``: the prediction's depth smoothed inside its silhouette
+before it is scored and saved, :mod:`lit3d.canonical.smoothing`); the task itself gives only its ``arch`` (the prediction row's name) and
 ``mask_threshold`` (where its predicted mask is).
 """
 from __future__ import annotations
@@ -37,6 +38,7 @@ import torch
 from lit3d.canonical.baselines import baseline_retrieval
 from lit3d.canonical.heldout import HELDOUT_FILE, heldout_arrays, save_heldout, settings_of
 from lit3d.canonical.report import write_figures, write_results  # noqa: F401
+from lit3d.canonical.smoothing import SETTING, smooth_prediction, smoothing_of
 from lit3d.metrics.depth import composite_depth
 from lit3d.metrics.retrieval import chance_scores, retrieval_scores
 from lit3d.retrieval.descriptor import DescriptorConfig, distance_matrix_from_depths
@@ -64,12 +66,15 @@ def protocol(task, datamodule, settings: Mapping) -> Evaluation:
         return Evaluation()
     order = torch.argsort(outputs["index"].cpu())  # dataset order: ranks hand in interleaved shares
     outputs = {k: v.cpu()[order] for k, v in outputs.items()}
+    threshold = float(task.hparams.mask_threshold)
+    outputs["pred_depth"] = smooth_prediction(outputs["pred_depth"], outputs["pred_mask"], smoothing_of(settings), threshold)
     held = heldout_items(task, outputs, datamodule, settings)
     results = retrieval_results(settings, outputs, datamodule, source=prediction_source(task),
-                                mask_threshold=float(task.hparams.mask_threshold))
+                                mask_threshold=threshold)
     metrics = {f"test/retrieval/{source}/{k}": float(scores[k])
                for source, scores in results.items() for k in LOGGED_SCORES if k in scores}
-    return Evaluation(metrics, {"heldout": held} if held else {})
+    artefacts = {"heldout": held} if held else {}
+    return Evaluation(metrics, {**artefacts, SETTING: smoothing_of(settings)})  # SETTING: for the contact sheets
 
 
 def prediction_source(task) -> str:

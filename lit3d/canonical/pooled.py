@@ -37,6 +37,7 @@ from datamodules.canonical.dataset import CanonicalPairDataset
 from lit3d.canonical.baselines import mesh_rows
 from lit3d.canonical.heldout import HELDOUT_FILE, pool, settings_of
 from lit3d.canonical.report import write_pooled_results
+from lit3d.canonical.smoothing import smooth_prediction, smoothing_of
 from lit3d.metrics.depth import composite_depth
 from lit3d.metrics.retrieval import chance_scores, mask_iou, retrieval_scores
 from lit3d.retrieval.descriptor import DescriptorConfig, depth_meshes, distance_matrix_from_features, mesh_features
@@ -228,6 +229,20 @@ def study(items: dict, datamodule, settings: dict, seeds, rows=None, extra_depth
             "descriptor": cfg.__dict__}
 
 
+def with_smoothing(items: dict, settings: dict, sigma: float) -> dict:
+    """``items`` with the prediction's depth smoothed inside its silhouette by ``sigma`` px
+    (:mod:`lit3d.canonical.smoothing`), recorded in ``settings``; ValueError when the runs already
+    smoothed it (their ``prediction_smooth_px``) or there is no prediction row."""
+    done = smoothing_of(settings)
+    if done > 0:
+        raise ValueError(f"--smooth-px: the runs' predictions are already smoothed (prediction_smooth_px={done:g})")
+    if "pred_depth" not in items:
+        raise ValueError("--smooth-px: no prediction row to smooth (give run dirs)")
+    settings["prediction_smooth_px"] = float(sigma)
+    threshold = settings.get("mask_threshold", 0.5)
+    return {**items, "pred_depth": smooth_prediction(items["pred_depth"], items["pred_mask"], sigma, threshold)}
+
+
 def compose(overrides: list[str]):
     """The ``lit3d-train`` config for ``overrides`` (Hydra compose of ``conf/train.yaml`` with task=canonical)."""
     from hydra import compose as hydra_compose
@@ -243,11 +258,12 @@ def build_datamodule(data: dict):
 
 
 def run(run_dirs, seeds, out_dir, overrides=(), rows=None, strict: bool = True, mesh_baselines=None,
-        fold_test: bool = False, depth_rows: dict | None = None) -> Path:
+        fold_test: bool = False, depth_rows: dict | None = None, smooth_px: float | None = None) -> Path:
     """Pool (or, without run dirs, take every held-out item of the composed config; ``fold_test``: only
     the test split of its ``data.fold``), score, write ``pooled_results.md`` and ``pooled.json`` into
     ``out_dir``; returns the .md path. ``mesh_baselines``: the canonical-form rows (default: the runs'
-    ``evaluation.mesh_baselines``); ``depth_rows``: ``{row: folder}`` more depth rows (:func:`folder_depths`)."""
+    ``evaluation.mesh_baselines``); ``depth_rows``: ``{row: folder}`` more depth rows (:func:`folder_depths`); ``smooth_px``: smooth the
+    prediction row as ``evaluation.prediction_smooth_px`` would have (:func:`with_smoothing`)."""
     from omegaconf import OmegaConf
 
     t0 = time.perf_counter()
@@ -274,6 +290,8 @@ def run(run_dirs, seeds, out_dir, overrides=(), rows=None, strict: bool = True, 
         meta = {"overrides": list(overrides)}
     if mesh_baselines is not None:
         settings["mesh_baselines"] = list(mesh_baselines)
+    if smooth_px is not None:
+        items = with_smoothing(items, settings, smooth_px)
     extra = {row: folder_depths(items, folder) for row, folder in (depth_rows or {}).items()}
     if extra:
         meta["depth_rows"] = {row: str(folder) for row, folder in depth_rows.items()}
@@ -335,6 +353,8 @@ def main(argv: list[str] | None = None) -> None:
                         help="without run dirs: only the test split of data.fold (not every fold's held-out items)")
     parser.add_argument("--depth-row", action="append", default=[], metavar="ROW=DIR",
                         help="one more depth row: DIR/<subject>_pose<pose>_body_canonical_depth.npy per item")
+    parser.add_argument("--smooth-px", type=float, default=None, metavar="SIGMA",
+                        help="smooth the prediction's depth inside its silhouette first (evaluation.prediction_smooth_px)")
     args = parser.parse_args(argv)
     depth_rows = dict(r.split("=", 1) for r in args.depth_row if "=" in r)
     if len(depth_rows) != len(args.depth_row):
@@ -343,7 +363,8 @@ def main(argv: list[str] | None = None) -> None:
         parser.error("give run dirs, or Hydra overrides after -- for the non-learned rows")
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     print(run(args.runs, args.seeds, args.out, overrides, args.rows, strict=not args.allow_partial,
-              mesh_baselines=args.mesh_baselines, fold_test=args.fold_test, depth_rows=depth_rows).read_text())
+              mesh_baselines=args.mesh_baselines, fold_test=args.fold_test, depth_rows=depth_rows,
+              smooth_px=args.smooth_px).read_text())
 
 
 if __name__ == "__main__":

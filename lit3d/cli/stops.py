@@ -24,7 +24,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from lit3d.cli.common import Interrupted
-from lit3d.utils.stops import StopRequested, on_signals, pending
+from lit3d.utils.stops import StopRequested, check_stop, on_signals, pending
 
 
 def preparation_stopped(stop: StopRequested, data_dir: str | Path) -> str:
@@ -40,10 +40,12 @@ def preparation_stopped(stop: StopRequested, data_dir: str | Path) -> str:
 @contextlib.contextmanager
 def preparing(data_dir: str | Path) -> Iterator[None]:
     """Prepare data inside the block; Ctrl-C or SIGTERM stops it at the next item (module doc); after a
-    stop the command ignores further signals while it exits."""
+    stop the command ignores further signals while it exits. A signal after the last item's stop point
+    stops the command at the end of the block (it was forgotten there, and the command went on to train)."""
     try:
         with on_signals(ignore_after_stop=True):
             yield
+            check_stop()
     except StopRequested as stop:
         raise Interrupted(preparation_stopped(stop, data_dir)) from None
 

@@ -140,3 +140,18 @@ def zero_window(x: torch.Tensor, origin: tuple[int, int], rows: tuple[int, int],
     h, w = x.shape[-2:]
     (r0, r1), (c0, c1) = rows, cols
     return F.pad(x, (x0 - c0, c1 - (x0 + w), y0 - r0, r1 - (y0 + h)))  # negative pads crop
+
+
+def masked_gaussian_blur(depth: torch.Tensor, mask: torch.Tensor, sigma: float) -> torch.Tensor:
+    """Gaussian blur of ``depth`` ``(..., H, W)`` over the pixels where ``mask`` (same shape) is > .5 only
+    (normalised convolution: ``G*(d m) / G*m``, zero padding, window ``2 ceil(4 sigma) + 1``): the
+    surface is smoothed without pulling the background into its rim. Pixels outside the mask keep
+    their value; ``sigma <= 0`` returns ``depth`` unchanged. Same dtype (float32 inside)."""
+    if sigma <= 0:
+        return depth
+    m = (mask.float() > 0.5).float()
+    d = depth.float()
+    taps = gaussian_kernel1d(2 * int(np.ceil(4 * sigma)) + 1, float(sigma))
+    num = separable_filter(d * m, taps, padding="zeros")
+    den = separable_filter(m, taps, padding="zeros")
+    return torch.where(m > 0, num / den.clamp_min(1e-6), d).to(depth.dtype)
