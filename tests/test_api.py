@@ -146,28 +146,3 @@ def test_export_command_line(ckpts, tmp_path, capsys):
     assert api_main(["export", str(tmp_path / "missing.ckpt"), str(tmp_path / "x.pt")]) == 2
     err = capsys.readouterr().err.strip()
     assert err == f"python -m lit3d.api export: error: {tmp_path / 'missing.ckpt'}: checkpoint not found"
-
-
-def test_canonical_model_smooths_as_its_evaluation_scored(ckpts, tmp_path):
-    """lit3d.load / lit3d-reconstruct --canonical smooth the predicted depth inside its silhouette as the
-    checkpoint's evaluation.prediction_smooth_px says (issue 33); the mask is the net's own."""
-    from lit3d.canonical.smoothing import smooth_prediction
-    from lit3d.utils.checkpoints import META_KEY
-
-    plain = load(ckpts["canonical"])
-    ck = torch.load(ckpts["canonical"], map_location="cpu", weights_only=True)
-    ck[META_KEY].setdefault("evaluation", {})["prediction_smooth_px"] = 2.0
-    torch.save(ck, tmp_path / "smoothed.ckpt")
-    smoothed = load(tmp_path / "smoothed.ckpt")
-    assert plain.smooth_px == 0.0 and smoothed.smooth_px == 2.0
-    rng = np.random.default_rng(0)
-    depth = np.zeros((48, 48), np.float32)
-    depth[8:40, 14:34] = 0.5 + 0.1 * rng.random((32, 20))
-    d0, m0 = plain.predict(depth, depth > 0)
-    d2, m2 = smoothed.predict(depth, depth > 0)
-    np.testing.assert_array_equal(m0, m2)
-    with torch.inference_mode():
-        out = plain.task(torch.from_numpy(depth)[None, None], torch.from_numpy((depth > 0).astype(np.float32))[None, None])
-    want = smooth_prediction(out.depth, out.mask, 2.0, 0.5)[0, 0].numpy()
-    np.testing.assert_allclose(d2, want, atol=1e-6)
-    assert not np.allclose(d0, d2)

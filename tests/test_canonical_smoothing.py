@@ -36,7 +36,7 @@ def test_protocol_scores_and_saves_the_smoothed_prediction(tmp_path, sigma):
     want = raw if sigma == 0 else masked_gaussian_blur(raw, (outputs["pred_mask"] >= 0.5).float(), sigma)
     np.testing.assert_allclose(held["pred_depth"].astype(np.float32), want[:, 0].numpy(), atol=1e-3)
     np.testing.assert_array_equal(held["depth"], outputs["depth"][:, 0].numpy().astype(np.float16))  # input as is
-    assert ev.artefacts[SETTING] == sigma and '"prediction_smooth_px": %s' % sigma in str(held["settings"])
+    assert '"prediction_smooth_px": %s' % sigma in str(held["settings"])
     if sigma:  # the checkerboard is gone inside the silhouette
         inside = outputs["mask"][:, 0].numpy() > 0.5
         rough_step = np.abs(np.diff(raw[:, 0].numpy(), axis=-1))[inside[..., 1:] & inside[..., :-1]].mean()

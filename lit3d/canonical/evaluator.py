@@ -38,7 +38,7 @@ import torch
 from lit3d.canonical.baselines import baseline_retrieval
 from lit3d.canonical.heldout import HELDOUT_FILE, heldout_arrays, save_heldout, settings_of
 from lit3d.canonical.report import write_figures, write_results  # noqa: F401
-from lit3d.canonical.smoothing import SETTING, smooth_prediction, smoothing_of
+from lit3d.canonical.smoothing import smooth_prediction, smoothing_of
 from lit3d.metrics.depth import composite_depth
 from lit3d.metrics.retrieval import chance_scores, retrieval_scores
 from lit3d.retrieval.descriptor import DescriptorConfig, distance_matrix_from_depths
@@ -73,8 +73,7 @@ def protocol(task, datamodule, settings: Mapping) -> Evaluation:
                                 mask_threshold=threshold)
     metrics = {f"test/retrieval/{source}/{k}": float(scores[k])
                for source, scores in results.items() for k in LOGGED_SCORES if k in scores}
-    artefacts = {"heldout": held} if held else {}
-    return Evaluation(metrics, {**artefacts, SETTING: smoothing_of(settings)})  # SETTING: for the contact sheets
+    return Evaluation(metrics, {"heldout": held} if held else {})
 
 
 def prediction_source(task) -> str:

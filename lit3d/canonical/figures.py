@@ -9,13 +9,10 @@ relief (limbs in front of the body, a flat or bent torso) shows.
 """
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import torch
 from PIL import Image
 
-from lit3d.canonical.smoothing import smooth_prediction
 from lit3d.metrics.depth import composite_depth
 from lit3d.render.depth import ORTHO_MAG, depth_to_mesh
 from lit3d.render.shaded import shaded_views
@@ -74,9 +71,8 @@ def contact_sheet(subject: str, rows: list[dict], size: int = CELL) -> Image.Ima
     return labelled_grid(rows, COLUMNS, title, size, left=170)
 
 
-def subject_sheets(task, dataset, n: int = 4, size: int = CELL, smooth_px: float = 0.0) -> dict[str, Image.Image]:
-    """``{subject: sheet}`` for up to ``n`` items per subject of ``dataset`` (canonical dataset items);
-    ``smooth_px``: the predicted depth smoothed inside its silhouette (:mod:`lit3d.canonical.smoothing`)."""
+def subject_sheets(task, dataset, n: int = 4, size: int = CELL) -> dict[str, Image.Image]:
+    """``{subject: sheet}`` for up to ``n`` items per subject of ``dataset`` (canonical dataset items)."""
     by_subject: dict[str, list[int]] = {}
     for i, r in enumerate(dataset.records):
         by_subject.setdefault(r["subject"], []).append(i)
@@ -89,7 +85,6 @@ def subject_sheets(task, dataset, n: int = 4, size: int = CELL, smooth_px: float
         batch["view"] = torch.tensor([it["view"] for it in items])
         with torch.no_grad():
             out = task(batch["depth"], batch["mask"])
-        out = replace(out, depth=smooth_prediction(out.depth, out.mask, smooth_px, task.hparams.mask_threshold))
         sheets[subject] = contact_sheet(subject, sheet_rows(batch, out, task.hparams.mask_threshold, size), size)
     return sheets
 

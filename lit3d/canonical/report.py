@@ -11,7 +11,6 @@ from pathlib import Path
 
 
 from lit3d.canonical.figures import subject_sheets
-from lit3d.canonical.smoothing import SETTING
 from lit3d.utils.tables import fmt, markdown_table
 from lit3d.utils.io import STAGE_PREFIX, atomic_write_bytes, atomic_write_text
 
@@ -190,8 +189,7 @@ def _mask_match_lines(match: dict | None) -> list[str]:
 def write_figures(task, datamodule, out_dir: Path, n: int = 4, evaluation=None) -> list[Path]:
     """One contact sheet per test subject ``canonical_<subject>.png`` (:mod:`lit3d.canonical.figures`:
     posed input | predicted canonical (depth, shaded surface) | true canonical (depth, shaded
-    surface) | |error|, one row per test pose/view; the prediction smoothed as it was scored, the
-    ``prediction_smooth_px`` artefact of ``evaluation``). Also rewrites ``results.md`` for the
+    surface) | |error|, one row per test pose/view). Also rewrites ``results.md`` for the
     datamodule's source when ``metrics.json`` is in ``out_dir`` (lit3d-eval writes them before the
     figures, without knowing the data source)."""
     import json
@@ -200,8 +198,7 @@ def write_figures(task, datamodule, out_dir: Path, n: int = 4, evaluation=None) 
     task.eval()
     datamodule.setup("test")
     paths = []
-    smooth_px = float((evaluation.artefacts if evaluation is not None else {}).get(SETTING, 0.0))
-    for subject, sheet in subject_sheets(task, datamodule.datasets["test"], n, smooth_px=smooth_px).items():
+    for subject, sheet in subject_sheets(task, datamodule.datasets["test"], n).items():
         buf = io.BytesIO()
         sheet.save(buf, format="PNG")
         paths.append(atomic_write_bytes(out_dir / f"canonical_{subject}.png", buf.getvalue()))

@@ -1,12 +1,13 @@
 """The predicted canonical depth smoothed inside its predicted silhouette before it is scored
-(``evaluation.prediction_smooth_px``, issue 33).
+(``evaluation.prediction_smooth_px``, issue 33): a retrieval setting, chosen on validation people.
 
-The warp head's depth surface carries ridges and seams of the moved limbs that the retrieval
-descriptor, which renders the back-projected surface from 66 views, reads as shape; the person is in
-the outline and the coarse surface. A Gaussian of ``sigma`` pixels (at the image's size) over the
+The warp head's depth surface carries ridges and the seams of the moved limbs, which the retrieval
+descriptor (the back-projected surface rendered from 66 views) reads as shape; who the person is shows
+in the outline and the coarse relief. A Gaussian of ``sigma`` pixels (at the image's size) over the
 silhouette only (:func:`lit3d.metrics.image.filters.masked_gaussian_blur`) removes them. It is applied
-to the model's prediction row (retrieval, ``heldout.npz``, the contact sheets, ``lit3d-reconstruct
---canonical``), not to the posed input or the true canonical rows, and not in training.
+to the model's prediction row where it is scored and saved (retrieval, ``heldout.npz``, the pooled
+protocol), not to the posed input or the true canonical rows, not in training, and not where the
+depth is used as a surface (``lit3d-reconstruct --canonical``, the contact sheets: the net's own depth).
 """
 from __future__ import annotations
 

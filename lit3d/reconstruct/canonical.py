@@ -19,10 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lit3d.canonical.smoothing import smooth_prediction, smoothing_of
 from lit3d.reconstruct.depth_io import InputError
 from lit3d.reconstruct.pipeline import load_task
-from lit3d.utils.checkpoints import META_KEY
 from lit3d.render.depth import CAMERA_DISTANCE, DEPTH_FAR, DEPTH_NEAR, FG_MIN, ORTHO_MAG, depth_to_points
 
 FLIP = np.array([1.0, -1.0, -1.0])  # camera frame (y down, z forward) <-> GL (y up, z back)
@@ -35,7 +33,6 @@ class CanonicalMapper:
     image_size: int
     path: str
     device: str
-    smooth_px: float = 0.0  # the checkpoint's evaluation.prediction_smooth_px (lit3d.canonical.smoothing)
 
     def depth_image(self, points_gl: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Normalised GL points ``(N, 3)`` -> ``(S, S) float32`` normalised depth and ``(S, S) bool`` mask."""
@@ -58,16 +55,14 @@ class CanonicalMapper:
 
     def predict(self, depth: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The net on one image: ``(S, S)`` normalised depth and mask -> canonical ``(S, S) float32``
-        depth and ``(S, S) bool`` mask (probability above 0.5 and depth above 0); the depth smoothed inside
-        the mask as the checkpoint's evaluation scored it (``smooth_px``)."""
+        depth and ``(S, S) bool`` mask (probability above 0.5 and depth above 0)."""
         import torch
 
         d = torch.from_numpy(np.asarray(depth, np.float32))[None, None].to(self.device)
         m = torch.from_numpy(np.asarray(mask, np.float32))[None, None].to(self.device)
         with torch.inference_mode():
             out = self.task(d, m)
-        depth_out = smooth_prediction(out.depth, out.mask, self.smooth_px, 0.5)
-        cd = depth_out[0, 0].float().cpu().numpy()
+        cd = out.depth[0, 0].float().cpu().numpy()
         return cd, (out.mask[0, 0].float().cpu().numpy() > 0.5) & (cd > 0)
 
     def map_points(self, points: np.ndarray, label: str) -> tuple[np.ndarray, dict]:
@@ -88,7 +83,6 @@ class CanonicalMapper:
 
 def load_canonical(path: str, device: str = "cpu") -> CanonicalMapper:
     """Load a canonical-task checkpoint (``weights_only=True``) as a :class:`CanonicalMapper`."""
-    task, ckpt = load_task(path, device, "canonical")
+    task, _ = load_task(path, device, "canonical")
     net = dict(task.hparams.get("net") or {})
-    smooth_px = smoothing_of((ckpt.get(META_KEY) or {}).get("evaluation"))
-    return CanonicalMapper(task, int(net.get("image_size", 128)), str(path), device, smooth_px)
+    return CanonicalMapper(task, int(net.get("image_size", 128)), str(path), device)
