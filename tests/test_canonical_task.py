@@ -212,6 +212,8 @@ def test_warp_terms_join_the_loss_with_their_weights(tiny_net):
         task.log = task.log_dict = lambda *a, **k: None
         got = float(task.training_step(batch, 0).detach())
         assert got == pytest.approx(float(expected + weight * term), rel=1e-5), name
+        with pytest.raises(ValueError, match=rf"task.{name}={weight:g} needs the warp head"):
+            CanonicalTask(**{**kw, "net": {**tiny_net(), "head": "redraw"}}, **{name: weight})  # a term with no effect
 
 
 def test_validation_retrieval_finds_each_subject_by_its_mask():

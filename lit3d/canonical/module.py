@@ -58,7 +58,7 @@ from lit3d.canonical.loss_phases import THESIS_FRACTIONS, LossPhases
 from lit3d.canonical.factory import build_canonical_net, summarize
 from lit3d.canonical.recall import RecallTemplates
 from lit3d.canonical.losses import canonical_loss, depth_gradient_loss, flow_loss, flow_smoothness, visibility_loss
-from lit3d.canonical.warp import pixels_to_grid
+from lit3d.canonical.warp import pixels_to_grid, require_warp_head
 from lit3d.metrics.depth import MaskedDepthMSE, MaskIoU
 from lit3d.metrics.gathered import GatheredTensors, compute_if_updated
 from lit3d.metrics.retrieval import mask_retrieval
@@ -164,6 +164,7 @@ class CanonicalTask(pl.LightningModule):
         if arch == "recall":  # closed-set recall row: the net is the subject classifier (lit3d.canonical.recall)
             cfg["n_subjects"] = identity_classes
         self.net = build_canonical_net(cfg)
+        require_warp_head(self.net, offset_smooth_weight=offset_smooth_weight, depth_grad_weight=depth_grad_weight)
         self.identity_head = None  # subject classifier on the MSFE latent (identity_weight > 0)
         if identity_weight > 0 and arch != "recall":
             if arch != "canonical" or not use_msfe or identity_classes < 2:
@@ -181,8 +182,7 @@ class CanonicalTask(pl.LightningModule):
         if contrastive_weight > 0:
             self.contrastive_head = ContrastiveEmbedder(contrastive_on, int(cfg.get("fuser_out", 500)),
                                                         int(contrastive_dim), contrastive_channels)
-        # set by LossPhases each epoch; constant weights when phases are off
-        self.loss_alpha, self.loss_beta = float(alpha), float(beta)
+        self.loss_alpha, self.loss_beta = float(alpha), float(beta)  # LossPhases sets them each epoch, if on
         self.val_metrics = self._image_metrics(mask_threshold)
         self.test_metrics = self._image_metrics(mask_threshold)
         self.test_outputs = GatheredTensors(TEST_OUTPUTS)  # read by lit3d.canonical.evaluator.protocol

@@ -160,3 +160,13 @@ class WarpHead(nn.Module):
             return coeffs
         size = coeffs.shape[-2:]
         return F.interpolate(F.avg_pool2d(coeffs, self.affine_cell), size=size, mode="bilinear", align_corners=False)
+
+
+def require_warp_head(net: nn.Module, **weights: float) -> None:
+    """ValueError naming the ``task.<weight>`` that is > 0 where ``net`` has no warp head (its ``head``
+    not a :class:`WarpHead`): those terms (offset smoothness, depth slope) exist only with the warp head."""
+    on = [k for k, w in weights.items() if w > 0]
+    if on and not isinstance(getattr(net, "head", None), WarpHead):
+        raise ValueError(f"task.{on[0]}={weights[on[0]]:g} needs the warp head (task.arch=canonical, "
+                         "task.net.head=warp); set it to 0 with this net")
+
