@@ -22,8 +22,8 @@ cross-validated protocol (:mod:`lit3d.canonical.pooled`).
 ``retrieval``: descriptor config or null = off, ``retrieval_min_subjects``, ``chance_trials``,
 ``ceiling_jitter_deg``, ``mesh_baselines``, ``baseline_landmarks``, ``baseline_max_vertices``,
 ``baseline_smacof_eps``, ``prediction_smooth_px``: the prediction's depth smoothed inside its silhouette
-before it is scored and saved, :mod:`lit3d.canonical.smoothing`); the task itself gives only its ``arch`` (the prediction row's name) and
-``mask_threshold`` (where its predicted mask is).
+before it is scored and saved, :mod:`lit3d.canonical.smoothing`); the task itself gives only its ``arch``
+(the prediction row's name) and ``mask_threshold`` (where its predicted mask is).
 """
 from __future__ import annotations
 
@@ -67,7 +67,8 @@ def protocol(task, datamodule, settings: Mapping) -> Evaluation:
     order = torch.argsort(outputs["index"].cpu())  # dataset order: ranks hand in interleaved shares
     outputs = {k: v.cpu()[order] for k, v in outputs.items()}
     threshold = float(task.hparams.mask_threshold)
-    outputs["pred_depth"] = smooth_prediction(outputs["pred_depth"], outputs["pred_mask"], smoothing_of(settings), threshold)
+    outputs["pred_depth"] = smooth_prediction(outputs["pred_depth"], outputs["pred_mask"], smoothing_of(settings),
+                                              threshold)
     held = heldout_items(task, outputs, datamodule, settings)
     results = retrieval_results(settings, outputs, datamodule, source=prediction_source(task),
                                 mask_threshold=threshold)

@@ -29,8 +29,8 @@ HELDOUT_FILE = "heldout.npz"
 IMAGES = ("pred_depth", "pred_mask", "depth", "mask", "canon_depth", "canon_mask")
 # the settings the pooled protocol scores with (saved as ``settings`` in heldout.npz): the task's
 # mask_threshold and the run's evaluation settings (the config's ``evaluation`` node)
-SETTINGS = ("retrieval", "mask_threshold", "prediction_smooth_px", "chance_trials", "mesh_baselines", "baseline_max_vertices",
-            "baseline_landmarks", "baseline_smacof_eps")
+SETTINGS = ("retrieval", "mask_threshold", "prediction_smooth_px", "chance_trials", "mesh_baselines",
+            "baseline_max_vertices", "baseline_landmarks", "baseline_smacof_eps")
 
 
 def settings_of(cfg: dict) -> dict:

@@ -262,8 +262,8 @@ def run(run_dirs, seeds, out_dir, overrides=(), rows=None, strict: bool = True, 
     """Pool (or, without run dirs, take every held-out item of the composed config; ``fold_test``: only
     the test split of its ``data.fold``), score, write ``pooled_results.md`` and ``pooled.json`` into
     ``out_dir``; returns the .md path. ``mesh_baselines``: the canonical-form rows (default: the runs'
-    ``evaluation.mesh_baselines``); ``depth_rows``: ``{row: folder}`` more depth rows (:func:`folder_depths`); ``smooth_px``: smooth the
-    prediction row as ``evaluation.prediction_smooth_px`` would have (:func:`with_smoothing`)."""
+    ``evaluation.mesh_baselines``); ``depth_rows``: ``{row: folder}`` more depth rows (:func:`folder_depths`);
+    ``smooth_px``: smooth the prediction row as ``evaluation.prediction_smooth_px`` would have (:func:`with_smoothing`)."""
     from omegaconf import OmegaConf
 
     t0 = time.perf_counter()

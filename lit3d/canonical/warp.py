@@ -169,4 +169,3 @@ def require_warp_head(net: nn.Module, **weights: float) -> None:
     if on and not isinstance(getattr(net, "head", None), WarpHead):
         raise ValueError(f"task.{on[0]}={weights[on[0]]:g} needs the warp head (task.arch=canonical, "
                          "task.net.head=warp); set it to 0 with this net")
-
