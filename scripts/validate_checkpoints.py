@@ -25,7 +25,7 @@ from pathlib import Path
 import lightning.pytorch as pl
 from omegaconf import OmegaConf
 
-from lit3d.canonical.evaluator import prediction_source
+from lit3d.canonical.evaluator import prediction_source, scored_outputs
 from lit3d.canonical.heldout import heldout_arrays, item_ids, save_heldout, settings_of
 from lit3d.cli.common import build_datamodule, import_object, read_checkpoint
 from lit3d.cli.eval_settings import checkpoint_settings
@@ -51,16 +51,15 @@ def validate(ckpt: Path, all_val: bool, heldout: Path | None = None) -> dict[str
 
 
 def write_validation_heldout(task, dm, ckpt: Path, task_cls, folder: Path) -> Path:
-    """The validation items through the task's test step, saved as ``folder/heldout.npz`` (every
+    """The validation items through the task's test step, saved as ``folder/heldout.npz`` as the
+    evaluator saves test items (the checkpoint's evaluation settings, its smoothing applied; every
     validation item is its own expected set: one fold)."""
-    _trainer().test(task, dataloaders=dm.val_dataloader(), verbose=False)
-    outputs = task.test_outputs.compute()
-    order = outputs["index"].cpu().argsort()
-    outputs = {k: v.cpu()[order] for k, v in outputs.items()}
-    names = {i: s for s, i in dm.subject_index.items()}
-    expected = item_ids([names[int(i)] for i in outputs["subject_idx"]], outputs["pose"], outputs["view"])
     ck, meta = read_checkpoint(ckpt)
     settings, _ = checkpoint_settings(ck, meta, task_cls)
+    _trainer().test(task, dataloaders=dm.val_dataloader(), verbose=False)
+    outputs = scored_outputs(task, settings)
+    names = {i: s for s, i in dm.subject_index.items()}
+    expected = item_ids([names[int(i)] for i in outputs["subject_idx"]], outputs["pose"], outputs["view"])
     arrays = heldout_arrays(outputs, names, expected.tolist(), prediction_source(task), dict(dm.hparams), 0, 1,
                             settings_of({"mask_threshold": task.hparams.mask_threshold, **settings}))
     return save_heldout(folder / "heldout.npz", arrays)

@@ -61,20 +61,30 @@ def protocol(task, datamodule, settings: Mapping) -> Evaluation:
     ``retrieval_min_subjects`` test subjects have 2+ items) and, on rank 0, the ``heldout``
     artefact (:func:`heldout_items`). ``settings``: the evaluation settings (module doc). Call on
     every process (the gathered outputs are synchronised across DDP ranks)."""
-    outputs = task.test_outputs.compute()
+    outputs = scored_outputs(task, settings)
     if settings.get("retrieval") is None or not outputs:
         return Evaluation()
-    order = torch.argsort(outputs["index"].cpu())  # dataset order: ranks hand in interleaved shares
-    outputs = {k: v.cpu()[order] for k, v in outputs.items()}
-    threshold = float(task.hparams.mask_threshold)
-    outputs["pred_depth"] = smooth_prediction(outputs["pred_depth"], outputs["pred_mask"], smoothing_of(settings),
-                                              threshold)
     held = heldout_items(task, outputs, datamodule, settings)
     results = retrieval_results(settings, outputs, datamodule, source=prediction_source(task),
-                                mask_threshold=threshold)
+                                mask_threshold=float(task.hparams.mask_threshold))
     metrics = {f"test/retrieval/{source}/{k}": float(scores[k])
                for source, scores in results.items() for k in LOGGED_SCORES if k in scores}
     return Evaluation(metrics, {"heldout": held} if held else {})
+
+
+def scored_outputs(task, settings: Mapping) -> dict[str, torch.Tensor]:
+    """The task's gathered test outputs (:data:`lit3d.canonical.module.TEST_OUTPUTS`) on the CPU in dataset
+    order (DDP ranks hand in interleaved shares), the prediction's depth smoothed as the settings'
+    ``prediction_smooth_px`` says: what retrieval scores and ``heldout.npz`` saves. ``{}`` when nothing
+    was tested. Call on every process (the outputs are synchronised across ranks)."""
+    outputs = task.test_outputs.compute()
+    if not outputs:
+        return {}
+    order = torch.argsort(outputs["index"].cpu())
+    outputs = {k: v.cpu()[order] for k, v in outputs.items()}
+    outputs["pred_depth"] = smooth_prediction(outputs["pred_depth"], outputs["pred_mask"], smoothing_of(settings),
+                                              float(task.hparams.mask_threshold))
+    return outputs
 
 
 def prediction_source(task) -> str:

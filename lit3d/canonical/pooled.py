@@ -37,7 +37,7 @@ from datamodules.canonical.dataset import CanonicalPairDataset
 from lit3d.canonical.baselines import mesh_rows
 from lit3d.canonical.heldout import HELDOUT_FILE, pool, settings_of
 from lit3d.canonical.report import write_pooled_results
-from lit3d.canonical.smoothing import smooth_prediction, smoothing_of
+from lit3d.canonical.smoothing import SETTING, smooth_prediction, smoothing_of
 from lit3d.metrics.depth import composite_depth
 from lit3d.metrics.retrieval import chance_scores, mask_iou, retrieval_scores
 from lit3d.retrieval.descriptor import DescriptorConfig, depth_meshes, distance_matrix_from_features, mesh_features
@@ -238,7 +238,7 @@ def with_smoothing(items: dict, settings: dict, sigma: float) -> dict:
         raise ValueError(f"--smooth-px: the runs' predictions are already smoothed (prediction_smooth_px={done:g})")
     if "pred_depth" not in items:
         raise ValueError("--smooth-px: no prediction row to smooth (give run dirs)")
-    settings["prediction_smooth_px"] = float(sigma)
+    settings[SETTING] = float(sigma)
     threshold = settings.get("mask_threshold", 0.5)
     return {**items, "pred_depth": smooth_prediction(items["pred_depth"], items["pred_mask"], sigma, threshold)}
 
