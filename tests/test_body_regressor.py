@@ -15,7 +15,8 @@ from lit3d.body.points import observe
 from lit3d.body.regressor import (BodyRegressor, Preprocess, Regressor, checkpoint, crop, fit_from_regressor,
                                   load_regressor, refine_config, rotmat_6d)
 from lit3d.body.synthetic import Camera, sensed_depth
-from lit3d.body.train_regressor import Buffer, draw, pose_params, render_people, shape_distribution, step
+from lit3d.body.poses import pose_params
+from lit3d.body.train_regressor import Buffer, draw, render_people, shape_distribution, step
 from lit3d.cli.reconstruct import main
 from lit3d.sensing.camera import backproject
 
@@ -121,6 +122,21 @@ def test_drawn_people_follow_the_pose_draw_and_the_adult_shapes(anny):
     theta, rot = pose_params(sample_pose(11, 2, subject=2))
     assert torch.allclose(got["theta"][2], torch.tensor(theta, dtype=torch.float32))
     assert ((got["phenotype"] >= 0) & (got["phenotype"] <= 1)).all()
+
+
+def test_varied_people_carry_their_drawn_rotation_as_the_target(anny):
+    import roma
+
+    from lit3d.body.poses import draw_pose
+
+    body, cam, prep, _, _ = anny
+    got = draw(body, shape_distribution(body), 11, 0, 6, cam, prep, image=(W, H), poses="varied")
+    assert len(got["image"]) == 6  # lying or upside down, every body is still seen
+    for i in range(6):
+        theta, rot, _ = draw_pose(11, i, "varied")
+        assert torch.allclose(got["theta"][i], torch.tensor(theta, dtype=torch.float32))
+        want = roma.rotvec_to_rotmat(torch.tensor(rot, dtype=torch.float32))
+        assert torch.allclose(got["rotmat"][i], want, atol=1e-5)
 
 
 def test_tiny_training_lowers_the_loss_and_beats_the_mean_height(anny):

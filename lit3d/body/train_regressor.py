@@ -4,9 +4,10 @@
 
 Each person: a phenotype from Anny's adult shape distribution (as the evaluation's held-out people,
 ``sample_phenotype(..., "adult")``: ``SimpleShapeDistribution`` at morphological ages
-:data:`~datamodules.canonical.bodies.ADULT_AGES`, drawn a batch at a time), a pose of
-:func:`~datamodules.canonical.bodies.sample_pose` (uniform within the joint limits; its ``root``
-yaw becomes the global rotation), placed ``--distance`` metres in front of the camera (uniform in
+:data:`~datamodules.canonical.bodies.ADULT_AGES`, drawn a batch at a time), a pose of the mix
+``--poses`` (:func:`lit3d.body.poses.draw_pose`; ``upright``: the Anny data source's
+:func:`~datamodules.canonical.bodies.sample_pose`, its ``root`` yaw the global rotation; ``varied``
+adds people turned any way, folded and in any rotation), placed ``--distance`` metres in front of the camera (uniform in
 the range) and up to ``--lateral`` metres off the axis, rendered through the evaluation's camera and
 ``--sensor`` noise (:func:`lit3d.body.synthetic.sensed_depth`). Seeds: ``--seed`` for training,
 ``--seed + 1`` for the fixed validation draw printed in the log; the evaluation's 1000 and the
@@ -31,22 +32,16 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from datamodules.canonical.bodies import adult_shape_distribution, sample_pose
+from datamodules.canonical.bodies import adult_shape_distribution
 from lit3d.body.fit import start_centre
-from lit3d.body.model import ANNY_TO_CAMERA, DOFS, PHENOTYPES, Body
+from lit3d.body.model import PHENOTYPES, Body
 from lit3d.body.points import MIN_POINTS
+from lit3d.body.poses import POSE_MIXES, draw_pose
 from lit3d.body.regressor import BodyRegressor, Preprocess, checkpoint, crop, loss, targets
 from lit3d.body.synthetic import HEIGHT, WIDTH, Camera, sensed_depth
 from lit3d.sensing.camera import backproject
 
 HELD_OUT_SEEDS = (1000, 2000)  # the evaluation's people, the refinement's validation people
-
-
-def pose_params(pose: dict) -> tuple[np.ndarray, np.ndarray]:
-    """A :func:`sample_pose` pose -> ``(D,)`` joint angles of :data:`lit3d.body.model.DOFS` and the
-    ``(3,)`` camera-frame rotation vector of its ``root`` turn."""
-    theta = np.array([float(np.dot(pose[d.bone], d.axis)) for d in DOFS])
-    return theta, ANNY_TO_CAMERA @ np.asarray(pose.get("root", np.zeros(3)), np.float64)
 
 
 def shape_distribution(body: Body):
@@ -55,16 +50,18 @@ def shape_distribution(body: Body):
 
 
 def draw(body: Body, dist, seed: int, first: int, n: int, cam, prep: Preprocess, distance=(2.6, 4.0),
-         lateral: float = 0.3, sensor: str = "recgan", image=(WIDTH, HEIGHT)) -> dict[str, torch.Tensor]:
-    """People ``first .. first + n - 1`` of draw ``seed`` (module doc), rendered and cropped by
-    :func:`render_people` (``cam`` sees an ``image`` (width, height) in pixels)."""
+         lateral: float = 0.3, sensor: str = "recgan", image=(WIDTH, HEIGHT),
+         poses: str = "upright") -> dict[str, torch.Tensor]:
+    """People ``first .. first + n - 1`` of draw ``seed`` (module doc) in poses of the mix ``poses``
+    (:data:`lit3d.body.poses.POSE_MIXES`), rendered and cropped by :func:`render_people` (``cam``
+    sees an ``image`` (width, height) in pixels)."""
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(int(np.random.default_rng([seed, first, 41]).integers(2**31)))
         _, ph = dist.sample(n)
     pheno = torch.stack([ph[k].float() for k in PHENOTYPES], 1)
-    poses = [pose_params(sample_pose(seed, first + i, subject=first + i)) for i in range(n)]
-    theta = torch.tensor(np.stack([p[0] for p in poses]), dtype=torch.float32)
-    rot = torch.tensor(np.stack([p[1] for p in poses]), dtype=torch.float32)
+    drawn = [draw_pose(seed, first + i, poses)[:2] for i in range(n)]
+    theta = torch.tensor(np.stack([p[0] for p in drawn]), dtype=torch.float32)
+    rot = torch.tensor(np.stack([p[1] for p in drawn]), dtype=torch.float32)
     rng = np.random.default_rng([seed, first, 43])
     trans = np.stack([rng.uniform(-lateral, lateral, n), rng.uniform(-lateral, lateral, n) / 2,
                       rng.uniform(distance[0], distance[1], n)], 1)
@@ -171,6 +168,8 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--distance", type=float, nargs=2, default=(2.6, 4.0), help="metres from the camera (range)")
     ap.add_argument("--lateral", type=float, default=0.3, help="metres off the optical axis at most (x; y half)")
     ap.add_argument("--sensor", default="recgan", help="noise model (lit3d.sensing.sensor.SENSORS)")
+    ap.add_argument("--poses", choices=sorted(POSE_MIXES), default="upright",
+                    help="pose mix of the people (lit3d.body.poses): upright as the Anny data source, or varied")
     ap.add_argument("--seed", type=int, default=7, help="body/pose draw of the training people")
     ap.add_argument("--threads", type=int, default=1, help="torch CPU threads")
     ap.add_argument("--log-every", type=int, default=100, help="steps between log lines")
@@ -190,7 +189,7 @@ def main(argv: list[str] | None = None) -> dict:
     opt = torch.optim.Adam(net.parameters(), lr=args.lr)
     body, cam = Body(), Camera.default()
     dist = shape_distribution(body)
-    place = {"distance": tuple(args.distance), "lateral": args.lateral, "sensor": args.sensor}
+    place = {"distance": tuple(args.distance), "lateral": args.lateral, "sensor": args.sensor, "poses": args.poses}
     val = draw(body, dist, args.seed + 1, 0, args.val, cam, prep, **place)
     buf, gen = Buffer(args.buffer), torch.Generator().manual_seed(args.seed)
     t0, drawn, credit, running, log = time.perf_counter(), 0, 0.0, [], []
