@@ -126,6 +126,22 @@ def _person(body, subject=3, pose=2):
     return truth, render_depth_pinhole(trimesh.Trimesh(truth, body.faces, process=False), INTR, W, H)
 
 
+def test_evaluation_people_of_either_pose_mix_agree_on_the_upright_draw(body, monkeypatch):
+    """``anny_person``'s two paths (the data source's body model; theta and rotation through
+    ``Body.place``) give one body for an upright pose: the pose conventions of lit3d.body.poses hold."""
+    from lit3d.body.evaluate import anny_person
+
+    pheno = bodies.sample_phenotype(1000, 4, "adult", body.model.model)
+    upright, rest = anny_person(body, pheno, 1000, 4, "upright")
+    import lit3d.body.poses as poses
+
+    monkeypatch.setitem(poses.POSE_MIXES, "upright_only", {"upright": 1.0})
+    placed, rest2 = anny_person(body, pheno, 1000, 4, "upright_only")  # the same draw, through Body.place
+    shift = (upright - placed).mean(0)
+    assert np.abs(upright - placed - shift).max() < 2e-3  # one body, up to where its centre is put
+    np.testing.assert_allclose(rest, rest2, atol=1e-5)
+
+
 @pytest.mark.slow
 def test_fit_recovers_a_known_person_far_better_than_the_mean_body(body):
     from lit3d.body.fit import FitConfig, fit_body

@@ -7,8 +7,9 @@ sides of a 320x240 image, centred), the person 3.2 m in front of it, facing it.
 
 - **Held-out Anny people** (``--anny N``): subject ``i`` = phenotype ``i`` of draw ``--body-seed``
   (Anny's adult shape distribution, as ``conf/data/anny.yaml``) in its own pose ``i`` of draw
-  ``--pose-seed`` (:func:`datamodules.canonical.bodies.sample_pose`, yaw included); training
-  draws use seed 0, these 1000+. The depth image gets the ``recgan`` sensor's noise
+  ``--pose-seed`` (:func:`datamodules.canonical.bodies.sample_pose`, yaw included; ``--poses varied``:
+  :func:`lit3d.body.poses.draw_pose`'s mix, people also lying, folded and upside down); training
+  draws use seed 0 (the regressor's 7), these 1000+. The depth image gets the ``recgan`` sensor's noise
   (:data:`lit3d.sensing.sensor.SENSORS`), whose figures are in voxels of a 256 grid: one voxel
   is taken as the person's longest side / 256 (~6.6 mm): misregistration (the body rendered
   shifted by U(-0.75, 0.75) voxels per axis against its truth), range noise (sd 0.25 voxel) and
@@ -49,8 +50,9 @@ import numpy as np
 from datamodules.canonical.bodies import sample_phenotype, sample_pose
 from datamodules.canonical.posesets import index_faust
 from lit3d.body.fit import FitConfig, fit_best, fit_body
-from lit3d.body.model import PHENOTYPES, Body
+from lit3d.body.model import PHENOTYPES, Body, Params
 from lit3d.body.points import observe
+from lit3d.body.poses import POSE_MIXES, draw_pose
 from lit3d.body.regressor import REFINE_FULL_ITERS, REFINE_GLOBAL_ITERS, fit_from_regressor, load_regressor, \
     refine_config, regress
 from lit3d.body.results import fit_outputs
@@ -128,16 +130,34 @@ def _methods(r: dict) -> list[str]:
     return [m for m in METHODS if m in r]
 
 
+def anny_person(body, pheno: dict, pose_seed: int, i: int, poses: str = "upright") -> tuple[np.ndarray, np.ndarray]:
+    """Person ``i``'s camera-frame posed vertices ``(V, 3)`` (centre ``DISTANCE`` m ahead) and y-up
+    rest-pose vertices ``(V, 3)`` for phenotype ``pheno``, in pose ``i`` of draw ``pose_seed`` under the
+    mix ``poses`` (``upright``: :func:`sample_pose` through the data source's body model;
+    otherwise :func:`lit3d.body.poses.draw_pose`, placed by :meth:`lit3d.body.model.Body.place`)."""
+    if poses == "upright":
+        posed_y, rest_y = body.model.vertices(pheno, [sample_pose(pose_seed, i, subject=i), None])
+        return posed_y.astype(np.float64) * FLIP + np.array([0.0, 0.0, DISTANCE]), rest_y
+    import torch
+
+    theta, rot, _ = draw_pose(pose_seed, i, poses)
+    p = Params(torch.tensor([pheno[k] for k in PHENOTYPES], dtype=torch.float32),
+               torch.tensor(theta, dtype=torch.float32), torch.tensor(rot, dtype=torch.float32),
+               torch.tensor([0.0, 0.0, DISTANCE]), torch.zeros(()))
+    with torch.no_grad():
+        posed = body.camera_vertices(p).double().numpy()
+    return posed, body.model.vertices(pheno, [None])[0]
+
+
 def anny_items(body, n: int, body_seed: int, pose_seed: int, cam: Camera, sensor: str, say,
-               rows: list | None = None, multi_start: bool = False, init=None) -> list[dict]:
-    """Fit ``n`` held-out Anny people (module doc); one dict of measures per person, appended to ``rows``."""
+               rows: list | None = None, multi_start: bool = False, init=None, poses: str = "upright") -> list[dict]:
+    """Fit ``n`` held-out Anny people (module doc; poses of the mix ``poses``, :func:`anny_person`);
+    one dict of measures per person, appended to ``rows``."""
 
     rows = [] if rows is None else rows
     for i in range(n):
         pheno = sample_phenotype(body_seed, i, "adult", body.model.model)
-        pose = sample_pose(pose_seed, i, subject=i)
-        posed_y, rest_y = body.model.vertices(pheno, [pose, None])
-        truth = posed_y.astype(np.float64) * FLIP + np.array([0.0, 0.0, DISTANCE])
+        truth, rest_y = anny_person(body, pheno, pose_seed, i, poses)
         depth, noise = sensed_depth(truth, body.faces, cam, np.random.default_rng([body_seed, i, 71]), sensor)
         r = fit(body, depth, cam, f"anny {i}", multi_start, init)
         row = {"item": i, "phenotype": pheno, "noise": noise, "cpu_s": r["cpu_s"], "wall_s": r["wall_s"],
@@ -317,6 +337,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--anny", type=int, default=20, help="held-out Anny people (0: none)")
     ap.add_argument("--body-seed", type=int, default=1000, help="phenotype draw (training uses 0)")
     ap.add_argument("--pose-seed", type=int, default=1000, help="pose draw (training uses 0)")
+    ap.add_argument("--poses", default="upright", choices=sorted(POSE_MIXES),
+                    help="pose mix of the Anny people (lit3d.body.poses): upright as the data source, or varied")
     ap.add_argument("--sensor", default="recgan", choices=sorted(SENSORS), help="noise model of the Anny depth images")
     ap.add_argument("--faust", type=Path, default=None, help="FAUST folder (e.g. ../shared/data/faust_a)")
     ap.add_argument("--faust-first", type=int, default=0, help="skip the first K FAUST meshes (pose-major order)")
@@ -339,7 +361,7 @@ def main(argv: list[str] | None = None) -> None:
     cam, body = Camera.default(), Body()
     args.out.mkdir(parents=True, exist_ok=True)
     meta = {"command": "python -m lit3d.body.evaluate " + " ".join(argv if argv is not None else sys.argv[1:]),
-            "body_seed": args.body_seed, "pose_seed": args.pose_seed, "sensor": args.sensor,
+            "body_seed": args.body_seed, "pose_seed": args.pose_seed, "poses": args.poses, "sensor": args.sensor,
             "starts": "4 starts, best probe kept" if args.multi_start else "one start: the mean body",
             "camera": {**cam.__dict__, "width": WIDTH, "height": HEIGHT, "distance_m": DISTANCE}, "threads": args.threads}
     if init is not None:
@@ -360,7 +382,8 @@ def main(argv: list[str] | None = None) -> None:
         write()
 
     if args.anny:
-        anny_items(body, args.anny, args.body_seed, args.pose_seed, cam, args.sensor, note, anny, args.multi_start, init)
+        anny_items(body, args.anny, args.body_seed, args.pose_seed, cam, args.sensor, note, anny, args.multi_start, init,
+                   args.poses)
     if args.faust is not None:
         faust_items(body, args.faust, cam, args.samples, args.out / "faust_canonical", note,
                     args.faust_limit, faust, args.multi_start, args.faust_first, init)
