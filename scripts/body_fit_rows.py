@@ -54,6 +54,7 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, required=True, help="folder of the canonical depth images")
     ap.add_argument("--init", type=Path, default=None, help="body regressor checkpoint (lit3d.body.train_regressor)")
+    ap.add_argument("--refine-poor", type=int, default=0, help="with --init: full steps more where flagged poor")
     ap.add_argument("--metric", action="store_true", help="the source's units are metres (Anny): no rescaling")
     ap.add_argument("--height", type=float, default=FAUST_HEIGHT, help="rest-pose height in metres otherwise")
     ap.add_argument("--all", action="store_true", help="every held-out item of the folds, not the test split")
@@ -67,7 +68,8 @@ def main(argv: list[str] | None = None) -> None:
     dm.prepare_data()
     dm.setup()
     pairs = held_out_pairs(dm, args.all)[args.worker::args.workers]
-    init = None if args.init is None else (load_regressor(args.init), refine_config(REFINE_GLOBAL_ITERS, REFINE_FULL_ITERS))
+    refine = refine_config(REFINE_GLOBAL_ITERS, REFINE_FULL_ITERS, None, args.refine_poor)
+    init = None if args.init is None else (load_regressor(args.init), refine)
     cam, body = Camera.default(), Body()
     args.out.mkdir(parents=True, exist_ok=True)
     scales: dict[str, float] = {}

@@ -175,3 +175,21 @@ def test_fit_from_a_given_start_runs_the_requested_steps(anny):
     res = fit_from_regressor(body, reg, obs, refine_config(1, 2))
     assert len(res.history) == 3 and res.iterations == 3 and res.seconds > 0
     assert res.vertices.shape == verts.shape
+
+
+def test_a_refinement_flagged_poor_goes_on_and_a_good_one_stops(anny, monkeypatch):
+    import lit3d.body.regressor as regressor
+
+    body, cam, prep, _, _ = anny
+    truth = body.camera_vertices(regressor.Params.mean((0.0, 0.0, 3.2))).detach().double().numpy()
+    depth, _ = sensed_depth(truth, body.faces, cam, np.random.default_rng(0), "recgan", W, H)
+    obs = observe(depth, cam, label="person")
+    torch.manual_seed(0)
+    reg = Regressor(BodyRegressor(16, width=4, hidden=8), prep)  # untrained: a start far off
+    res = fit_from_regressor(body, reg, obs, refine_config(1, 2, poor_extra_iters=4))
+    assert res.iterations == 7 and len(res.history) == 7  # 1 + 2 steps flagged poor, then 4 more
+    assert fit_from_regressor(body, reg, obs, refine_config(1, 2)).iterations == 3  # 0: never more
+    checked = []
+    monkeypatch.setattr(regressor, "fit_quality", lambda *a: checked.append(1) or {"poor_fit": False})
+    assert fit_from_regressor(body, reg, obs, refine_config(1, 2, poor_extra_iters=4)).iterations == 3
+    assert checked == [1]

@@ -350,6 +350,8 @@ def main(argv: list[str] | None = None) -> None:
                     "adds the rows 'regressor alone' and 'regressor + refinement'")
     ap.add_argument("--refine-global", type=int, default=REFINE_GLOBAL_ITERS, help="rigid steps of the refinement")
     ap.add_argument("--refine-full", type=int, default=REFINE_FULL_ITERS, help="full steps of the refinement")
+    ap.add_argument("--refine-poor", type=int, default=0,
+                    help="full steps more where the refinement is flagged poor (0: none)")
     ap.add_argument("--threads", type=int, default=1, help="torch CPU threads")
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
@@ -357,7 +359,8 @@ def main(argv: list[str] | None = None) -> None:
     def say(line):
         print(line, file=sys.stderr, flush=True)
 
-    init = None if args.init is None else (load_regressor(args.init), refine_config(args.refine_global, args.refine_full))
+    init = None if args.init is None else (load_regressor(args.init),
+                                           refine_config(args.refine_global, args.refine_full, None, args.refine_poor))
     cam, body = Camera.default(), Body()
     args.out.mkdir(parents=True, exist_ok=True)
     meta = {"command": "python -m lit3d.body.evaluate " + " ".join(argv if argv is not None else sys.argv[1:]),
@@ -365,7 +368,8 @@ def main(argv: list[str] | None = None) -> None:
             "starts": "4 starts, best probe kept" if args.multi_start else "one start: the mean body",
             "camera": {**cam.__dict__, "width": WIDTH, "height": HEIGHT, "distance_m": DISTANCE}, "threads": args.threads}
     if init is not None:
-        meta.update(init=str(args.init), refine=f"{args.refine_global} + {args.refine_full} steps")
+        meta.update(init=str(args.init), refine=f"{args.refine_global} + {args.refine_full} steps"
+                    + (f", {args.refine_poor} more where flagged poor" if args.refine_poor else ""))
     anny: list[dict] = []
     faust: list[dict] = []
 

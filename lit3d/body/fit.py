@@ -56,6 +56,7 @@ class FitConfig:
     w_scale: float = 0.3
     w_limits: float = 1.0
     depth_offset: float = 0.1    # metres: the start's centre lies this far behind the points' median
+    poor_extra_iters: int = 0    # lit3d.body.regressor.fit_from_regressor: full steps more when flagged poor
 
 
 @dataclass

@@ -34,6 +34,7 @@ from lit3d.body.errors import BodyCheckpointError
 from lit3d.body.fit import FitConfig, FitResult, fit_body, start_centre
 from lit3d.body.model import DOFS, PHENOTYPES, Body, Params
 from lit3d.body.points import Observation
+from lit3d.body.results import fit_quality, render_mask
 from lit3d.utils.checkpoints import load_checkpoint
 
 FORMAT = "lit3d-body-regressor-1"
@@ -165,9 +166,11 @@ class Regressor:
 
 
 def refine_config(global_iters: int = REFINE_GLOBAL_ITERS, full_iters: int = REFINE_FULL_ITERS,
-                  base: FitConfig | None = None) -> FitConfig:
-    """``base`` (default :class:`~lit3d.body.fit.FitConfig`) with the refinement's step counts."""
-    return FitConfig(**{**(base or FitConfig()).__dict__, "global_iters": global_iters, "full_iters": full_iters})
+                  base: FitConfig | None = None, poor_extra_iters: int = 0) -> FitConfig:
+    """``base`` (default :class:`~lit3d.body.fit.FitConfig`) with the refinement's step counts and
+    ``poor_extra_iters`` (:func:`fit_from_regressor`)."""
+    return FitConfig(**{**(base or FitConfig()).__dict__, "global_iters": global_iters, "full_iters": full_iters,
+                        "poor_extra_iters": poor_extra_iters})
 
 
 def regress(body: Body, regressor: Regressor, obs: Observation) -> FitResult:
@@ -182,9 +185,17 @@ def regress(body: Body, regressor: Regressor, obs: Observation) -> FitResult:
 
 def fit_from_regressor(body: Body, regressor: Regressor, obs: Observation, cfg: FitConfig | None = None) -> FitResult:
     """:func:`~lit3d.body.fit.fit_body` from the regressor's start with ``cfg`` (default
-    :func:`refine_config`); ``seconds`` counts the prediction too."""
+    :func:`refine_config`). Where ``cfg.poor_extra_iters`` > 0 and that fit is flagged poor
+    (:func:`lit3d.body.results.fit_quality`), the fit goes on from where it ended for that many more
+    full steps (a fresh schedule). ``seconds`` counts the prediction and the check too."""
+    cfg = cfg or refine_config()
     t0 = time.perf_counter()
-    res = fit_body(body, obs, cfg or refine_config(), regressor.start(obs))
+    res = fit_body(body, obs, cfg, regressor.start(obs))
+    if cfg.poor_extra_iters > 0 and fit_quality(body, res, obs, render_mask(res.vertices, body.faces, obs))["poor_fit"]:
+        more = fit_body(body, obs, FitConfig(**{**cfg.__dict__, "global_iters": 0, "full_iters": cfg.poor_extra_iters}),
+                        res.params)
+        more.history, more.iterations = res.history + more.history, res.iterations + more.iterations
+        res = more
     res.seconds = time.perf_counter() - t0
     return res
 
