@@ -7,8 +7,7 @@ Examples::
     lit3d-reconstruct d.npy --ckpt CKPT --out out/ --far 2.0 --remove-plane --format ply
     lit3d-reconstruct d.png --ckpt CKPT --out out/ --reference chair.obj --quality-ckpt Q.ckpt
     lit3d-reconstruct d.png --ckpt CKPT --out out/ --canonical logs/canonical/.../best.ckpt
-    lit3d-reconstruct person.png --body --out out/     # Anny body fit (lit3d.reconstruct.body)
-    lit3d-reconstruct person.png --body --body-init body_regressor.ckpt --out out/
+    lit3d-reconstruct person.png --body [--body-init REGRESSOR.ckpt] --out out/     # Anny body fit
 
 Inputs: 16-bit PNG/TIFF and integer .npy/.npz (depth units x --depth-scale metres, default
 millimetres), float .npy/.npz metres, .exr metres; 0 and an integer type's maximum (65535:
@@ -45,6 +44,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--ckpt", help="completion checkpoint (lit3d-train task=completion; not with --body)")
     p.add_argument("--body", action="store_true", help="fit the Anny body model instead (a person)")
     p.add_argument("--body-init", metavar="CKPT", help="with --body: start from this body regressor (lit3d.body.regressor)")
+    p.add_argument("--body-refine-poor", metavar="N", type=int, default=0, help="with --body-init: N more steps if poor")
     p.add_argument("--out", required=True, help="output folder")
     cam = p.add_argument_group("camera")
     cam.add_argument("--fov", type=float, default=None, help="field of view in degrees (default 49.124)")
@@ -116,8 +116,8 @@ def _check_args(args) -> None:
         raise InputError(f"--depth-scale {args.depth_scale:g}: expected a positive number of metres per unit")
     if bool(args.ckpt) == bool(args.body) or (args.body and (args.canonical or args.reference)):
         raise InputError("give --ckpt CKPT (completion) or --body (Anny fit; not with --canonical/--reference)")
-    if args.body_init and not args.body:
-        raise InputError("--body-init CKPT: needs --body (it starts the Anny body fit)")
+    if (args.body_init and not args.body) or (args.body_refine_poor and not args.body_init):
+        raise InputError("--body-init CKPT: needs --body, and --body-refine-poor N needs --body-init CKPT")
     if args.quality_ckpt and not args.reference:
         raise InputError("--quality-ckpt needs --reference (the shape to score against)")
     if not 64 <= args.size <= 2048:

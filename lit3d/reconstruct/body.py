@@ -12,7 +12,8 @@ Per input NAME, DIR gets (written together, as one set: :func:`lit3d.reconstruct
 
 The fit starts from the mean body (:mod:`lit3d.body.fit`), or with ``--body-init CKPT`` from a body
 regressor's prediction (:mod:`lit3d.body.regressor`), refined by fewer steps
-(:func:`lit3d.body.regressor.fit_from_regressor`). A poor fit (not a person, a bad cut) is written
+(:func:`lit3d.body.regressor.fit_from_regressor`; ``--body-refine-poor N``: N more steps where those end
+flagged poor). A poor fit (not a person, a bad cut) is written
 with ``poor_fit: true`` and said on one line.
 """
 from __future__ import annotations
@@ -27,7 +28,7 @@ import numpy as np
 from lit3d.body.fit import fit_body
 from lit3d.body.model import Body  # noqa: F401 (re-exported for lit3d.cli.reconstruct)
 from lit3d.body.points import observe
-from lit3d.body.regressor import fit_from_regressor, load_regressor  # noqa: F401 (load_regressor: for lit3d.cli)
+from lit3d.body.regressor import fit_from_regressor, load_regressor, refine_config  # noqa: F401 (load_regressor: cli)
 from lit3d.body.results import BodyOutputs, fit_outputs
 from lit3d.geometry.normalise import bounding_frame
 from lit3d.reconstruct.depth_io import find_mask, read_depth_info, read_mask
@@ -135,7 +136,8 @@ def body_one(args, path: Path, name: str, body, protected, intrinsics, camera: s
     obs = observe(depth, intr, keep, str(path))
     body = body()
     t0, c0 = time.perf_counter(), time.process_time()
-    fit = fit_body(body, obs) if regressor is None else fit_from_regressor(body, regressor, obs)
+    refine = refine_config(poor_extra_iters=getattr(args, "body_refine_poor", 0))
+    fit = fit_body(body, obs) if regressor is None else fit_from_regressor(body, regressor, obs, refine)
     fit_cpu = time.process_time() - c0
     out = fit_outputs(body, fit, obs)
     timings = {"fit": fit.seconds, "fit_cpu": fit_cpu, "outputs": time.perf_counter() - t0 - fit.seconds}
