@@ -7,11 +7,11 @@ Each person: a phenotype from Anny's adult shape distribution (as the evaluation
 :data:`~datamodules.canonical.bodies.ADULT_AGES`, drawn a batch at a time), a pose of the mix
 ``--poses`` (:func:`lit3d.body.poses.draw_pose`; ``upright``: the Anny data source's
 :func:`~datamodules.canonical.bodies.sample_pose`, its ``root`` yaw the global rotation; ``varied``
-adds people turned any way, folded and in any rotation), placed ``--distance`` metres in front of the camera (uniform in
-the range) and up to ``--lateral`` metres off the axis, rendered through the evaluation's camera and
-``--sensor`` noise (:func:`lit3d.body.synthetic.sensed_depth`). Seeds: ``--seed`` for training,
-``--seed + 1`` for the fixed validation draw printed in the log; the evaluation's 1000 and the
-refinement's validation draw 2000 are refused. Nothing is cached on disk: the samples live in a
+adds people turned any way, folded and in any rotation), placed ``--distance`` metres in front of
+the camera (uniform in the range) and up to ``--lateral`` metres off the axis, rendered through the
+evaluation's camera and ``--sensor`` noise (:func:`lit3d.body.synthetic.sensed_depth`). Seeds:
+``--seed`` for training, ``--seed + 1`` for the fixed validation draw printed in the log; the
+evaluation's 1000 and the refinement's validation draw 2000 are refused. Nothing is cached on disk: the samples live in a
 replay buffer in memory (``--buffer`` people; each is used about ``--reuse`` times).
 
 Loss: :func:`lit3d.body.regressor.loss`; Adam, learning rate cosine-decayed over whichever ends
