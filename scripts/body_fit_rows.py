@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> None:
     dm.prepare_data()
     dm.setup()
     pairs = held_out_pairs(dm, args.all)[args.worker::args.workers]
-    refine = refine_config(REFINE_GLOBAL_ITERS, REFINE_FULL_ITERS, None, args.refine_poor)
+    refine = refine_config(REFINE_GLOBAL_ITERS, REFINE_FULL_ITERS, poor_extra_iters=args.refine_poor)
     init = None if args.init is None else (load_regressor(args.init), refine)
     cam, body = Camera.default(), Body()
     args.out.mkdir(parents=True, exist_ok=True)

@@ -360,7 +360,8 @@ def main(argv: list[str] | None = None) -> None:
         print(line, file=sys.stderr, flush=True)
 
     init = None if args.init is None else (load_regressor(args.init),
-                                           refine_config(args.refine_global, args.refine_full, None, args.refine_poor))
+                                           refine_config(args.refine_global, args.refine_full,
+                                                         poor_extra_iters=args.refine_poor))
     cam, body = Camera.default(), Body()
     args.out.mkdir(parents=True, exist_ok=True)
     meta = {"command": "python -m lit3d.body.evaluate " + " ".join(argv if argv is not None else sys.argv[1:]),
