@@ -61,8 +61,10 @@ def protocol(task, datamodule, settings: Mapping) -> Evaluation:
     ``retrieval_min_subjects`` test subjects have 2+ items) and, on rank 0, the ``heldout``
     artefact (:func:`heldout_items`). ``settings``: the evaluation settings (module doc). Call on
     every process (the gathered outputs are synchronised across DDP ranks)."""
+    if settings.get("retrieval") is None:
+        return Evaluation()
     outputs = scored_outputs(task, settings)
-    if settings.get("retrieval") is None or not outputs:
+    if not outputs:
         return Evaluation()
     held = heldout_items(task, outputs, datamodule, settings)
     results = retrieval_results(settings, outputs, datamodule, source=prediction_source(task),
