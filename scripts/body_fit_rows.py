@@ -31,7 +31,7 @@ from omegaconf import OmegaConf
 
 from lit3d.body.evaluate import FAUST_HEIGHT, camera_frame, fit
 from lit3d.body.model import Body
-from lit3d.body.regressor import REFINE_FULL_ITERS, REFINE_GLOBAL_ITERS, load_regressor, refine_config
+from lit3d.body.regressor import load_regressor, refine_config
 from lit3d.body.results import fit_outputs
 from lit3d.body.synthetic import Camera, render
 from lit3d.canonical.pooled import FOLDER_DEPTH_SUFFIX, build_datamodule, compose
@@ -68,8 +68,7 @@ def main(argv: list[str] | None = None) -> None:
     dm.prepare_data()
     dm.setup()
     pairs = held_out_pairs(dm, args.all)[args.worker::args.workers]
-    refine = refine_config(REFINE_GLOBAL_ITERS, REFINE_FULL_ITERS, poor_extra_iters=args.refine_poor)
-    init = None if args.init is None else (load_regressor(args.init), refine)
+    init = None if args.init is None else (load_regressor(args.init), refine_config(poor_extra_iters=args.refine_poor))
     cam, body = Camera.default(), Body()
     args.out.mkdir(parents=True, exist_ok=True)
     scales: dict[str, float] = {}

@@ -136,8 +136,8 @@ def body_one(args, path: Path, name: str, body, protected, intrinsics, camera: s
     obs = observe(depth, intr, keep, str(path))
     body = body()
     t0, c0 = time.perf_counter(), time.process_time()
-    refine = refine_config(poor_extra_iters=args.body_refine_poor)
-    fit = fit_body(body, obs) if regressor is None else fit_from_regressor(body, regressor, obs, refine)
+    fit = fit_body(body, obs) if regressor is None else \
+        fit_from_regressor(body, regressor, obs, refine_config(poor_extra_iters=args.body_refine_poor))
     fit_cpu = time.process_time() - c0
     out = fit_outputs(body, fit, obs)
     timings = {"fit": fit.seconds, "fit_cpu": fit_cpu, "outputs": time.perf_counter() - t0 - fit.seconds}
