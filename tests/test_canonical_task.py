@@ -11,6 +11,7 @@ from omegaconf import OmegaConf
 
 from lit3d.canonical import evaluator
 from lit3d.canonical.module import CanonicalTask, validation_retrieval
+from lit3d.canonical.warp_loss import warp_terms
 from lit3d.cli.common import build_datamodule, build_task
 
 
@@ -195,7 +196,7 @@ def test_warp_terms_join_the_loss_with_their_weights(tiny_net):
     torch.nn.init.normal_(base.net.head.out.weight, std=0.1)  # a non-zero flow and depth offset
     base.log = base.log_dict = lambda *a, **k: None  # a direct training_step call logs nowhere
     out = base.net(batch["depth"], batch["mask"])
-    terms = {k: v.detach() for k, v in base._warp_terms(out, batch).items()}
+    terms = {k: v.detach() for k, v in warp_terms(out, batch).items()}
     from lit3d.canonical.losses import canonical_loss, depth_gradient_loss, flow_smoothness
 
     image = canonical_loss(out.depth, out.mask, batch["canon_depth"], batch["canon_mask"], 1.0, 1.0, "mse",

@@ -13,6 +13,7 @@ from datamodules.canonical.flow import flow_targets
 from datamodules.canonical.rendering import PairRenderer
 from datamodules.canonical.sources import AnnySource, SynthSource
 from lit3d.canonical.factory import build_canonical_net
+from lit3d.canonical.nets import UNetTrunk
 from lit3d.canonical.losses import flow_loss
 from lit3d.canonical.warp import WarpHead, pixels_to_grid, warp_compose, warp_image
 from lit3d.render.depth import render_depth
@@ -53,11 +54,13 @@ def test_zero_flow_reproduces_the_posed_input_exactly():
     assert torch.allclose(d1[..., :-1], depth[..., 1:], atol=1e-5)
 
 
-def test_untrained_warp_net_returns_its_input(compose_cfg):
-    net_cfg = OmegaConf.to_container(compose_cfg(["experiment=canonical_tiny", "task.net.head=warp"]).task.net,
-                                     resolve=True)
+@pytest.mark.parametrize("reconstruction", ["downup", "unet"])
+def test_untrained_warp_net_returns_its_input(compose_cfg, reconstruction):
+    net_cfg = OmegaConf.to_container(compose_cfg(["experiment=canonical_tiny", "task.net.head=warp",
+                                                  f"task.net.reconstruction={reconstruction}"]).task.net, resolve=True)
     net = build_canonical_net({"kind": "canonical", **net_cfg})
     assert isinstance(net.head, WarpHead)
+    assert isinstance(net.reconstruction, UNetTrunk) == (reconstruction == "unet")
     depth = torch.rand(2, 1, 48, 48)
     mask = (depth > 0.5).float()
     depth = depth * mask
@@ -263,3 +266,27 @@ def test_depth_gradient_loss_reads_the_slope_not_the_level():
     outside = flat.clone()
     outside[..., 0, :] = 9.0  # a row outside the mask: no pair with both pixels inside touches it
     assert float(depth_gradient_loss(outside, flat, mask)) == 0.0
+
+
+def test_flow_on_foreground_pays_the_hidden_pixels_too():
+    """``task.flow_on``: ``visible`` pays the flow only where the posed view shows the point, ``foreground``
+    on every canonical foreground pixel; neither pays the background."""
+    from types import SimpleNamespace
+
+    from lit3d.canonical.warp_loss import warp_terms
+
+    canon_mask = torch.zeros(1, 1, 8, 8)
+    canon_mask[..., 2:6, 2:6] = 1
+    vis = canon_mask.clone()
+    vis[..., 2:4, 2:6] = 0  # the upper half of the body is hidden in the posed view
+    flow = torch.zeros(1, 2, 8, 8)
+    out = SimpleNamespace(flow=flow, vis_logits=torch.zeros(1, 1, 8, 8), mask=canon_mask, depth=canon_mask,
+                          depth_offset=None)
+    batch = {"flow": torch.zeros(1, 2, 8, 8), "vis": vis, "has_flow": torch.tensor([True]), "canon_mask": canon_mask,
+             "canon_depth": canon_mask}
+    batch["flow"][:, 0, 2:4, 2:6] = 4.0  # 4 px = 1 grid unit on 8 px: wrong only on the hidden pixels
+    batch["flow"][:, 0, 0, 0] = 4.0      # and on a background pixel, which neither pays
+    assert float(warp_terms(out, batch, "visible")["flow"]) == pytest.approx(0.0, abs=1e-3)
+    assert float(warp_terms(out, batch, "foreground")["flow"]) == pytest.approx(0.5, abs=1e-3)  # 8 of 16 pixels
+    with pytest.raises(ValueError, match="flow_on"):
+        warp_terms(out, batch, "everywhere")

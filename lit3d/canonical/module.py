@@ -57,8 +57,9 @@ from lit3d.canonical.figures import validation_panel
 from lit3d.canonical.loss_phases import THESIS_FRACTIONS, LossPhases
 from lit3d.canonical.factory import build_canonical_net, summarize
 from lit3d.canonical.recall import RecallTemplates
-from lit3d.canonical.losses import canonical_loss, depth_gradient_loss, flow_loss, flow_smoothness, visibility_loss
-from lit3d.canonical.warp import pixels_to_grid, require_warp_head
+from lit3d.canonical.losses import canonical_loss, flow_loss
+from lit3d.canonical.warp import require_warp_head
+from lit3d.canonical.warp_loss import FLOW_ON, flow_targets, warp_terms
 from lit3d.metrics.depth import MaskedDepthMSE, MaskIoU
 from lit3d.metrics.gathered import GatheredTensors, compute_if_updated
 from lit3d.metrics.retrieval import mask_retrieval
@@ -131,6 +132,7 @@ class CanonicalTask(pl.LightningModule):
         identity_classes: int = 0,
         init_weights: str | None = None,
         flow_weight: float = 0.0,
+        flow_on: str = "visible",
         vis_weight: float = 0.0,
         smooth_weight: float = 0.0,
         offset_smooth_weight: float = 0.0,
@@ -157,6 +159,8 @@ class CanonicalTask(pl.LightningModule):
         # unet_baseline: accepted (false) from older checkpoints only; the evaluation settings are not the module's
         self.save_hyperparameters(ignore=["unet_baseline", *legacy_evaluation])
         validate_mode(on_nonfinite)
+        if flow_on not in FLOW_ON:
+            raise ValueError(f"task.flow_on must be one of {FLOW_ON}, got '{flow_on}'")
         cfg = dict(net or {})
         cfg["kind"] = arch
         if arch == "canonical":
@@ -250,7 +254,8 @@ class CanonicalTask(pl.LightningModule):
                                                           self.hparams.contrastive_temperature)
             terms["loss"] = terms["loss"] + self.hparams.contrastive_weight * terms["contrastive"]
         if out.flow is not None:  # the warp head: each of its terms times its weight
-            terms.update(warp := self._warp_terms(out, batch))
+            hp = self.hparams
+            terms.update(warp := warp_terms(out, batch, hp.flow_on, hp.offset_smooth_weight > 0, hp.depth_grad_weight > 0))
             terms["loss"] = terms["loss"] + sum(self.hparams[f"{k}_weight"] * v for k, v in warp.items())
         where = f"step {self.global_step} (epoch {self.current_epoch}, batch {batch_idx})"
         if not guard_step(self, terms, where, self.hparams.on_nonfinite):
@@ -265,31 +270,6 @@ class CanonicalTask(pl.LightningModule):
             self.log_dict({"train/alpha": self.loss_alpha, "train/beta": self.loss_beta},
                           on_step=False, on_epoch=True, batch_size=bs)
         return terms["loss"]
-
-    @staticmethod
-    def _flow_targets(out, batch: dict) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """The batch's target flow (grid units) ``(B, 2, H, W)``, visibility ``(B, 1, H, W)`` and
-        ``has_flow`` ``(B,)``; zeros and False when the batch has no flow targets."""
-        if batch.get("has_flow") is None or "flow" not in batch:
-            has = torch.zeros(out.flow.shape[0], dtype=torch.bool, device=out.flow.device)
-            return torch.zeros_like(out.flow), torch.zeros_like(out.mask), has
-        return pixels_to_grid(batch["flow"].float()), batch["vis"], batch["has_flow"]
-
-    def _warp_terms(self, out, batch: dict) -> dict[str, torch.Tensor]:
-        """The warp head's :data:`WARP_TERMS` that are on: ``flow`` (end-point distance, grid units),
-        ``vis`` (BCE), ``smooth`` (flow total variation), with ``offset_smooth_weight`` > 0 ``offset_smooth``
-        (the depth offset's total variation) and with ``depth_grad_weight`` > 0 ``depth_grad`` (the depth's
-        slope against the target's, :func:`~lit3d.canonical.losses.depth_gradient_loss`); items without
-        flow targets (``has_flow`` false or absent) add to the last three only."""
-        target, vis, has = self._flow_targets(out, batch)
-        terms = {"flow": flow_loss(out.flow, target, vis, has),
-                 "vis": visibility_loss(out.vis_logits, vis, batch["canon_mask"], has),
-                 "smooth": flow_smoothness(out.flow)}
-        if self.hparams.offset_smooth_weight > 0 and out.depth_offset is not None:
-            terms["offset_smooth"] = flow_smoothness(out.depth_offset)
-        if self.hparams.depth_grad_weight > 0:
-            terms["depth_grad"] = depth_gradient_loss(out.depth, batch["canon_depth"], batch["canon_mask"])
-        return terms
 
     def _identity_loss(self, latent: torch.Tensor, subject_idx) -> torch.Tensor:
         """Cross-entropy of the subject classifier on the MSFE latent ``(B, fuser_out)`` (``arch=recall``: of
@@ -334,7 +314,7 @@ class CanonicalTask(pl.LightningModule):
         self.log_dict({"val/depth_loss": loss["depth"], "val/mask_loss": loss["mask"]}, on_epoch=True, batch_size=bs)
         if out.flow is not None and "has_flow" in batch and bool(batch["has_flow"].any()):
             # end-point error in pixels on the visible pixels of the items with targets
-            target, vis, has = self._flow_targets(out, batch)
+            target, vis, has = flow_targets(out, batch)
             epe = flow_loss(out.flow, target, vis, has) * batch["depth"].shape[-1] / 2
             self.log("val/flow_epe", epe, on_epoch=True, batch_size=bs)
         if self.phenotype_head is not None and "phenotype" in batch:  # new people's body shape, mean |error|

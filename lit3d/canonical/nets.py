@@ -155,6 +155,7 @@ class MSFE(nn.Module):
 
 
 HEADS = ("redraw", "warp")
+RECONSTRUCTIONS = ("downup", "unet")
 
 
 class CanonicalNet(nn.Module):
@@ -172,8 +173,10 @@ class CanonicalNet(nn.Module):
                  msfe_grid: int, fuser_hidden: int, fuser_out: int, msfe_dec_channels: Sequence[int], msfe_out: int,
                  rec_channels: Sequence[int], use_lfe: bool = True, use_msfe: bool = True, head: str = "redraw",
                  warp_hidden: int | None = None, warp_normalise_depth: bool = False, warp_depth: str = "offset",
-                 warp_affine_cell: int = 8):
+                 warp_affine_cell: int = 8, reconstruction: str = "downup"):
         super().__init__()
+        if reconstruction not in RECONSTRUCTIONS:
+            raise ValueError(f"unknown canonical reconstruction '{reconstruction}' ({', '.join(RECONSTRUCTIONS)})")
         if head not in HEADS:
             raise ValueError(f"unknown canonical net head '{head}' ({', '.join(HEADS)})")
         if head == "warp" and warp_hidden is None:
@@ -184,8 +187,12 @@ class CanonicalNet(nn.Module):
         self.msfe = MSFE(c, msfe_out, msfe_channels, msfe_grid, fuser_hidden, fuser_out, msfe_dec_channels,
                          image_size) if use_msfe else None
         c += msfe_out if use_msfe else 0
-        hidden = max(rec_channels[0] // 2, 4)
-        self.reconstruction = DownUp(c, hidden, rec_channels, up_act="leaky", final_act=True)
+        if reconstruction == "unet":  # skip connections: full-resolution features for the flow
+            self.reconstruction = UNetTrunk(c, rec_channels)
+            hidden = self.reconstruction.out_channels
+        else:
+            hidden = max(rec_channels[0] // 2, 4)
+            self.reconstruction = DownUp(c, hidden, rec_channels, up_act="leaky", final_act=True)
         # the input is given to the head again (skip link)
         self.head = (WarpHead(hidden + 2, warp_hidden, fuser_out if use_msfe else 0,
                               normalise_depth=warp_normalise_depth, depth_model=warp_depth,
@@ -206,18 +213,16 @@ class CanonicalNet(nn.Module):
         return out
 
 
-class UNet(nn.Module):
-    """Plain U-Net baseline: ``(depth, mask)`` -> ``CanonicalOutput`` with skip connections.
+class UNetTrunk(nn.Module):
+    """Encoder-decoder with skip connections: ``(B, cin, H, W) -> (B, channels[0], H, W)``; per level two
+    3x3 convs (LeakyReLU 0.2) and a 2x max-pool, a 3x3 conv at the bottom, transposed-conv ups joined
+    with the skips. Pads the input to a multiple of ``2**len(channels)`` and crops back (size-agnostic)."""
 
-    Pads the input to a multiple of ``2**len(channels)`` and crops back (size-agnostic).
-    """
-
-    def __init__(self, channels: Sequence[int], image_size: int):
+    def __init__(self, cin: int, channels: Sequence[int]):
         super().__init__()
-        self.image_size = image_size
         ch = list(channels)
         self.enc = nn.ModuleList()
-        prev = 2
+        prev = cin
         for c in ch:
             self.enc.append(nn.Sequential(nn.Conv2d(prev, c, 3, padding=1), nn.LeakyReLU(0.2),
                                           nn.Conv2d(c, c, 3, padding=1), nn.LeakyReLU(0.2)))
@@ -229,11 +234,10 @@ class UNet(nn.Module):
             self.ups.append(nn.ConvTranspose2d(prev, c, 2, stride=2))
             self.dec.append(nn.Sequential(nn.Conv2d(2 * c, c, 3, padding=1), nn.LeakyReLU(0.2)))
             prev = c
-        self.head = OutputHead(prev)
+        self.out_channels = prev
         self.factor = 2 ** len(ch)
 
-    def forward(self, depth: torch.Tensor, mask: torch.Tensor) -> CanonicalOutput:
-        x = torch.cat([depth, mask], dim=1)
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
         H, W = x.shape[-2:]
         ph, pw = (-H) % self.factor, (-W) % self.factor
         x = F.pad(x, (0, pw, 0, ph))
@@ -245,5 +249,17 @@ class UNet(nn.Module):
         x = self.bottom(x)
         for up, dec, s in zip(self.ups, self.dec, reversed(skips)):
             x = dec(torch.cat([up(x), s], dim=1))
-        out = self.head(x)
-        return CanonicalOutput(out.depth[..., :H, :W], out.mask[..., :H, :W], out.mask_logits[..., :H, :W])
+        return x[..., :H, :W]
+
+
+class UNet(UNetTrunk):
+    """Plain U-Net baseline: ``(depth, mask)`` -> ``CanonicalOutput``: the :class:`UNetTrunk` (its
+    parameters at the top level, as checkpoints hold them) and the redraw head (a 1x1 conv)."""
+
+    def __init__(self, channels: Sequence[int], image_size: int):
+        super().__init__(2, channels)
+        self.image_size = image_size
+        self.head = OutputHead(self.out_channels)
+
+    def forward(self, depth: torch.Tensor, mask: torch.Tensor) -> CanonicalOutput:
+        return self.head(super().forward(torch.cat([depth, mask], dim=1)))

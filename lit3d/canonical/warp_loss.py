@@ -1,0 +1,49 @@
+"""The warp head's loss terms (:mod:`lit3d.canonical.warp`), from a net output and a batch.
+
+Batch keys (``datamodules.canonical`` with ``data.flow_targets=true``): ``flow`` ``(B, 2, H, W)`` in
+pixels, ``vis`` ``(B, 1, H, W)``, ``has_flow`` ``(B,)`` bool, ``canon_depth``/``canon_mask``
+``(B, 1, H, W)``. Batches without flow targets (FAUST) give zero flow and visibility terms.
+
+``flow_on`` says where the flow's end-point distance is paid: ``visible`` (the canonical pixels whose
+surface point the posed image shows) or ``foreground`` (every canonical foreground pixel: a hidden
+point's target lands on the part that hides it, still on the posed body, so the moved mask is right
+there even where the depth must come from the fill).
+"""
+from __future__ import annotations
+
+import torch
+
+from lit3d.canonical.losses import depth_gradient_loss, flow_loss, flow_smoothness, visibility_loss
+from lit3d.canonical.warp import pixels_to_grid
+
+FLOW_ON = ("visible", "foreground")
+
+
+def flow_targets(out, batch: dict) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The batch's target flow (grid units) ``(B, 2, H, W)``, visibility ``(B, 1, H, W)`` and
+    ``has_flow`` ``(B,)``; zeros and False when the batch has no flow targets."""
+    if batch.get("has_flow") is None or "flow" not in batch:
+        has = torch.zeros(out.flow.shape[0], dtype=torch.bool, device=out.flow.device)
+        return torch.zeros_like(out.flow), torch.zeros_like(out.mask), has
+    return pixels_to_grid(batch["flow"].float()), batch["vis"], batch["has_flow"]
+
+
+def warp_terms(out, batch: dict, flow_on: str = "visible", offset_smooth: bool = False,
+               depth_grad: bool = False) -> dict[str, torch.Tensor]:
+    """``flow`` (end-point distance, grid units, on the pixels ``flow_on`` names), ``vis`` (BCE on the
+    canonical foreground), ``smooth`` (flow total variation), with ``offset_smooth`` the depth map's total
+    variation and with ``depth_grad`` the depth's slope against the target's
+    (:func:`~lit3d.canonical.losses.depth_gradient_loss`); items without flow targets add to the last
+    three only."""
+    if flow_on not in FLOW_ON:
+        raise ValueError(f"task.flow_on must be one of {FLOW_ON}, got '{flow_on}'")
+    target, vis, has = flow_targets(out, batch)
+    where = vis if flow_on == "visible" else batch["canon_mask"]
+    terms = {"flow": flow_loss(out.flow, target, where, has),
+             "vis": visibility_loss(out.vis_logits, vis, batch["canon_mask"], has),
+             "smooth": flow_smoothness(out.flow)}
+    if offset_smooth and out.depth_offset is not None:
+        terms["offset_smooth"] = flow_smoothness(out.depth_offset)
+    if depth_grad:
+        terms["depth_grad"] = depth_gradient_loss(out.depth, batch["canon_depth"], batch["canon_mask"])
+    return terms
