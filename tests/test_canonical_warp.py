@@ -268,9 +268,10 @@ def test_depth_gradient_loss_reads_the_slope_not_the_level():
     assert float(depth_gradient_loss(outside, flat, mask)) == 0.0
 
 
-def test_flow_on_foreground_pays_the_hidden_pixels_too():
+def test_flow_and_visibility_are_paid_where_asked():
     """``task.flow_on``: ``visible`` pays the flow only where the posed view shows the point, ``foreground``
-    on every canonical foreground pixel; neither pays the background."""
+    on every canonical foreground pixel; neither pays the background. ``task.vis_on``: ``image`` pays the
+    visibility on the background too (target 0), ``foreground`` does not."""
     from types import SimpleNamespace
 
     from lit3d.canonical.warp_loss import warp_terms
@@ -290,3 +291,9 @@ def test_flow_on_foreground_pays_the_hidden_pixels_too():
     assert float(warp_terms(out, batch, "foreground")["flow"]) == pytest.approx(0.5, abs=1e-3)  # 8 of 16 pixels
     with pytest.raises(ValueError, match="flow_on"):
         warp_terms(out, batch, "everywhere")
+    # vis_on: "foreground" leaves the background's visibility free, "image" pays it with target 0
+    out.vis_logits = torch.where(canon_mask > 0.5, torch.where(vis > 0.5, 20.0, -20.0), 20.0)  # right on fg, 1 on bg
+    assert float(warp_terms(out, batch, vis_on="foreground")["vis"]) == pytest.approx(0.0, abs=1e-6)
+    assert float(warp_terms(out, batch, vis_on="image")["vis"]) == pytest.approx(20.0 * 48 / 64, rel=1e-4)
+    with pytest.raises(ValueError, match="vis_on"):
+        warp_terms(out, batch, vis_on="nowhere")

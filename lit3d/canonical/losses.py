@@ -57,11 +57,12 @@ def flow_loss(flow: torch.Tensor, target: torch.Tensor, vis: torch.Tensor, has_f
     return (w * epe).sum() / w.sum().clamp_min(1.0)
 
 
-def visibility_loss(vis_logits: torch.Tensor, vis: torch.Tensor, canon_mask: torch.Tensor,
+def visibility_loss(vis_logits: torch.Tensor, vis: torch.Tensor, where: torch.Tensor,
                     has_flow: torch.Tensor) -> torch.Tensor:
-    """Binary cross-entropy of the visibility logits ``(B, 1, H, W)`` against ``vis`` on the canonical
-    foreground (``canon_mask``) of the items with targets; 0 when there are none. Scalar, fp32."""
-    w = _per_item(canon_mask, has_flow)
+    """Binary cross-entropy of the visibility logits ``(B, 1, H, W)`` against ``vis`` on the pixels
+    ``where`` ``(B, 1, H, W)`` (the canonical foreground, or all) of the items with targets; 0 when there
+    are none. Scalar, fp32."""
+    w = _per_item(where, has_flow)
     bce = torch.nn.functional.binary_cross_entropy_with_logits(vis_logits.float(), vis.float(), reduction="none")
     return (w * bce).sum() / w.sum().clamp_min(1.0)
 

@@ -59,7 +59,7 @@ from lit3d.canonical.factory import build_canonical_net, summarize
 from lit3d.canonical.recall import RecallTemplates
 from lit3d.canonical.losses import canonical_loss, flow_loss
 from lit3d.canonical.warp import require_warp_head
-from lit3d.canonical.warp_loss import FLOW_ON, flow_targets, warp_terms
+from lit3d.canonical.warp_loss import check_choices, flow_targets, warp_terms
 from lit3d.metrics.depth import MaskedDepthMSE, MaskIoU
 from lit3d.metrics.gathered import GatheredTensors, compute_if_updated
 from lit3d.metrics.retrieval import mask_retrieval
@@ -133,6 +133,7 @@ class CanonicalTask(pl.LightningModule):
         init_weights: str | None = None,
         flow_weight: float = 0.0,
         flow_on: str = "visible",
+        vis_on: str = "foreground",
         vis_weight: float = 0.0,
         smooth_weight: float = 0.0,
         offset_smooth_weight: float = 0.0,
@@ -159,8 +160,7 @@ class CanonicalTask(pl.LightningModule):
         # unet_baseline: accepted (false) from older checkpoints only; the evaluation settings are not the module's
         self.save_hyperparameters(ignore=["unet_baseline", *legacy_evaluation])
         validate_mode(on_nonfinite)
-        if flow_on not in FLOW_ON:
-            raise ValueError(f"task.flow_on must be one of {FLOW_ON}, got '{flow_on}'")
+        check_choices(flow_on, vis_on)
         cfg = dict(net or {})
         cfg["kind"] = arch
         if arch == "canonical":
@@ -255,7 +255,8 @@ class CanonicalTask(pl.LightningModule):
             terms["loss"] = terms["loss"] + self.hparams.contrastive_weight * terms["contrastive"]
         if out.flow is not None:  # the warp head: each of its terms times its weight
             hp = self.hparams
-            terms.update(warp := warp_terms(out, batch, hp.flow_on, hp.offset_smooth_weight > 0, hp.depth_grad_weight > 0))
+            terms.update(warp := warp_terms(out, batch, hp.flow_on, hp.offset_smooth_weight > 0, hp.depth_grad_weight > 0,
+                                            hp.vis_on))
             terms["loss"] = terms["loss"] + sum(self.hparams[f"{k}_weight"] * v for k, v in warp.items())
         where = f"step {self.global_step} (epoch {self.current_epoch}, batch {batch_idx})"
         if not guard_step(self, terms, where, self.hparams.on_nonfinite):
