@@ -282,9 +282,9 @@ def test_flow_and_visibility_are_paid_where_asked():
     vis[..., 2:4, 2:6] = 0  # the upper half of the body is hidden in the posed view
     flow = torch.zeros(1, 2, 8, 8)
     out = SimpleNamespace(flow=flow, vis_logits=torch.zeros(1, 1, 8, 8), mask=canon_mask, depth=canon_mask,
-                          depth_offset=None)
+                          depth_offset=None, flow_frame="canonical")
     batch = {"flow": torch.zeros(1, 2, 8, 8), "vis": vis, "has_flow": torch.tensor([True]), "canon_mask": canon_mask,
-             "canon_depth": canon_mask}
+             "canon_depth": canon_mask, "mask": torch.ones_like(canon_mask)}
     batch["flow"][:, 0, 2:4, 2:6] = 4.0  # 4 px = 1 grid unit on 8 px: wrong only on the hidden pixels
     batch["flow"][:, 0, 0, 0] = 4.0      # and on a background pixel, which neither pays
     assert float(warp_terms(out, batch, "visible")["flow"]) == pytest.approx(0.0, abs=1e-3)

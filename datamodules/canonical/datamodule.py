@@ -19,7 +19,8 @@ inputs turned in the image plane by up to that many degrees (a rolled camera; th
 training poses (:mod:`datamodules.canonical.blends`; one connectivity per subject, as TOSCA).
 ``train_pose_fraction``: train on that share of each subject's training poses (a learning curve).
 ``flow_targets``: also cache, for every pose whose mesh corresponds to the canonical one, the backward
-flow and visibility of the warp head (:mod:`datamodules.canonical.flow`); items then carry them.
+flow and visibility of the warp head and the forward flow and visibility of the splat head
+(:mod:`datamodules.canonical.flow`); items then carry them.
 ``batch_poses`` K >= 2: training batches of ``batch_size / K`` subjects with K poses each
 (:class:`~datamodules.canonical.batches.SubjectGroupedBatches`; for ``task.contrastive_weight``).
 
@@ -28,7 +29,8 @@ Batches (``B`` samples, ``S = image_size``):
     canon_depth, canon_mask  (B, 1, S, S) float32   canonical target
     subject (list[str]), subject_idx (B,) int64, pose (B,) int64, view (B,) int64
     flow (B, 2, S, S), vis (B, 1, S, S) float32, has_flow (B,) bool   (``flow_targets``; zeros and False
-                             for items without targets)
+                             for items without targets; backward: at canonical pixels)
+    fflow (B, 2, S, S), fvis (B, 1, S, S) float32   (the forward flow and visibility, at posed pixels)
 
 Cache (:class:`datamodules.cache.CacheBuilder`, the one cache scheme of every DataModule):
 ``data_dir/subjects/<subject>.npz`` per subject (depth as float16, masks packed bits; layout in
@@ -77,7 +79,7 @@ log = logging.getLogger("lit3d")
 GENERATOR = "canonical"
 DATA_VERSION = "canonical-data-1"
 SUBJECTS_DIR = "subjects"  # the cache's item folder
-FLOW_VERSION = "flow-1"  # bump when datamodules.canonical.flow changes what it writes
+FLOW_VERSION = "flow-2"  # bump when datamodules.canonical.flow changes what it writes
 
 __all__ = ["CANONICAL_SPLITS", "CanonicalDataModule", "DataError", "CanonicalPairDataset", "Shrec14Source", "SynthSource",
            "ToscaSource", "deal", "depth_image_problem", "read_subject", "split_pose", "split_subject_pose",

@@ -3,7 +3,8 @@ subject-balanced training sampler.
 
 Items (``S = image_size``): ``depth``, ``mask``, ``canon_depth``, ``canon_mask`` ``(1, S, S)``
 float32; ``subject`` str, ``subject_idx``, ``pose``, ``view`` int; ``flow`` ``(2, S, S)`` (backward
-flow in pixels, :mod:`datamodules.canonical.flow`), ``vis`` ``(1, S, S)`` float32 and ``has_flow``
+flow in pixels, :mod:`datamodules.canonical.flow`), ``vis`` ``(1, S, S)`` float32, ``fflow`` and
+``fvis`` (the forward flow and visibility, at posed pixels, same shapes) and ``has_flow``
 bool (zeros and False for an item without targets, or whose input is rolled or mirrored without its
 target); ``phenotype`` ``(P,)`` float32 when the dataset is given phenotypes. With ``flip_lr`` (training
 only) the posed images of an item are mirrored left-right with probability 1/2, and the canonical
@@ -70,20 +71,22 @@ class CanonicalPairDataset(Dataset):
             depth, mask = roll(depth, mask, angle)
         # flow targets hold only when input and target moved together (not rolled; mirrored both or neither)
         has_flow = pk in c.get("flow", {}) and not angle and flip == flip_canon and target_view == r["view"]
-        if has_flow:
-            flow = c["flow"][pk].astype(np.float32)
-            if flip:  # mirrored pair: the flow of the mirrored image, its x component negated
-                flow = flow[:, :, ::-1] * np.array([-1.0, 1.0], np.float32)[:, None, None]
-            flow, vis = torch.from_numpy(np.ascontiguousarray(flow)), t(c["vis"][pk], flip)
-        else:
-            size = depth.shape[-1]
-            flow, vis = torch.zeros(2, size, size), torch.zeros(1, size, size)
+        flows = {}
+        for f_name, v_name in (("flow", "vis"), ("fflow", "fvis")):
+            if has_flow:
+                flow = c[f_name][pk].astype(np.float32)
+                if flip:  # mirrored pair: the flow of the mirrored image, its x component negated
+                    flow = flow[:, :, ::-1] * np.array([-1.0, 1.0], np.float32)[:, None, None]
+                flows[f_name], flows[v_name] = torch.from_numpy(np.ascontiguousarray(flow)), t(c[v_name][pk], flip)
+            else:
+                size = depth.shape[-1]
+                flows[f_name], flows[v_name] = torch.zeros(2, size, size), torch.zeros(1, size, size)
         item = {
             "depth": depth, "mask": mask,
             "canon_depth": t(c["depth"][ck], flip_canon), "canon_mask": t(c["mask"][ck], flip_canon),
             "subject": r["subject"], "subject_idx": self.subject_index[r["subject"]],
             "pose": int(r["pose"]), "view": int(r["view"]), "index": i,
-            "flow": flow, "vis": vis, "has_flow": has_flow,
+            **flows, "has_flow": has_flow,
         }
         if self.phenotypes is not None:
             item["phenotype"] = torch.from_numpy(self.phenotypes[r["subject"]])

@@ -10,6 +10,8 @@ Arrays of a subject file (``S = image_size``; layout read by :mod:`datamodules.c
     depth_<p>_<v>  (S, S) float16       mask_<p>_<v>  packed bits of (S, S) bool
     flow_<p>_<v>   (2, S, S) float16    vis_<p>_<v>   packed bits of (S, S) bool   (``flow_targets``;
                    only for poses whose mesh corresponds to the canonical one)
+    fflow_<p>_<v>  (2, S, S) float16    fvis_<p>_<v>  packed bits of (S, S) bool   (the same pairs: the
+                   forward flow, per posed pixel, and whether its point is seen in the canonical image)
     poses (str), skipped (str)
 """
 from __future__ import annotations
@@ -101,10 +103,14 @@ class PairRenderer:
         corr = (np.asarray(corr, np.float64) - centre) * scale  # the posed mesh's own frame
         for vi, (d, m) in enumerate(views):
             cd, cm = canon["views"][vi]
-            flow, vis = flow_targets(rotate_y(canon["verts"], canon["azimuths"][vi]), rotate_y(corr, posed_az[vi]),
-                                     cd, cm, d, m)
+            canon_v, posed_v = rotate_y(canon["verts"], canon["azimuths"][vi]), rotate_y(corr, posed_az[vi])
+            flow, vis = flow_targets(canon_v, posed_v, cd, cm, d, m)
             out[f"flow_{pose}_{vi}"] = flow.astype(np.float16)
             out[f"vis_{pose}_{vi}"] = np.packbits(vis)
+            # the forward flow: per posed pixel, where its point lies in the canonical image (the splat head's)
+            fflow, fvis = flow_targets(posed_v, canon_v, d, m, cd, cm)
+            out[f"fflow_{pose}_{vi}"] = fflow.astype(np.float16)
+            out[f"fvis_{pose}_{vi}"] = np.packbits(fvis)
         return out
 
     def render_subject(self, subject: str) -> dict[str, np.ndarray]:

@@ -26,6 +26,7 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from lit3d.canonical.outputs import CanonicalOutput, OutputHead
+from lit3d.canonical.splat import SplatHead
 from lit3d.canonical.warp import WarpHead
 
 UP_KERNELS = (5, 3, 5, 2, 2)
@@ -154,7 +155,7 @@ class MSFE(nn.Module):
         return self.decode(self.encode(x), x.shape[-2:])
 
 
-HEADS = ("redraw", "warp")
+HEADS = ("redraw", "warp", "splat")
 RECONSTRUCTIONS = ("downup", "unet")
 
 
@@ -179,8 +180,8 @@ class CanonicalNet(nn.Module):
             raise ValueError(f"unknown canonical reconstruction '{reconstruction}' ({', '.join(RECONSTRUCTIONS)})")
         if head not in HEADS:
             raise ValueError(f"unknown canonical net head '{head}' ({', '.join(HEADS)})")
-        if head == "warp" and warp_hidden is None:
-            raise ValueError("the warp head needs its width: set task.net.warp_hidden")
+        if head in ("warp", "splat") and warp_hidden is None:
+            raise ValueError(f"the {head} head needs its width: set task.net.warp_hidden")
         self.image_size = image_size
         self.lfe = LFE(2, lfe_out, lfe_channels) if use_lfe else None
         c = 2 + (lfe_out if use_lfe else 0)
@@ -194,10 +195,14 @@ class CanonicalNet(nn.Module):
             hidden = max(rec_channels[0] // 2, 4)
             self.reconstruction = DownUp(c, hidden, rec_channels, up_act="leaky", final_act=True)
         # the input is given to the head again (skip link)
-        self.head = (WarpHead(hidden + 2, warp_hidden, fuser_out if use_msfe else 0,
-                              normalise_depth=warp_normalise_depth, depth_model=warp_depth,
-                              affine_cell=warp_affine_cell) if head == "warp"
-                     else OutputHead(hidden + 2))
+        latent = fuser_out if use_msfe else 0
+        if head == "warp":
+            self.head = WarpHead(hidden + 2, warp_hidden, latent, normalise_depth=warp_normalise_depth,
+                                 depth_model=warp_depth, affine_cell=warp_affine_cell)
+        elif head == "splat":
+            self.head = SplatHead(hidden + 2, warp_hidden, latent, depth_model=warp_depth, affine_cell=warp_affine_cell)
+        else:
+            self.head = OutputHead(hidden + 2)
 
     def forward(self, depth: torch.Tensor, mask: torch.Tensor) -> CanonicalOutput:
         x = torch.cat([depth, mask], dim=1)
@@ -208,7 +213,7 @@ class CanonicalNet(nn.Module):
             latent = self.msfe.encode(torch.cat(feats, dim=1))
             feats.append(self.msfe.decode(latent, x.shape[-2:]))
         h = torch.cat([self.reconstruction(torch.cat(feats, dim=1)), x], dim=1)
-        out = self.head(h, depth, mask, latent) if isinstance(self.head, WarpHead) else self.head(h)
+        out = self.head(h, depth, mask, latent) if getattr(self.head, "moves_pixels", False) else self.head(h)
         out.latent = latent
         return out
 

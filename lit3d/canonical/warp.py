@@ -61,6 +61,25 @@ def pixels_to_grid(flow_px: torch.Tensor) -> torch.Tensor:
     return flow_px * torch.tensor([2.0 / w, 2.0 / h], device=flow_px.device, dtype=flow_px.dtype)[None, :, None, None]
 
 
+def map_depth(depth: torch.Tensor, coeffs: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
+    """The depth map of the module docstring: ``depth`` ``(B, 1, H, W)`` (a moved pixel's posed depth D)
+    and ``coeffs`` ``(B, K, H, W)`` -> ``D + c0`` (K = 1) or ``c0 + c1 x + c2 y + (1 + c3) D`` (K = 4),
+    ``(x, y)`` from ``grid`` ``(B, H, W, 2)``: the pixel's posed position in grid units."""
+    mapped = depth + coeffs[:, 0:1]
+    if coeffs.shape[1] == 4:
+        x, y = grid[..., 0].unsqueeze(1), grid[..., 1].unsqueeze(1)
+        mapped = mapped + coeffs[:, 1:2] * x + coeffs[:, 2:3] * y + coeffs[:, 3:4] * depth
+    return mapped
+
+
+def cell_smooth(coeffs: torch.Tensor, cell: int) -> torch.Tensor:
+    """``(B, K, H, W)`` averaged over cells of ``cell`` pixels and upsampled bilinearly (unchanged for
+    ``cell`` <= 1): the depth map's coefficients, smooth by construction (a rigid part has constant ones)."""
+    if cell <= 1:
+        return coeffs
+    return F.interpolate(F.avg_pool2d(coeffs, cell), size=coeffs.shape[-2:], mode="bilinear", align_corners=False)
+
+
 def warp_compose(depth: torch.Tensor, mask: torch.Tensor, flow: torch.Tensor, coeffs: torch.Tensor,
                  vis: torch.Tensor, fill_depth: torch.Tensor, fill_mask: torch.Tensor,
                  normalise: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
@@ -77,10 +96,7 @@ def warp_compose(depth: torch.Tensor, mask: torch.Tensor, flow: torch.Tensor, co
     if normalise:
         moved_depth = torch.where(moved[:, 1:2] > 1e-3, moved_depth / moved[:, 1:2].clamp_min(1e-3),
                                   torch.zeros_like(moved_depth))
-    mapped = moved_depth + coeffs[:, 0:1]
-    if coeffs.shape[1] == 4:  # (x, y): the sampled posed position
-        x, y = grid[..., 0].unsqueeze(1), grid[..., 1].unsqueeze(1)
-        mapped = mapped + coeffs[:, 1:2] * x + coeffs[:, 2:3] * y + coeffs[:, 3:4] * moved_depth
+    mapped = map_depth(moved_depth, coeffs, grid)  # (x, y): the sampled posed position
     m = vis * moved[:, 1:2] + (1 - vis) * fill_mask
     d = vis * mapped + (1 - vis) * fill_depth
     return d.clamp(0, 1), m
@@ -106,6 +122,8 @@ class WarpHead(nn.Module):
        the residual flow, the depth offset, the visibility and the fills.
 
     Both output layers start at zero (visibility bias :data:`VIS_BIAS`)."""
+
+    moves_pixels = True  # the heads whose depth map and flow terms the module may add (require_warp_head)
 
     def __init__(self, cin: int, hidden: int, latent_dim: int = 0, coarse: int = 16, normalise_depth: bool = False,
                  depth_model: str = "offset", affine_cell: int = 8):
@@ -144,7 +162,7 @@ class WarpHead(nn.Module):
             flow = flow + F.interpolate(coarse, size=(height, width), mode="bilinear", align_corners=False)
         o = self.out(self.refine(torch.cat([warp_image(h, flow), h, coords], 1)))
         flow = flow + o[:, 0:2]
-        coeffs = self._coarse(o[:, 2:2 + self.n_coeffs])
+        coeffs = cell_smooth(o[:, 2:2 + self.n_coeffs], self.affine_cell)
         vis_logits = o[:, -3:-2]
         fill_depth, fill_mask = torch.sigmoid(o[:, -2:-1]), torch.sigmoid(o[:, -1:])
         d, m = warp_compose(depth, mask, flow, coeffs, torch.sigmoid(vis_logits), fill_depth, fill_mask,
@@ -153,19 +171,12 @@ class WarpHead(nn.Module):
         return CanonicalOutput(depth=d, mask=m, mask_logits=torch.logit(m), flow=flow, vis_logits=vis_logits,
                                depth_offset=coeffs)
 
-    def _coarse(self, coeffs: torch.Tensor) -> torch.Tensor:
-        """The depth map's coefficients ``(B, K, H, W)`` averaged over cells of ``affine_cell`` pixels and
-        upsampled bilinearly: smooth by construction (a rigid part has constant coefficients)."""
-        if self.affine_cell <= 1:
-            return coeffs
-        size = coeffs.shape[-2:]
-        return F.interpolate(F.avg_pool2d(coeffs, self.affine_cell), size=size, mode="bilinear", align_corners=False)
-
 
 def require_warp_head(net: nn.Module, **weights: float) -> None:
-    """ValueError naming the ``task.<weight>`` that is > 0 where ``net`` has no warp head (its ``head``
-    not a :class:`WarpHead`): those terms (offset smoothness, depth slope) exist only with the warp head."""
+    """ValueError naming the ``task.<weight>`` that is > 0 where ``net``'s head moves no pixels (neither a
+    :class:`WarpHead` nor :class:`lit3d.canonical.splat.SplatHead`): those terms (offset smoothness,
+    depth slope) exist only with them."""
     on = [k for k, w in weights.items() if w > 0]
-    if on and not isinstance(getattr(net, "head", None), WarpHead):
+    if on and not getattr(getattr(net, "head", None), "moves_pixels", False):
         raise ValueError(f"task.{on[0]}={weights[on[0]]:g} needs the warp head (task.arch=canonical, "
-                         "task.net.head=warp); set it to 0 with this net")
+                         "task.net.head=warp or splat); set it to 0 with this net")

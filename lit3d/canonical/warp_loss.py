@@ -1,8 +1,10 @@
 """The warp head's loss terms (:mod:`lit3d.canonical.warp`), from a net output and a batch.
 
 Batch keys (``datamodules.canonical`` with ``data.flow_targets=true``): ``flow`` ``(B, 2, H, W)`` in
-pixels, ``vis`` ``(B, 1, H, W)``, ``has_flow`` ``(B,)`` bool, ``canon_depth``/``canon_mask``
-``(B, 1, H, W)``. Batches without flow targets (FAUST) give zero flow and visibility terms.
+pixels, ``vis`` ``(B, 1, H, W)`` (backward, at canonical pixels: the warp head's), ``fflow``, ``fvis``
+(forward, at posed pixels: the splat head's, :mod:`lit3d.canonical.splat`), ``has_flow`` ``(B,)`` bool,
+``mask``, ``canon_depth``, ``canon_mask`` ``(B, 1, H, W)``. "Foreground" below is that of the flow's own
+frame: the canonical mask for the warp head, the posed mask for the splat head. Batches without flow targets (FAUST) give zero flow and visibility terms.
 
 ``flow_on`` says where the flow's end-point distance is paid: ``visible`` (the canonical pixels whose
 surface point the posed image shows) or ``foreground`` (every canonical foreground pixel: a hidden
@@ -35,11 +37,13 @@ def check_choices(flow_on: str, vis_on: str) -> None:
 
 def flow_targets(out, batch: dict) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """The batch's target flow (grid units) ``(B, 2, H, W)``, visibility ``(B, 1, H, W)`` and
-    ``has_flow`` ``(B,)``; zeros and False when the batch has no flow targets."""
-    if batch.get("has_flow") is None or "flow" not in batch:
+    ``has_flow`` ``(B,)`` in the output's frame (``out.flow_frame``: ``canonical``, the backward ``flow``
+    and ``vis``; ``posed``, the forward ``fflow`` and ``fvis``); zeros and False when the batch has none."""
+    f_name, v_name = ("fflow", "fvis") if out.flow_frame == "posed" else ("flow", "vis")
+    if batch.get("has_flow") is None or f_name not in batch:
         has = torch.zeros(out.flow.shape[0], dtype=torch.bool, device=out.flow.device)
         return torch.zeros_like(out.flow), torch.zeros_like(out.mask), has
-    return pixels_to_grid(batch["flow"].float()), batch["vis"], batch["has_flow"]
+    return pixels_to_grid(batch[f_name].float()), batch[v_name], batch["has_flow"]
 
 
 def warp_terms(out, batch: dict, flow_on: str = "visible", offset_smooth: bool = False,
@@ -51,10 +55,10 @@ def warp_terms(out, batch: dict, flow_on: str = "visible", offset_smooth: bool =
     three only."""
     check_choices(flow_on, vis_on)
     target, vis, has = flow_targets(out, batch)
-    where = vis if flow_on == "visible" else batch["canon_mask"]
-    terms = {"flow": flow_loss(out.flow, target, where, has),
-             "vis": visibility_loss(out.vis_logits, vis, batch["canon_mask"] if vis_on == "foreground"
-                                    else torch.ones_like(batch["canon_mask"]), has),
+    foreground = batch["mask"] if out.flow_frame == "posed" else batch["canon_mask"]  # of the flow's own frame
+    terms = {"flow": flow_loss(out.flow, target, vis if flow_on == "visible" else foreground, has),
+             "vis": visibility_loss(out.vis_logits, vis, foreground if vis_on == "foreground"
+                                    else torch.ones_like(foreground), has),
              "smooth": flow_smoothness(out.flow)}
     if offset_smooth and out.depth_offset is not None:
         terms["offset_smooth"] = flow_smoothness(out.depth_offset)
