@@ -204,7 +204,9 @@ class CanonicalNet(nn.Module):
         else:
             self.head = OutputHead(hidden + 2)
 
-    def forward(self, depth: torch.Tensor, mask: torch.Tensor) -> CanonicalOutput:
+    def features(self, depth: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """The head's input ``(B, hidden + 2, H, W)`` (the reconstruction's features and the posed depth and
+        mask) and the MSFE's fused latent ``(B, fuser_out)`` (None without the MSFE)."""
         x = torch.cat([depth, mask], dim=1)
         feats, latent = [x], None
         if self.lfe is not None:
@@ -212,7 +214,10 @@ class CanonicalNet(nn.Module):
         if self.msfe is not None:
             latent = self.msfe.encode(torch.cat(feats, dim=1))
             feats.append(self.msfe.decode(latent, x.shape[-2:]))
-        h = torch.cat([self.reconstruction(torch.cat(feats, dim=1)), x], dim=1)
+        return torch.cat([self.reconstruction(torch.cat(feats, dim=1)), x], dim=1), latent
+
+    def forward(self, depth: torch.Tensor, mask: torch.Tensor) -> CanonicalOutput:
+        h, latent = self.features(depth, mask)
         out = self.head(h, depth, mask, latent) if getattr(self.head, "moves_pixels", False) else self.head(h)
         out.latent = latent
         return out

@@ -152,8 +152,10 @@ class WarpHead(nn.Module):
             self.out.bias[-3] = VIS_BIAS
             self.out.bias[-1] = -VIS_BIAS
 
-    def forward(self, h: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor,
-                latent: torch.Tensor | None = None) -> CanonicalOutput:
+    def parts(self, h: torch.Tensor, latent: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+        """What the head predicts from the features ``h`` ``(B, cin, H, W)`` (and the latent): ``flow``
+        ``(B, 2, H, W)``, depth-map ``coeffs`` ``(B, K, H, W)``, ``vis_logits``, ``fill_depth`` and
+        ``fill_mask`` (probabilities) ``(B, 1, H, W)``; :func:`warp_compose` makes the output of them."""
         b, _, height, width = h.shape
         coords = identity_grid(b, height, width, h.device, h.dtype).permute(0, 3, 1, 2)
         flow = self.first(self.body(torch.cat([h, coords], 1)))
@@ -161,15 +163,17 @@ class WarpHead(nn.Module):
             coarse = self.coarse_flow(latent).view(b, 2, self.coarse, self.coarse)
             flow = flow + F.interpolate(coarse, size=(height, width), mode="bilinear", align_corners=False)
         o = self.out(self.refine(torch.cat([warp_image(h, flow), h, coords], 1)))
-        flow = flow + o[:, 0:2]
-        coeffs = cell_smooth(o[:, 2:2 + self.n_coeffs], self.affine_cell)
-        vis_logits = o[:, -3:-2]
-        fill_depth, fill_mask = torch.sigmoid(o[:, -2:-1]), torch.sigmoid(o[:, -1:])
-        d, m = warp_compose(depth, mask, flow, coeffs, torch.sigmoid(vis_logits), fill_depth, fill_mask,
-                            self.normalise_depth)
+        return {"flow": flow + o[:, 0:2], "coeffs": cell_smooth(o[:, 2:2 + self.n_coeffs], self.affine_cell),
+                "vis_logits": o[:, -3:-2], "fill_depth": torch.sigmoid(o[:, -2:-1]), "fill_mask": torch.sigmoid(o[:, -1:])}
+
+    def forward(self, h: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor,
+                latent: torch.Tensor | None = None) -> CanonicalOutput:
+        p = self.parts(h, latent)
+        d, m = warp_compose(depth, mask, p["flow"], p["coeffs"], torch.sigmoid(p["vis_logits"]), p["fill_depth"],
+                            p["fill_mask"], self.normalise_depth)
         m = m.clamp(MASK_EPS, 1 - MASK_EPS)
-        return CanonicalOutput(depth=d, mask=m, mask_logits=torch.logit(m), flow=flow, vis_logits=vis_logits,
-                               depth_offset=coeffs)
+        return CanonicalOutput(depth=d, mask=m, mask_logits=torch.logit(m), flow=p["flow"], vis_logits=p["vis_logits"],
+                               depth_offset=p["coeffs"])
 
 
 def require_warp_head(net: nn.Module, **weights: float) -> None:

@@ -1,0 +1,132 @@
+"""Where the warp head's mask IoU goes: the output composed again with the net's flow, visibility and
+fill each replaced by the truth, on the items of a split.
+
+    python -m lit3d.canonical.warp_breakdown CKPT [--split val|test] [--data-dir DIR] [--out FILE.md]
+
+The data are the checkpoint's own (its data config; ``--data-dir`` reads a cache elsewhere), with flow
+targets (``data.flow_targets=true``). Per item and row, the mask IoU (at 0.5) against the true
+canonical mask; the table gives the means. The "true fill" is the target itself (depth and mask), the
+"true visibility" the cached one (0 on the canonical background, so there the fill is taken). Also:
+the model's missed and extra pixels (a share of the true area), and the flow's end-point error in
+pixels where the posed view shows the point and where it hides it.
+
+Measured this way on the demo (docs/results_canonical.md): the flow is right on the canonical body, but
+the background beside a posed limb reads that limb where it was posed, and the visibility, unpaid there,
+stays near 1: the limb stays in the output.
+"""
+from __future__ import annotations
+
+import argparse
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from lit3d.canonical.warp import WarpHead, pixels_to_grid, warp_compose
+
+# (row, flow, visibility, fill): "pred" the net's, "true" the target's, "true on the body" the true flow on the
+# canonical foreground and the net's elsewhere
+ROWS = (
+    ("the model", "pred", "pred", "pred"),
+    ("true fill", "pred", "pred", "true"),
+    ("true visibility", "pred", "true", "pred"),
+    ("true visibility and fill", "pred", "true", "true"),
+    ("true flow on the body", "true on the body", "pred", "pred"),
+    ("true flow on the body, true fill", "true on the body", "pred", "true"),
+    ("true flow, visibility and fill (the oracle)", "true", "true", "true"),
+)
+
+
+def mask_iou(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Per-item IoU ``(B,)`` of ``(B, 1, H, W)`` masks at 0.5 (1 where both are empty)."""
+    p, t = pred > 0.5, target > 0.5
+    union = (p | t).sum((1, 2, 3))
+    return torch.where(union > 0, (p & t).sum((1, 2, 3)).float() / union.clamp_min(1).float(), torch.ones_like(union,
+                       dtype=torch.float32))
+
+
+@torch.no_grad()
+def breakdown(net, batch: dict) -> dict[str, torch.Tensor]:
+    """Per-item figures ``(B,)`` of one batch (``depth``, ``mask``, ``canon_depth``, ``canon_mask``, ``flow``
+    in pixels, ``vis``: ``datamodules.canonical`` with flow targets): a mask IoU per :data:`ROWS` row,
+    the posed input's, the model's ``missed`` / ``extra`` pixels per true pixel, and the flow error in
+    pixels on the ``visible`` / ``hidden`` canonical body (NaN where an item has none)."""
+    if not isinstance(getattr(net, "head", None), WarpHead):
+        raise ValueError("the breakdown needs a warp head (task.net.head=warp)")
+    depth, mask, target = batch["depth"], batch["mask"], batch["canon_mask"].float()
+    h, latent = net.features(depth, mask)
+    p = net.head.parts(h, latent)
+    true_flow, true_vis = pixels_to_grid(batch["flow"].float()), batch["vis"].float()
+    body = target > 0.5
+    flows = {"pred": p["flow"], "true": true_flow, "true on the body": torch.where(body, true_flow, p["flow"])}
+    vis = {"pred": torch.sigmoid(p["vis_logits"]), "true": true_vis}
+    fills = {"pred": (p["fill_depth"], p["fill_mask"]), "true": (batch["canon_depth"].float(), target)}
+    out = {}
+    for name, f, v, fill in ROWS:
+        _, m = warp_compose(depth, mask, flows[f], p["coeffs"], vis[v], *fills[fill], net.head.normalise_depth)
+        out[name] = mask_iou(m, target)
+    out["posed input"] = mask_iou(mask, target)
+    _, model = warp_compose(depth, mask, p["flow"], p["coeffs"], vis["pred"], *fills["pred"], net.head.normalise_depth)
+    area = body.sum((1, 2, 3)).clamp_min(1).float()
+    out["missed"] = (body & (model <= 0.5)).sum((1, 2, 3)) / area
+    out["extra"] = (~body & (model > 0.5)).sum((1, 2, 3)) / area
+    error = ((p["flow"] - true_flow) * depth.shape[-1] / 2).norm(dim=1, keepdim=True)
+    for name, where in (("flow error, visible (px)", body & (true_vis > 0.5)), ("flow error, hidden (px)", body & (true_vis <= 0.5))):
+        n = where.sum((1, 2, 3)).float()
+        out[name] = torch.where(n > 0, (error * where).sum((1, 2, 3)) / n.clamp_min(1), torch.full_like(n, float("nan")))
+    return out
+
+
+def summarise(batches: Iterable[dict[str, torch.Tensor]]) -> dict[str, float]:
+    """Means over items of :func:`breakdown`'s figures (NaN items left out)."""
+    pooled: dict[str, list] = {}
+    for figures in batches:
+        for k, v in figures.items():
+            pooled.setdefault(k, []).append(v.cpu().numpy())
+    return {k: float(np.nanmean(np.concatenate(v))) for k, v in pooled.items()}
+
+
+def markdown(means: dict[str, float], n_items: int, source: str) -> str:
+    """The table of :func:`summarise`'s means, ``source`` named above it."""
+    lines = [f"Mask IoU breakdown of {source} ({n_items} items)", "", "| row | mean |", "|---|---|"]
+    lines += [f"| {k} | {v:.3f} |" for k, v in means.items()]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    from datamodules.canonical import CanonicalDataModule
+    from lit3d.canonical.module import CanonicalTask
+    from lit3d.utils.checkpoints import META_KEY, load_checkpoint
+
+    ap = argparse.ArgumentParser(prog="python -m lit3d.canonical.warp_breakdown", description=__doc__.split("\n\n")[0])
+    ap.add_argument("ckpt", help="a canonical checkpoint with the warp head")
+    ap.add_argument("--split", choices=("val", "test"), default="test")
+    ap.add_argument("--data-dir", help="the data cache (default: the checkpoint's data.data_dir)")
+    ap.add_argument("--out", help="also write the table to this markdown file")
+    args = ap.parse_args(argv)
+    ckpt = load_checkpoint(args.ckpt, ValueError)
+    meta = ckpt.get(META_KEY, {}) if isinstance(ckpt, dict) else {}
+    data = {k: v for k, v in dict(meta.get("data") or {}).items() if k != "_target_"}
+    if not data.get("flow_targets"):
+        raise SystemExit(f"{args.ckpt}: its data have no flow targets (data.flow_targets=true is needed)")
+    if args.data_dir:
+        data["data_dir"] = args.data_dir
+    task = CanonicalTask(**ckpt["hyper_parameters"])
+    task.load_state_dict(ckpt["state_dict"])
+    task.eval()
+    dm = CanonicalDataModule(**data)
+    dm.prepare_data()
+    dm.setup("fit" if args.split == "val" else "test")
+    loader = dm.val_dataloader() if args.split == "val" else dm.test_dataloader()
+    figures = [breakdown(task.net, batch) for batch in loader]
+    n = sum(len(f["the model"]) for f in figures)
+    text = markdown(summarise(figures), n, f"{args.ckpt}, {args.split} split")
+    print(text)
+    if args.out:
+        Path(args.out).write_text(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

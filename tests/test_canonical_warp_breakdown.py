@@ -1,0 +1,57 @@
+"""The warp head's mask-IoU breakdown: an untrained head scores as its posed input, the oracle row (true
+flow, visibility and fill) scores the flow targets' own fidelity, and a net without a warp head is refused."""
+import numpy as np
+import pytest
+import torch
+from omegaconf import OmegaConf
+
+from datamodules.canonical.rendering import PairRenderer
+from datamodules.canonical.sources import SynthSource
+from lit3d.canonical.factory import build_canonical_net
+from lit3d.canonical.warp_breakdown import ROWS, breakdown, markdown, summarise
+
+HP = dict(image_size=64, azimuths=[0.0], view_mode="fixed", scale_mode="shape", skip_bad=False, flow_targets=True)
+
+
+def _batch() -> dict:
+    """Every pose of two procedural figures (a humanoid, a quadruped) at 64², with flow targets."""
+    src = SynthSource(["humanoid", "quadruped"], 2, 3, 0, 32, 0, 15.0, 1.0)
+    size = HP["image_size"]
+
+    def unpack(a):
+        return np.unpackbits(a)[: size * size].reshape(size, size).astype(np.float32)
+
+    items = []
+    for subject in src.subjects():
+        a = PairRenderer(src, OmegaConf.create(HP)).render_subject(subject)
+        for p in a["poses"]:
+            items.append({"depth": a[f"depth_{p}_0"].astype(np.float32)[None], "mask": unpack(a[f"mask_{p}_0"])[None],
+                          "canon_depth": a["depth_canonical_0"].astype(np.float32)[None],
+                          "canon_mask": unpack(a["mask_canonical_0"])[None],
+                          "flow": a[f"flow_{p}_0"].astype(np.float32), "vis": unpack(a[f"vis_{p}_0"])[None]})
+    return {k: torch.as_tensor(np.stack([it[k] for it in items])) for k in items[0]}
+
+
+def test_breakdown_of_an_untrained_head_and_its_oracle(compose_cfg):
+    cfg = compose_cfg(["experiment=canonical_tiny", "task.net.head=warp", "data.image_size=64"])
+    net = build_canonical_net({"kind": "canonical", **OmegaConf.to_container(cfg.task.net, resolve=True)}).eval()
+    batch = _batch()
+    figures = breakdown(net, batch)
+    assert all(len(figures[name]) == 6 for name, *_ in ROWS)
+    # an untrained head returns its input: the model scores as the posed input, well below the oracle
+    assert torch.allclose(figures["the model"], figures["posed input"], atol=0.03)
+    assert float(figures[ROWS[-1][0]].min()) >= 0.95  # the oracle: the flow targets reproduce the truth
+    assert float(figures["posed input"].mean()) < 0.8
+    # the true flow on the body moves the body: better than the untrained (zero) flow
+    assert float(figures["true flow on the body, true fill"].mean()) > float(figures["true fill"].mean())
+    means = summarise([figures])
+    assert means["flow error, visible (px)"] > 0.5  # zero flow against a pose change
+    table = markdown(means, 6, "an untrained net")
+    assert "| the model |" in table and "(6 items)" in table
+
+
+def test_breakdown_refuses_a_net_without_a_warp_head(compose_cfg):
+    cfg = compose_cfg(["experiment=canonical_tiny", "task.net.head=redraw"])
+    net = build_canonical_net({"kind": "canonical", **OmegaConf.to_container(cfg.task.net, resolve=True)})
+    with pytest.raises(ValueError, match="warp head"):
+        breakdown(net, {})
