@@ -23,7 +23,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from datamodules.canonical import CanonicalDataModule
+from lit3d.canonical.module import CanonicalTask
 from lit3d.canonical.warp import WarpHead, pixels_to_grid, warp_compose
+from lit3d.utils.checkpoints import META_KEY, load_checkpoint
 
 # (row, flow, visibility, fill): "pred" the net's, "true" the target's, "true on the body" the true flow on the
 # canonical foreground and the net's elsewhere
@@ -95,10 +98,6 @@ def markdown(means: dict[str, float], n_items: int, source: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from datamodules.canonical import CanonicalDataModule
-    from lit3d.canonical.module import CanonicalTask
-    from lit3d.utils.checkpoints import META_KEY, load_checkpoint
-
     ap = argparse.ArgumentParser(prog="python -m lit3d.canonical.warp_breakdown", description=__doc__.split("\n\n")[0])
     ap.add_argument("ckpt", help="a canonical checkpoint with the warp head")
     ap.add_argument("--split", choices=("val", "test"), default="test")
