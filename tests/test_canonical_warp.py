@@ -297,3 +297,23 @@ def test_flow_and_visibility_are_paid_where_asked():
     assert float(warp_terms(out, batch, vis_on="image")["vis"]) == pytest.approx(20.0 * 48 / 64, rel=1e-4)
     with pytest.raises(ValueError, match="vis_on"):
         warp_terms(out, batch, vis_on="nowhere")
+
+
+def test_escape_flow_reads_the_posed_background_where_the_canonical_form_has_none():
+    """On the canonical background the backward flow target leads to the nearest posed background pixel,
+    so the posed mask moved by it is empty there (a posed limb is not kept where it was posed); the
+    canonical body's flow is left as it was."""
+    from datamodules.canonical.dataset import escape_flow
+
+    posed = np.zeros((16, 16), np.float32)
+    posed[4:12, 2:14] = 1  # a wide posed body
+    canon = np.zeros((16, 16), np.float32)
+    canon[4:12, 5:11] = 1  # a narrower canonical one
+    flow = np.zeros((2, 16, 16), np.float32)
+    flow[0][canon > 0] = 0.25
+    out = escape_flow(flow, canon, posed)
+    np.testing.assert_array_equal(out[:, canon > 0], flow[:, canon > 0])
+    assert (out[:, (canon == 0) & (posed == 0)] == 0).all()
+    moved = _warped_mask(posed, out)
+    assert not moved[(canon == 0)].any() and moved[canon > 0].mean() > 0.9
+    assert _warped_mask(posed, flow)[(canon == 0) & (posed > 0)].all()  # without it the posed body stays

@@ -7,9 +7,11 @@ pixels, ``vis`` ``(B, 1, H, W)`` (backward, at canonical pixels: the warp head's
 frame: the canonical mask for the warp head, the posed mask for the splat head. Batches without flow targets (FAUST) give zero flow and visibility terms.
 
 ``flow_on`` says where the flow's end-point distance is paid: ``visible`` (the canonical pixels whose
-surface point the posed image shows) or ``foreground`` (every canonical foreground pixel: a hidden
+surface point the posed image shows), ``foreground`` (every canonical foreground pixel: a hidden
 point's target lands on the part that hides it, still on the posed body, so the moved mask is right
-there even where the depth must come from the fill).
+there even where the depth must come from the fill) or ``image`` (every pixel: on the canonical
+background the target leads off the posed body, :func:`datamodules.canonical.dataset.escape_flow`, so a
+posed limb is not read where the canonical form has none; warp head only).
 
 ``vis_on`` says where the visibility is paid: ``foreground`` (the canonical foreground only: the
 background's visibility is left to the mask loss) or ``image`` (every pixel, the canonical background
@@ -24,7 +26,7 @@ import torch
 from lit3d.canonical.losses import depth_gradient_loss, flow_loss, flow_smoothness, visibility_loss
 from lit3d.canonical.warp import pixels_to_grid
 
-FLOW_ON = ("visible", "foreground")
+FLOW_ON = ("visible", "foreground", "image")
 VIS_ON = ("foreground", "image")
 
 
@@ -56,7 +58,8 @@ def warp_terms(out, batch: dict, flow_on: str = "visible", offset_smooth: bool =
     check_choices(flow_on, vis_on)
     target, vis, has = flow_targets(out, batch)
     foreground = batch["mask"] if out.flow_frame == "posed" else batch["canon_mask"]  # of the flow's own frame
-    terms = {"flow": flow_loss(out.flow, target, vis if flow_on == "visible" else foreground, has),
+    where = {"visible": vis, "foreground": foreground, "image": torch.ones_like(foreground)}[flow_on]
+    terms = {"flow": flow_loss(out.flow, target, where, has),
              "vis": visibility_loss(out.vis_logits, vis, foreground if vis_on == "foreground"
                                     else torch.ones_like(foreground), has),
              "smooth": flow_smoothness(out.flow)}
