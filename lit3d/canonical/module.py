@@ -25,9 +25,10 @@ MSFE's fused latent and its cross-entropy, times that weight, to the loss: the l
 (``identity_classes`` subjects) whose output is the recalled training canonical image; its templates are
 filled from the training data at fit start and saved in the checkpoint; its cross-entropy x ``identity_weight`` too.
 
-``net.head="warp"`` (:mod:`lit3d.canonical.warp`) moves the posed pixels instead of redrawing them; its terms
-(:data:`WARP_TERMS`, :mod:`lit3d.canonical.losses`) times their ``<term>_weight`` join the loss, the flow and
-visibility where the batch has flow targets (``data.flow_targets``).
+``net.head="warp"`` (:mod:`lit3d.canonical.warp`) moves the posed pixels instead of redrawing them (``"splat"``,
+:mod:`lit3d.canonical.splat`: pushes them by a forward flow); its terms (:data:`WARP_TERMS`,
+:mod:`lit3d.canonical.warp_loss`) times their ``<term>_weight`` join the loss, the flow and visibility where
+the batch has flow targets (``data.flow_targets``), paid where ``flow_on`` and ``vis_on`` say.
 
 Logged: ``train/loss|depth_loss|mask_loss|alpha|beta`` (``identity_loss`` with the classifier, ``contrastive_loss``;
 ``flow_loss|vis_loss|smooth_loss`` and ``val/flow_epe`` in pixels with the warp head); ``val/`` and ``test/`` ``depth_mse``
