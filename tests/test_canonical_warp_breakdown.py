@@ -8,7 +8,7 @@ from omegaconf import OmegaConf
 from datamodules.canonical.rendering import PairRenderer
 from datamodules.canonical.sources import SynthSource
 from lit3d.canonical.factory import build_canonical_net
-from lit3d.canonical.warp_breakdown import ROWS, breakdown, markdown, summarise
+from lit3d.canonical.warp_breakdown import PICTURE_COLUMNS, ROWS, breakdown, markdown, picture, summarise
 
 HP = dict(image_size=64, azimuths=[0.0], view_mode="fixed", scale_mode="shape", skip_bad=False, flow_targets=True)
 
@@ -48,6 +48,8 @@ def test_breakdown_of_an_untrained_head_and_its_oracle(compose_cfg):
     assert means["flow error, visible (px)"] > 0.5  # zero flow against a pose change
     table = markdown(means, 6, "an untrained net")
     assert "| the model |" in table and "(6 items)" in table
+    image = picture(net, batch, "untrained", n=2, cell=256)  # 2 rows of 256-px cells, one column each
+    assert image.size[0] >= 256 * len(PICTURE_COLUMNS) and image.size[1] >= 2 * 256
 
 
 def test_breakdown_refuses_a_net_without_a_warp_head(compose_cfg):

@@ -2,6 +2,7 @@
 fill each replaced by the truth, on the items of a split.
 
     python -m lit3d.canonical.warp_breakdown CKPT [--split val|test] [--data-dir DIR] [--out FILE.md]
+                                             [--picture FILE.png]
 
 The data are the checkpoint's own (its data config; ``--data-dir`` reads a cache elsewhere), with flow
 targets (``data.flow_targets=true``). Per item and row, the mask IoU (at 0.5) against the true
@@ -27,6 +28,10 @@ from datamodules.canonical import CanonicalDataModule
 from lit3d.canonical.module import CanonicalTask
 from lit3d.canonical.warp import WarpHead, pixels_to_grid, warp_compose
 from lit3d.utils.checkpoints import META_KEY, load_checkpoint
+from lit3d.utils.figures import labelled_grid
+
+PICTURE_ITEMS = 4  # rows of --picture: the split's first items
+PICTURE_COLUMNS = ["posed mask", "true canonical", "output vs truth", "moved by the flow", "visibility"]
 
 # (row, flow, visibility, fill): "pred" the net's, "true" the target's, "true on the body" the true flow on the
 # canonical foreground and the net's elsewhere
@@ -81,6 +86,38 @@ def breakdown(net, batch: dict) -> dict[str, torch.Tensor]:
     return out
 
 
+def _tile(image: np.ndarray, cell: int) -> np.ndarray:
+    """``(H, W)`` in [0, 1] or ``(H, W, 3)`` -> ``(cell, cell, 3)`` uint8, nearest-neighbour enlarged."""
+    rgb = np.repeat(image[..., None], 3, -1) if image.ndim == 2 else image
+    reps = max(cell // rgb.shape[0], 1)
+    big = np.kron(np.clip(rgb, 0, 1), np.ones((reps, reps, 1)))
+    out = np.ones((cell, cell, 3))
+    out[: big.shape[0], : big.shape[1]] = big[:cell, :cell]
+    return (out * 255).astype(np.uint8)
+
+
+@torch.no_grad()
+def picture(net, batch: dict, title: str, n: int = PICTURE_ITEMS, cell: int = 256):
+    """A labelled grid (PIL image) of the first ``n`` items: posed and true canonical masks, the output's
+    mask coloured by agreement (green kept, red extra, blue missed), the posed mask moved by the net's flow
+    alone, and the visibility (white: the moved pixel is taken)."""
+    h, latent = net.features(batch["depth"], batch["mask"])
+    p = net.head.parts(h, latent)
+    vis = torch.sigmoid(p["vis_logits"])
+    _, model = warp_compose(batch["depth"], batch["mask"], p["flow"], p["coeffs"], vis, p["fill_depth"], p["fill_mask"],
+                            net.head.normalise_depth)
+    moved = warp_compose(batch["depth"], batch["mask"], p["flow"], p["coeffs"], torch.ones_like(vis),
+                         p["fill_depth"], p["fill_mask"])[1]
+    iou = mask_iou(model, batch["canon_mask"])
+    rows = []
+    for i in range(min(n, len(model))):
+        t, m = batch["canon_mask"][i, 0].numpy() > 0.5, model[i, 0].numpy() > 0.5
+        agree = np.stack([m & ~t, m & t, ~m & t], -1).astype(np.float32)
+        cells = [batch["mask"][i, 0].numpy(), t.astype(np.float32), agree, moved[i, 0].numpy(), vis[i, 0].numpy()]
+        rows.append({"label": f"item {i}\nIoU {float(iou[i]):.2f}", "cells": [_tile(c, cell) for c in cells]})
+    return labelled_grid(rows, PICTURE_COLUMNS, title, cell=cell, left=130)
+
+
 def summarise(batches: Iterable[dict[str, torch.Tensor]]) -> dict[str, float]:
     """Means over items of :func:`breakdown`'s figures (NaN items left out)."""
     pooled: dict[str, list] = {}
@@ -103,6 +140,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--split", choices=("val", "test"), default="test")
     ap.add_argument("--data-dir", help="the data cache (default: the checkpoint's data.data_dir)")
     ap.add_argument("--out", help="also write the table to this markdown file")
+    ap.add_argument("--picture", help="also draw the first items (masks, agreement, moved mask, visibility) to this PNG")
     args = ap.parse_args(argv)
     ckpt = load_checkpoint(args.ckpt, ValueError)
     meta = ckpt.get(META_KEY, {}) if isinstance(ckpt, dict) else {}
@@ -119,6 +157,10 @@ def main(argv: list[str] | None = None) -> int:
     dm.setup("fit" if args.split == "val" else "test")
     loader = dm.val_dataloader() if args.split == "val" else dm.test_dataloader()
     figures = [breakdown(task.net, batch) for batch in loader]
+    if args.picture:
+        run = Path(args.ckpt).resolve().parent.parent.name  # RUN/checkpoints/NAME.ckpt
+        title = f"{run}, {args.split} split; output vs truth: green kept, red extra, blue missed"
+        picture(task.net, next(iter(loader)), title).save(args.picture)
     n = sum(len(f["the model"]) for f in figures)
     text = markdown(summarise(figures), n, f"{args.ckpt}, {args.split} split")
     print(text)
