@@ -291,6 +291,12 @@ def test_flow_and_visibility_are_paid_where_asked():
     assert float(warp_terms(out, batch, "foreground")["flow"]) == pytest.approx(0.5, abs=1e-3)  # 8 of 16 pixels
     with pytest.raises(ValueError, match="flow_on"):
         warp_terms(out, batch, "everywhere")
+    # flow_power=2: the squared distance (1 grid unit on 8 of 16 pixels: 0.5 either way; 2 units: 2.0 against 1.0)
+    assert float(warp_terms(out, batch, "foreground", flow_power=2.0)["flow"]) == pytest.approx(0.5, abs=1e-3)
+    batch["flow"] = batch["flow"] * 2
+    assert float(warp_terms(out, batch, "foreground", flow_power=2.0)["flow"]) == pytest.approx(2.0, abs=1e-3)
+    assert float(warp_terms(out, batch, "foreground")["flow"]) == pytest.approx(1.0, abs=1e-3)
+    batch["flow"] = batch["flow"] / 2
     # vis_on: "foreground" leaves the background's visibility free, "image" pays it with target 0
     out.vis_logits = torch.where(canon_mask > 0.5, torch.where(vis > 0.5, 20.0, -20.0), 20.0)  # right on fg, 1 on bg
     assert float(warp_terms(out, batch, vis_on="foreground")["vis"]) == pytest.approx(0.0, abs=1e-6)

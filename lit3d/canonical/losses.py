@@ -48,13 +48,15 @@ def _per_item(weight: torch.Tensor, has_flow: torch.Tensor) -> torch.Tensor:
     return weight.float() * has_flow.float().view(-1, 1, 1, 1).to(weight.device)
 
 
-def flow_loss(flow: torch.Tensor, target: torch.Tensor, vis: torch.Tensor, has_flow: torch.Tensor) -> torch.Tensor:
-    """Mean end-point distance (normalised grid units, the net's) between the predicted backward flow
-    ``(B, 2, H, W)`` and the target ``(B, 2, H, W)`` (same units) over the visible pixels ``vis``
-    ``(B, 1, H, W)`` of the items with targets; 0 when there are none. Scalar, fp32."""
+def flow_loss(flow: torch.Tensor, target: torch.Tensor, vis: torch.Tensor, has_flow: torch.Tensor,
+              power: float = 1.0) -> torch.Tensor:
+    """Mean end-point distance (normalised grid units, the net's) between the predicted flow
+    ``(B, 2, H, W)`` and the target ``(B, 2, H, W)`` (same units) over the pixels ``vis``
+    ``(B, 1, H, W)`` of the items with targets, each distance to the ``power`` (2: the squared distance,
+    which pays a pixel in proportion to its error); 0 when there are none. Scalar, fp32."""
     w = _per_item(vis, has_flow)
     epe = torch.sqrt(((flow.float() - target.float()) ** 2).sum(1, keepdim=True) + 1e-8)
-    return (w * epe).sum() / w.sum().clamp_min(1.0)
+    return (w * epe ** power).sum() / w.sum().clamp_min(1.0)
 
 
 def visibility_loss(vis_logits: torch.Tensor, vis: torch.Tensor, where: torch.Tensor,

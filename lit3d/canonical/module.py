@@ -134,6 +134,7 @@ class CanonicalTask(pl.LightningModule):
         init_weights: str | None = None,
         flow_weight: float = 0.0,
         flow_on: str = "visible",
+        flow_power: float = 1.0,
         vis_on: str = "foreground",
         vis_weight: float = 0.0,
         smooth_weight: float = 0.0,
@@ -257,7 +258,7 @@ class CanonicalTask(pl.LightningModule):
         if out.flow is not None:  # the warp head: each of its terms times its weight
             hp = self.hparams
             terms.update(warp := warp_terms(out, batch, hp.flow_on, hp.offset_smooth_weight > 0, hp.depth_grad_weight > 0,
-                                            hp.vis_on))
+                                            hp.vis_on, hp.flow_power))
             terms["loss"] = terms["loss"] + sum(self.hparams[f"{k}_weight"] * v for k, v in warp.items())
         where = f"step {self.global_step} (epoch {self.current_epoch}, batch {batch_idx})"
         if not guard_step(self, terms, where, self.hparams.on_nonfinite):

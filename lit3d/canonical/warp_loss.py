@@ -49,8 +49,8 @@ def flow_targets(out, batch: dict) -> tuple[torch.Tensor, torch.Tensor, torch.Te
 
 
 def warp_terms(out, batch: dict, flow_on: str = "visible", offset_smooth: bool = False,
-               depth_grad: bool = False, vis_on: str = "foreground") -> dict[str, torch.Tensor]:
-    """``flow`` (end-point distance, grid units, on the pixels ``flow_on`` names), ``vis`` (BCE on the
+               depth_grad: bool = False, vis_on: str = "foreground", flow_power: float = 1.0) -> dict[str, torch.Tensor]:
+    """``flow`` (end-point distance, grid units, to the ``flow_power``, on the pixels ``flow_on`` names), ``vis`` (BCE on the
     pixels ``vis_on`` names), ``smooth`` (flow total variation), with ``offset_smooth`` the depth map's total
     variation and with ``depth_grad`` the depth's slope against the target's
     (:func:`~lit3d.canonical.losses.depth_gradient_loss`); items without flow targets add to the last
@@ -59,7 +59,7 @@ def warp_terms(out, batch: dict, flow_on: str = "visible", offset_smooth: bool =
     target, vis, has = flow_targets(out, batch)
     foreground = batch["mask"] if out.flow_frame == "posed" else batch["canon_mask"]  # of the flow's own frame
     where = {"visible": vis, "foreground": foreground, "image": torch.ones_like(foreground)}[flow_on]
-    terms = {"flow": flow_loss(out.flow, target, where, has),
+    terms = {"flow": flow_loss(out.flow, target, where, has, flow_power),
              "vis": visibility_loss(out.vis_logits, vis, foreground if vis_on == "foreground"
                                     else torch.ones_like(foreground), has),
              "smooth": flow_smoothness(out.flow)}

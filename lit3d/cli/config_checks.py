@@ -140,6 +140,7 @@ RULES: tuple[Rule, ...] = (
     Rule("task.net.fuser_hidden",              "int",     ">= 1"),
     Rule("task.net.msfe_grid",                 "int",     ">= 1"),
     Rule("task.net.warp_hidden",               "int",     ">= 1"),
+    Rule("task.flow_power",                    "number",  "> 0"),
     Rule("task.net.warp_affine_cell",          "int",     ">= 1"),
     Rule("task.net.hidden",                    "int",     ">= 1"),
     Rule("task.net.blocks",                    "int",     ">= 1"),
