@@ -25,10 +25,10 @@ from __future__ import annotations
 
 import torch
 import torch.nn as nn
-import torch.nn.functional as F
 
 from lit3d.canonical.outputs import CanonicalOutput
-from lit3d.canonical.warp import DEPTH_MODELS, MASK_EPS, VIS_BIAS, _convs, cell_smooth, identity_grid, map_depth
+from lit3d.canonical.warp import (MASK_EPS, VIS_BIAS, PixelMover, _convs, cell_smooth, coarse_flow_field, identity_grid,
+                                  map_depth, zero_layers_)
 
 
 def forward_splat(values: torch.Tensor, weight: torch.Tensor, flow: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -56,7 +56,7 @@ def forward_splat(values: torch.Tensor, weight: torch.Tensor, flow: torch.Tensor
     return out[:, :c], out[:, c:]
 
 
-class SplatHead(nn.Module):
+class SplatHead(PixelMover):
     """``(B, cin, H, W)`` features (aligned with the posed image) and the posed ``depth``, ``mask`` ->
     :class:`CanonicalOutput` whose ``flow`` and ``vis_logits`` are the forward flow and the seen logits
     at the *posed* pixels (``flow_frame="posed"``; module docstring).
@@ -67,30 +67,19 @@ class SplatHead(nn.Module):
     Stage 2, at canonical pixels: the features pushed with the pixels (weighted mean), the coverage and
     the coordinates through two 3x3 convs and a 1x1 layer give the fill's depth and mask."""
 
-    moves_pixels = True  # its depth map and flow terms may be added (lit3d.canonical.warp.require_warp_head)
-
     def __init__(self, cin: int, hidden: int, latent_dim: int = 0, coarse: int = 16, depth_model: str = "offset",
                  affine_cell: int = 8):
-        super().__init__()
-        if depth_model not in DEPTH_MODELS:
-            raise ValueError(f"unknown warp depth model '{depth_model}' ({', '.join(DEPTH_MODELS)})")
-        self.n_coeffs = DEPTH_MODELS[depth_model]
-        self.affine_cell = affine_cell if depth_model == "affine" else 1
+        super().__init__(latent_dim, coarse, depth_model, affine_cell)
         self.body = _convs(cin + 2, hidden)
         self.posed_out = nn.Conv2d(hidden, 2 + self.n_coeffs + 1, 1)  # flow, depth map, seen
         self.fill_body = _convs(cin + 1 + 2, hidden)
         self.fill_out = nn.Conv2d(hidden, 2, 1)  # fill depth, fill mask
-        self.coarse = coarse
-        self.coarse_flow = nn.Linear(latent_dim, 2 * coarse * coarse) if latent_dim else None
         self.reset_output_()
 
     def reset_output_(self) -> None:
         """Output layers to zero, seen bias :data:`VIS_BIAS`, fill mask bias -VIS_BIAS (an untrained head
         returns the posed input); called again after a whole-net initialisation."""
-        for layer in (self.posed_out, self.fill_out, self.coarse_flow):
-            if layer is not None:
-                nn.init.zeros_(layer.weight)
-                nn.init.zeros_(layer.bias)
+        zero_layers_(self.posed_out, self.fill_out, self.coarse_flow)
         with torch.no_grad():
             self.posed_out.bias[-1] = VIS_BIAS
             self.fill_out.bias[-1] = -VIS_BIAS
@@ -101,10 +90,7 @@ class SplatHead(nn.Module):
         grid = identity_grid(b, height, width, h.device, h.dtype)
         coords = grid.permute(0, 3, 1, 2)
         o = self.posed_out(self.body(torch.cat([h, coords], 1)))
-        flow = o[:, 0:2]
-        if self.coarse_flow is not None and latent is not None:
-            coarse = self.coarse_flow(latent).view(b, 2, self.coarse, self.coarse)
-            flow = flow + F.interpolate(coarse, size=(height, width), mode="bilinear", align_corners=False)
+        flow = o[:, 0:2] + coarse_flow_field(self.coarse_flow, latent, self.coarse, (height, width))
         coeffs = cell_smooth(o[:, 2:2 + self.n_coeffs], self.affine_cell)
         seen_logits = o[:, -1:]
         mapped = map_depth(depth, coeffs, grid)

@@ -102,13 +102,48 @@ def warp_compose(depth: torch.Tensor, mask: torch.Tensor, flow: torch.Tensor, co
     return d.clamp(0, 1), m
 
 
+def zero_layers_(*layers: nn.Module | None) -> None:
+    """Weights and biases of the given layers (None skipped) to zero: an output that starts at nothing."""
+    for layer in layers:
+        if layer is not None:
+            nn.init.zeros_(layer.weight)
+            nn.init.zeros_(layer.bias)
+
+
+def coarse_flow_field(linear: nn.Linear | None, latent: torch.Tensor | None, coarse: int, size) -> torch.Tensor | float:
+    """The coarse flow ``(B, 2, coarse, coarse)`` that ``linear`` maps the net's latent ``(B, D)`` to,
+    upsampled bilinearly to ``size = (H, W)``; 0 without a linear layer or a latent."""
+    if linear is None or latent is None:
+        return 0.0
+    field = linear(latent).view(latent.shape[0], 2, coarse, coarse)
+    return F.interpolate(field, size=tuple(size), mode="bilinear", align_corners=False)
+
+
 def _convs(cin: int, hidden: int) -> nn.Sequential:
     """Two 3x3 conv + LeakyReLU(0.2) layers, ``(B, cin, H, W) -> (B, hidden, H, W)``."""
     return nn.Sequential(nn.Conv2d(cin, hidden, 3, padding=1), nn.LeakyReLU(0.2),
                          nn.Conv2d(hidden, hidden, 3, padding=1), nn.LeakyReLU(0.2))
 
 
-class WarpHead(nn.Module):
+class PixelMover(nn.Module):
+    """What the warp and splat heads share: the depth model's coefficient count (``n_coeffs``) and cell
+    (``affine_cell``), and the linear layer from the net's latent ``(B, latent_dim)`` to a coarse flow
+    ``(B, 2, coarse, coarse)`` (None for ``latent_dim`` 0). ``moves_pixels``: the module may add the
+    depth-map and flow terms (:func:`require_warp_head`)."""
+
+    moves_pixels = True
+
+    def __init__(self, latent_dim: int, coarse: int, depth_model: str, affine_cell: int):
+        super().__init__()
+        if depth_model not in DEPTH_MODELS:
+            raise ValueError(f"unknown warp depth model '{depth_model}' ({', '.join(DEPTH_MODELS)})")
+        self.n_coeffs = DEPTH_MODELS[depth_model]
+        self.affine_cell = affine_cell if depth_model == "affine" else 1
+        self.coarse = coarse
+        self.coarse_flow = nn.Linear(latent_dim, 2 * coarse * coarse) if latent_dim else None
+
+
+class WarpHead(PixelMover):
     """``(B, cin, H, W)`` features and the posed ``depth``, ``mask`` -> :class:`CanonicalOutput` with
     ``flow`` and ``vis_logits`` (module docstring), in two stages.
 
@@ -123,31 +158,20 @@ class WarpHead(nn.Module):
 
     Both output layers start at zero (visibility bias :data:`VIS_BIAS`)."""
 
-    moves_pixels = True  # the heads whose depth map and flow terms the module may add (require_warp_head)
-
     def __init__(self, cin: int, hidden: int, latent_dim: int = 0, coarse: int = 16, normalise_depth: bool = False,
                  depth_model: str = "offset", affine_cell: int = 8):
-        super().__init__()
-        if depth_model not in DEPTH_MODELS:
-            raise ValueError(f"unknown warp depth model '{depth_model}' ({', '.join(DEPTH_MODELS)})")
+        super().__init__(latent_dim, coarse, depth_model, affine_cell)
         self.normalise_depth = normalise_depth  # warp_compose(normalise=...): no edge mixing
-        self.n_coeffs = DEPTH_MODELS[depth_model]
-        self.affine_cell = affine_cell if depth_model == "affine" else 1
         self.body = _convs(cin + 2, hidden)
         self.first = nn.Conv2d(hidden, 2, 1)
         self.refine = _convs(2 * cin + 2, hidden)
         self.out = nn.Conv2d(hidden, 2 + self.n_coeffs + 3, 1)  # flow, depth map, vis, fill depth, fill mask
-        self.coarse = coarse
-        self.coarse_flow = nn.Linear(latent_dim, 2 * coarse * coarse) if latent_dim else None
         self.reset_output_()
 
     def reset_output_(self) -> None:
         """Output layers to zero, visibility bias :data:`VIS_BIAS`, fill mask bias -4 (an untrained head
         returns the posed input); called again after a whole-net initialisation."""
-        for layer in (self.first, self.out, self.coarse_flow):
-            if layer is not None:
-                nn.init.zeros_(layer.weight)
-                nn.init.zeros_(layer.bias)
+        zero_layers_(self.first, self.out, self.coarse_flow)
         with torch.no_grad():
             self.out.bias[-3] = VIS_BIAS
             self.out.bias[-1] = -VIS_BIAS
@@ -159,9 +183,7 @@ class WarpHead(nn.Module):
         b, _, height, width = h.shape
         coords = identity_grid(b, height, width, h.device, h.dtype).permute(0, 3, 1, 2)
         flow = self.first(self.body(torch.cat([h, coords], 1)))
-        if self.coarse_flow is not None and latent is not None:
-            coarse = self.coarse_flow(latent).view(b, 2, self.coarse, self.coarse)
-            flow = flow + F.interpolate(coarse, size=(height, width), mode="bilinear", align_corners=False)
+        flow = flow + coarse_flow_field(self.coarse_flow, latent, self.coarse, (height, width))
         o = self.out(self.refine(torch.cat([warp_image(h, flow), h, coords], 1)))
         return {"flow": flow + o[:, 0:2], "coeffs": cell_smooth(o[:, 2:2 + self.n_coeffs], self.affine_cell),
                 "vis_logits": o[:, -3:-2], "fill_depth": torch.sigmoid(o[:, -2:-1]), "fill_mask": torch.sigmoid(o[:, -1:])}
