@@ -55,10 +55,11 @@ def test_zero_flow_reproduces_the_posed_input_exactly():
     assert torch.allclose(d1[..., :-1], depth[..., 1:], atol=1e-5)
 
 
-@pytest.mark.parametrize("reconstruction", ["downup", "unet"])
-def test_untrained_warp_net_returns_its_input(compose_cfg, reconstruction):
+@pytest.mark.parametrize("reconstruction,parts", [("downup", 0), ("unet", 0), ("downup", 4)])
+def test_untrained_warp_net_returns_its_input(compose_cfg, reconstruction, parts):
     net_cfg = OmegaConf.to_container(compose_cfg(["experiment=canonical_tiny", "task.net.head=warp",
-                                                  f"task.net.reconstruction={reconstruction}"]).task.net, resolve=True)
+                                                  f"task.net.reconstruction={reconstruction}",
+                                                  f"task.net.warp_parts={parts}"]).task.net, resolve=True)
     net = build_canonical_net({"kind": "canonical", **net_cfg})
     assert isinstance(net.head, WarpHead)
     assert isinstance(net.reconstruction, UNetTrunk) == (reconstruction == "unet")
@@ -338,3 +339,31 @@ def test_escape_flow_reads_the_posed_background_where_the_canonical_form_has_non
     moved = _warped_mask(posed, out)
     assert not moved[(canon == 0)].any() and moved[canon > 0].mean() > 0.9
     assert _warped_mask(posed, flow)[(canon == 0) & (posed > 0)].all()  # without it the posed body stays
+
+
+def test_part_flow_blends_rigid_motions_by_part():
+    """One part moved by a translation, the other turned: each pixel's flow is its part's motion, blended
+    by the part weights; zero motions (the start) give zero flow."""
+    from lit3d.canonical.warp import PartFlow, identity_grid
+
+    flow_net = PartFlow(hidden=1, latent_dim=1, parts=2)
+    flow_net.reset_output_()
+    feats = torch.linspace(-1, 1, 16).sign().view(1, 1, 1, 16).expand(1, 1, 16, 16)  # left half part 0, right part 1
+    grid = identity_grid(1, 16, 16)
+    assert float(flow_net(feats, torch.ones(1, 1), grid).detach().abs().max()) == 0
+    with torch.no_grad():
+        flow_net.logits.weight.copy_(torch.tensor([-50.0, 50.0]).view(2, 1, 1, 1))
+        flow_net.logits.bias.zero_()
+        c, s = np.cos(0.3), np.sin(0.3)
+        motion = torch.tensor([[0, 0, 0.2, 0, 0, -0.1],                    # part 0 (left): translation (0.2, -0.1)
+                               [c - 1, -s, 0, s, c - 1, 0]], dtype=torch.float32)  # part 1 (right): turned by 0.3 rad
+        flow_net.motion.weight.zero_()
+        flow_net.motion.bias.copy_(motion.view(-1))
+    flow = flow_net(feats, torch.ones(1, 1), grid)[0].detach()
+    left, right = grid[0, :, :8], grid[0, :, 8:]
+    assert torch.allclose(flow[0, :, :8], torch.full((16, 8), 0.2), atol=1e-4)
+    assert torch.allclose(flow[1, :, :8], torch.full((16, 8), -0.1), atol=1e-4)
+    turned_x = c * right[..., 0] - s * right[..., 1]
+    turned_y = s * right[..., 0] + c * right[..., 1]
+    assert torch.allclose(flow[0, :, 8:], turned_x - right[..., 0], atol=1e-4)
+    assert torch.allclose(flow[1, :, 8:], turned_y - right[..., 1], atol=1e-4)

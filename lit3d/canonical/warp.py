@@ -143,6 +143,35 @@ class PixelMover(nn.Module):
         self.coarse_flow = nn.Linear(latent_dim, 2 * coarse * coarse) if latent_dim else None
 
 
+class PartFlow(nn.Module):
+    """A flow made of ``parts`` rigid (affine) motions blended per pixel, as skinning blends bones:
+    ``flow(x) = sum_k w_k(x) ((A_k - I) x + t_k)``, ``x`` the pixel's grid position, ``w`` a softmax over
+    part logits from the features ``(B, hidden, H, W)`` (a 1x1 conv: which part a canonical pixel
+    belongs to), ``(A_k, t_k)`` per item from the net's latent ``(B, latent_dim)`` (a linear layer: the
+    pose, seen whole). A limb is a few numbers to learn instead of a field, and the background next to a
+    canonical limb moves with it, off the posed limb. The motions start at the identity (zero flow); the
+    part logits keep their random start (equal parts would stay equal)."""
+
+    def __init__(self, hidden: int, latent_dim: int, parts: int):
+        super().__init__()
+        self.parts = parts
+        self.logits = nn.Conv2d(hidden, parts, 1)
+        self.motion = nn.Linear(latent_dim, parts * 6)
+
+    def reset_output_(self) -> None:
+        """The motions to the identity (zero flow)."""
+        zero_layers_(self.motion)
+
+    def forward(self, feats: torch.Tensor, latent: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
+        """``(B, 2, H, W)`` flow from the features, the latent and the pixels' grid positions ``(B, H, W, 2)``."""
+        b = feats.shape[0]
+        w = torch.softmax(self.logits(feats), 1)  # (B, K, H, W)
+        m = self.motion(latent).view(b, self.parts, 2, 3)  # (A - I | t) per part
+        xy1 = torch.cat([grid, torch.ones_like(grid[..., :1])], -1)  # (B, H, W, 3)
+        disp = torch.einsum("bkij,bhwj->bkihw", m, xy1)  # (B, K, 2, H, W)
+        return (w.unsqueeze(2) * disp).sum(1)
+
+
 class WarpHead(PixelMover):
     """``(B, cin, H, W)`` features and the posed ``depth``, ``mask`` -> :class:`CanonicalOutput` with
     ``flow`` and ``vis_logits`` (module docstring), in two stages.
@@ -159,8 +188,11 @@ class WarpHead(PixelMover):
     Both output layers start at zero (visibility bias :data:`VIS_BIAS`)."""
 
     def __init__(self, cin: int, hidden: int, latent_dim: int = 0, coarse: int = 16, normalise_depth: bool = False,
-                 depth_model: str = "offset", affine_cell: int = 8):
+                 depth_model: str = "offset", affine_cell: int = 8, parts: int = 0):
         super().__init__(latent_dim, coarse, depth_model, affine_cell)
+        if parts and not latent_dim:
+            raise ValueError("warp_parts > 0 needs the MSFE's latent (task.use_msfe=true)")
+        self.part_flow = PartFlow(hidden, latent_dim, parts) if parts else None
         self.normalise_depth = normalise_depth  # warp_compose(normalise=...): no edge mixing
         self.body = _convs(cin + 2, hidden)
         self.first = nn.Conv2d(hidden, 2, 1)
@@ -172,6 +204,8 @@ class WarpHead(PixelMover):
         """Output layers to zero, visibility bias :data:`VIS_BIAS`, fill mask bias -4 (an untrained head
         returns the posed input); called again after a whole-net initialisation."""
         zero_layers_(self.first, self.out, self.coarse_flow)
+        if self.part_flow is not None:
+            self.part_flow.reset_output_()
         with torch.no_grad():
             self.out.bias[-3] = VIS_BIAS
             self.out.bias[-1] = -VIS_BIAS
@@ -182,8 +216,10 @@ class WarpHead(PixelMover):
         ``fill_mask`` (probabilities) ``(B, 1, H, W)``; :func:`warp_compose` makes the output of them."""
         b, _, height, width = h.shape
         coords = identity_grid(b, height, width, h.device, h.dtype).permute(0, 3, 1, 2)
-        flow = self.first(self.body(torch.cat([h, coords], 1)))
-        flow = flow + coarse_flow_field(self.coarse_flow, latent, self.coarse, (height, width))
+        body = self.body(torch.cat([h, coords], 1))
+        flow = self.first(body) + coarse_flow_field(self.coarse_flow, latent, self.coarse, (height, width))
+        if self.part_flow is not None and latent is not None:
+            flow = flow + self.part_flow(body, latent, coords.permute(0, 2, 3, 1))
         o = self.out(self.refine(torch.cat([warp_image(h, flow), h, coords], 1)))
         return {"flow": flow + o[:, 0:2], "coeffs": cell_smooth(o[:, 2:2 + self.n_coeffs], self.affine_cell),
                 "vis_logits": o[:, -3:-2], "fill_depth": torch.sigmoid(o[:, -2:-1]), "fill_mask": torch.sigmoid(o[:, -1:])}
