@@ -16,8 +16,7 @@ and per canonical pixel a fill (depth and mask) for what no posed pixel reaches,
 features pushed along with the pixels (:func:`forward_splat`). Output: ``c = min(1, W)``, ``W`` the
 splatted weight (posed mask x seen probability, bilinear), ``mask = c + (1 - c) fill_mask``,
 ``depth = c * splat_depth + (1 - c) fill_mask fill_depth`` (0 where nothing lands and the fill
-draws no body; ``splat_depth`` the weighted mean of the mapped
-depths landing there). Zero flow with every pixel seen returns the posed input exactly; the output
+draws no body; ``splat_depth`` the weighted mean of the mapped depths landing there). Zero flow with every pixel seen returns the posed input exactly; the output
 layers start at zero with the seen bias at :data:`~lit3d.canonical.warp.VIS_BIAS`, so an untrained
 head returns (almost exactly) the posed input.
 """
@@ -27,7 +26,7 @@ import torch
 import torch.nn as nn
 
 from lit3d.canonical.outputs import CanonicalOutput
-from lit3d.canonical.warp import (MASK_EPS, VIS_BIAS, PixelMover, _convs, cell_smooth, coarse_flow_field, identity_grid,
+from lit3d.canonical.warp import (MASK_EPS, VIS_BIAS, PixelMover, two_convs, cell_smooth, coarse_flow_field, identity_grid,
                                   map_depth, zero_layers_)
 
 
@@ -70,9 +69,9 @@ class SplatHead(PixelMover):
     def __init__(self, cin: int, hidden: int, latent_dim: int = 0, coarse: int = 16, depth_model: str = "offset",
                  affine_cell: int = 8):
         super().__init__(latent_dim, coarse, depth_model, affine_cell)
-        self.body = _convs(cin + 2, hidden)
+        self.body = two_convs(cin + 2, hidden)
         self.posed_out = nn.Conv2d(hidden, 2 + self.n_coeffs + 1, 1)  # flow, depth map, seen
-        self.fill_body = _convs(cin + 1 + 2, hidden)
+        self.fill_body = two_convs(cin + 1 + 2, hidden)
         self.fill_out = nn.Conv2d(hidden, 2, 1)  # fill depth, fill mask
         self.reset_output_()
 

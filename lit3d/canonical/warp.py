@@ -119,7 +119,7 @@ def coarse_flow_field(linear: nn.Linear | None, latent: torch.Tensor | None, coa
     return F.interpolate(field, size=tuple(size), mode="bilinear", align_corners=False)
 
 
-def _convs(cin: int, hidden: int) -> nn.Sequential:
+def two_convs(cin: int, hidden: int) -> nn.Sequential:
     """Two 3x3 conv + LeakyReLU(0.2) layers, ``(B, cin, H, W) -> (B, hidden, H, W)``."""
     return nn.Sequential(nn.Conv2d(cin, hidden, 3, padding=1), nn.LeakyReLU(0.2),
                          nn.Conv2d(hidden, hidden, 3, padding=1), nn.LeakyReLU(0.2))
@@ -194,9 +194,9 @@ class WarpHead(PixelMover):
             raise ValueError("warp_parts > 0 needs the MSFE's latent (task.use_msfe=true)")
         self.part_flow = PartFlow(hidden, latent_dim, parts) if parts else None
         self.normalise_depth = normalise_depth  # warp_compose(normalise=...): no edge mixing
-        self.body = _convs(cin + 2, hidden)
+        self.body = two_convs(cin + 2, hidden)
         self.first = nn.Conv2d(hidden, 2, 1)
-        self.refine = _convs(2 * cin + 2, hidden)
+        self.refine = two_convs(2 * cin + 2, hidden)
         self.out = nn.Conv2d(hidden, 2 + self.n_coeffs + 3, 1)  # flow, depth map, vis, fill depth, fill mask
         self.reset_output_()
 
