@@ -319,6 +319,12 @@ def test_flow_and_visibility_are_paid_where_asked():
     assert float(warp_terms(out, batch, vis_on="image")["vis"]) == pytest.approx(20.0 * 48 / 64, rel=1e-4)
     with pytest.raises(ValueError, match="vis_on"):
         warp_terms(out, batch, vis_on="nowhere")
+    # the splat head's flow lives at the posed pixels: its targets are the forward ones, its foreground the posed mask
+    out.flow_frame = "posed"
+    batch.update(fflow=torch.zeros(1, 2, 8, 8), fvis=torch.zeros(1, 1, 8, 8), mask=canon_mask.clone())
+    batch["fflow"][:, 1, 2:6, 2:6] = -8.0  # 2 grid units upwards on the 16 posed body pixels
+    assert float(warp_terms(out, batch, "visible")["flow"]) == pytest.approx(0.0, abs=1e-3)  # none seen: nothing paid
+    assert float(warp_terms(out, batch, "foreground")["flow"]) == pytest.approx(2.0, abs=1e-3)
 
 
 def test_escape_flow_reads_the_posed_background_where_the_canonical_form_has_none():
