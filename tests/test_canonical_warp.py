@@ -331,7 +331,7 @@ def test_escape_flow_reads_the_posed_background_where_the_canonical_form_has_non
     """On the canonical background the backward flow target leads to the nearest posed background pixel,
     so the posed mask moved by it is empty there (a posed limb is not kept where it was posed); the
     canonical body's flow is left as it was."""
-    from datamodules.canonical.dataset import escape_flow
+    from lit3d.canonical.warp_loss import escape_flow
 
     posed = np.zeros((16, 16), np.float32)
     posed[4:12, 2:14] = 1  # a wide posed body
@@ -345,6 +345,23 @@ def test_escape_flow_reads_the_posed_background_where_the_canonical_form_has_non
     moved = _warped_mask(posed, out)
     assert not moved[(canon == 0)].any() and moved[canon > 0].mean() > 0.9
     assert _warped_mask(posed, flow)[(canon == 0) & (posed > 0)].all()  # without it the posed body stays
+    # task.flow_on=image pays it there (a flow already leading off the posed body costs nothing), the other
+    # choices do not read the background
+    from types import SimpleNamespace
+
+    from lit3d.canonical.warp_loss import warp_terms
+
+    def _b(a):
+        return torch.as_tensor(a)[None, None]
+
+    batch = {"flow": torch.as_tensor(flow)[None], "vis": _b(canon), "has_flow": torch.tensor([True]),
+             "canon_mask": _b(canon), "canon_depth": _b(canon), "mask": _b(posed)}
+    out = SimpleNamespace(flow=pixels_to_grid(torch.as_tensor(out)[None]), vis_logits=torch.zeros(1, 1, 16, 16),
+                          mask=_b(canon), depth=_b(canon), depth_offset=None, flow_frame="canonical")
+    assert float(warp_terms(out, batch, "image")["flow"]) == pytest.approx(0.0, abs=1e-3)
+    out.flow = pixels_to_grid(batch["flow"])
+    assert float(warp_terms(out, batch, "image")["flow"]) > 0.01  # 48 stale pixels of 256, 1-3 px each
+    assert float(warp_terms(out, batch, "foreground")["flow"]) == pytest.approx(0.0, abs=1e-3)
 
 
 def test_part_flow_blends_rigid_motions_by_part():

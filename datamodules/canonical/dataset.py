@@ -3,8 +3,7 @@ subject-balanced training sampler.
 
 Items (``S = image_size``): ``depth``, ``mask``, ``canon_depth``, ``canon_mask`` ``(1, S, S)``
 float32; ``subject`` str, ``subject_idx``, ``pose``, ``view`` int; ``flow`` ``(2, S, S)`` (backward
-flow in pixels, :mod:`datamodules.canonical.flow`; on the canonical background where the posed body
-lies, the way off it: :func:`escape_flow`), ``vis`` ``(1, S, S)`` float32, ``fflow`` and
+flow in pixels, :mod:`datamodules.canonical.flow`), ``vis`` ``(1, S, S)`` float32, ``fflow`` and
 ``fvis`` (the forward flow and visibility, at posed pixels, same shapes) and ``has_flow``
 bool (zeros and False for an item without targets, or whose input is rolled or mirrored without its
 target); ``phenotype`` ``(P,)`` float32 when the dataset is given phenotypes. With ``flip_lr`` (training
@@ -18,25 +17,7 @@ from collections.abc import Sequence
 
 import numpy as np
 import torch
-from scipy.ndimage import distance_transform_edt
 from torch.utils.data import Dataset, WeightedRandomSampler
-
-
-def escape_flow(flow: np.ndarray, canon_mask: np.ndarray, posed_mask: np.ndarray) -> np.ndarray:
-    """The backward ``flow`` ``(2, S, S)`` (pixels; 0 off the canonical body) with a target on the canonical
-    background too: where the posed image shows the body at that pixel (``posed_mask`` ``(S, S)``), the
-    displacement to the nearest posed background pixel (a pixel read there shows no body), elsewhere 0.
-    Only the flow paid on every pixel (``task.flow_on=image``) reads it."""
-    canon, posed = np.asarray(canon_mask) > 0.5, np.asarray(posed_mask) > 0.5
-    stale = ~canon & posed
-    if not stale.any():
-        return flow
-    _, (rows, cols) = distance_transform_edt(posed, return_indices=True)
-    out = np.array(flow, np.float32, copy=True)
-    r, c = np.nonzero(stale)
-    out[0, r, c] = cols[r, c] - c
-    out[1, r, c] = rows[r, c] - r
-    return out
 
 
 class CanonicalPairDataset(Dataset):
@@ -96,9 +77,6 @@ class CanonicalPairDataset(Dataset):
                 flow = c[f_name][pk].astype(np.float32)
                 if flip:  # mirrored pair: the flow of the mirrored image, its x component negated
                     flow = flow[:, :, ::-1] * np.array([-1.0, 1.0], np.float32)[:, None, None]
-                if f_name == "flow":  # the canonical background: where it must read the posed background
-                    flow = escape_flow(flow, c["mask"][ck][:, ::-1] if flip_canon else c["mask"][ck],
-                                       c["mask"][pk][:, ::-1] if flip else c["mask"][pk])
                 flows[f_name], flows[v_name] = torch.from_numpy(np.ascontiguousarray(flow)), t(c[v_name][pk], flip)
             else:
                 size = depth.shape[-1]

@@ -10,8 +10,8 @@ frame: the canonical mask for the warp head, the posed mask for the splat head. 
 surface point the posed image shows), ``foreground`` (every canonical foreground pixel: a hidden
 point's target lands on the part that hides it, still on the posed body, so the moved mask is right
 there even where the depth must come from the fill) or ``image`` (every pixel: on the canonical
-background the target leads off the posed body, :func:`datamodules.canonical.dataset.escape_flow`, so a
-posed limb is not read where the canonical form has none; warp head only).
+background the target leads off the posed body, :func:`escape_flow`, so a posed limb is not read where
+the canonical form has none; warp head only; computed for the batch only then).
 
 ``vis_on`` says where the visibility is paid: ``foreground`` (the canonical foreground only: the
 background's visibility is left to the mask loss) or ``image`` (every pixel, the canonical background
@@ -21,7 +21,9 @@ pixel whose flow lands inside a posed limb (flat mask, no gradient) keeps that l
 """
 from __future__ import annotations
 
+import numpy as np
 import torch
+from scipy.ndimage import distance_transform_edt
 
 from lit3d.canonical.losses import depth_gradient_loss, flow_loss, flow_smoothness, visibility_loss
 from lit3d.canonical.warp import pixels_to_grid
@@ -35,6 +37,32 @@ def check_choices(flow_on: str, vis_on: str) -> None:
     for name, value, choices in (("flow_on", flow_on, FLOW_ON), ("vis_on", vis_on, VIS_ON)):
         if value not in choices:
             raise ValueError(f"task.{name} must be one of {choices}, got '{value}'")
+
+
+def escape_flow(flow: np.ndarray, canon_mask: np.ndarray, posed_mask: np.ndarray) -> np.ndarray:
+    """The backward ``flow`` ``(2, S, S)`` (pixels; 0 off the canonical body) with a target on the canonical
+    background too: where the posed image shows the body at that pixel (``posed_mask`` ``(S, S)``), the
+    displacement to the nearest posed background pixel (a pixel read there shows no body), elsewhere 0
+    (also where the posed image has no background at all)."""
+    canon, posed = np.asarray(canon_mask) > 0.5, np.asarray(posed_mask) > 0.5
+    stale = ~canon & posed
+    if not stale.any() or posed.all():  # nothing to leave, or no posed background to leave to
+        return flow
+    _, (rows, cols) = distance_transform_edt(posed, return_indices=True)
+    out = np.array(flow, np.float32, copy=True)
+    r, c = np.nonzero(stale)
+    out[0, r, c] = cols[r, c] - c
+    out[1, r, c] = rows[r, c] - r
+    return out
+
+
+def _escape_targets(target: torch.Tensor, batch: dict) -> torch.Tensor:
+    """The backward target flow ``(B, 2, H, W)`` (grid units) with :func:`escape_flow` on each item's
+    canonical background (``canon_mask``, ``mask`` ``(B, 1, H, W)``); on the CPU, per item."""
+    px = batch["flow"].detach().float().cpu().numpy()
+    canon, posed = batch["canon_mask"].detach().cpu().numpy(), batch["mask"].detach().cpu().numpy()
+    out = np.stack([escape_flow(px[i], canon[i, 0], posed[i, 0]) for i in range(len(px))])
+    return pixels_to_grid(torch.from_numpy(out).to(target.device, target.dtype))
 
 
 def flow_targets(out, batch: dict) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -58,6 +86,8 @@ def warp_terms(out, batch: dict, flow_on: str = "visible", offset_smooth: bool =
     check_choices(flow_on, vis_on)
     target, vis, has = flow_targets(out, batch)
     foreground = batch["mask"] if out.flow_frame == "posed" else batch["canon_mask"]  # of the flow's own frame
+    if flow_on == "image" and out.flow_frame == "canonical" and bool(has.any()):
+        target = _escape_targets(target, batch)
     where = {"visible": vis, "foreground": foreground, "image": torch.ones_like(foreground)}[flow_on]
     terms = {"flow": flow_loss(out.flow, target, where, has, flow_power),
              "vis": visibility_loss(out.vis_logits, vis, foreground if vis_on == "foreground"
