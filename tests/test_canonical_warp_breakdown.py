@@ -57,3 +57,21 @@ def test_breakdown_refuses_a_net_without_a_warp_head(compose_cfg):
     net = build_canonical_net({"kind": "canonical", **OmegaConf.to_container(cfg.task.net, resolve=True)})
     with pytest.raises(ValueError, match="warp head"):
         breakdown(net, {})
+
+
+def test_command_refuses_bad_input_and_outputs_over_its_input(tmp_path, capsys):
+    """A missing or broken checkpoint and an output that would replace the checkpoint: one line, exit 2,
+    the checkpoint untouched."""
+    from lit3d.canonical.warp_breakdown import main
+
+    bad = tmp_path / "run.ckpt"
+    bad.write_text("not a checkpoint\n")
+    cases = [([str(tmp_path / "missing.ckpt")], "checkpoint not found"),
+             ([str(bad)], "not a readable checkpoint"),
+             ([str(bad), "--out", str(bad)], "would replace the input"),
+             ([str(bad), "--picture", str(tmp_path)], "exists as a folder")]
+    for argv, message in cases:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], (argv, err)
+    assert bad.read_text() == "not a checkpoint\n"

@@ -18,6 +18,7 @@ stays near 1: the limb stays in the output.
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -26,9 +27,11 @@ import torch
 
 from datamodules.canonical import CanonicalDataModule
 from lit3d.canonical.module import CanonicalTask
-from lit3d.canonical.warp import WarpHead, pixels_to_grid, warp_compose
+from lit3d.canonical.warp import WarpHead, pixels_to_grid, warp_compose, warp_image
+from lit3d.metrics.depth import per_sample_mask_iou
 from lit3d.utils.checkpoints import META_KEY, load_checkpoint
 from lit3d.utils.figures import labelled_grid
+from lit3d.utils.io import atomic_file, atomic_write_text, check_targets, output_error
 
 PICTURE_ITEMS = 4  # rows of --picture: the split's first items
 PICTURE_COLUMNS = ["posed mask", "true canonical", "output vs truth", "moved by the flow", "visibility"]
@@ -46,39 +49,43 @@ ROWS = (
 )
 
 
-def mask_iou(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """Per-item IoU ``(B,)`` of ``(B, 1, H, W)`` masks at 0.5 (1 where both are empty)."""
-    p, t = pred > 0.5, target > 0.5
-    union = (p | t).sum((1, 2, 3))
-    return torch.where(union > 0, (p & t).sum((1, 2, 3)).float() / union.clamp_min(1).float(), torch.ones_like(union,
-                       dtype=torch.float32))
+@torch.no_grad()
+def predict(net, batch: dict) -> dict[str, torch.Tensor]:
+    """The warp head's pieces for one batch (:meth:`~lit3d.canonical.warp.WarpHead.parts`: ``flow``,
+    ``coeffs``, ``vis_logits``, ``fill_depth``, ``fill_mask``), with ``vis`` (the visibility probability)
+    and ``mask`` (the output's mask probability, ``(B, 1, H, W)``). ValueError without a warp head."""
+    if not isinstance(getattr(net, "head", None), WarpHead):
+        raise ValueError("the breakdown needs a warp head (task.net.head=warp)")
+    p = net.head.parts(*net.features(batch["depth"], batch["mask"]))
+    p["vis"] = torch.sigmoid(p["vis_logits"])
+    p["mask"] = warp_compose(batch["depth"], batch["mask"], p["flow"], p["coeffs"], p["vis"], p["fill_depth"],
+                             p["fill_mask"], net.head.normalise_depth)[1]
+    return p
 
 
 @torch.no_grad()
-def breakdown(net, batch: dict) -> dict[str, torch.Tensor]:
+def breakdown(net, batch: dict, pred: dict | None = None) -> dict[str, torch.Tensor]:
     """Per-item figures ``(B,)`` of one batch (``depth``, ``mask``, ``canon_depth``, ``canon_mask``, ``flow``
     in pixels, ``vis``: ``datamodules.canonical`` with flow targets): a mask IoU per :data:`ROWS` row,
     the posed input's, the model's ``missed`` / ``extra`` pixels per true pixel, and the flow error in
-    pixels on the ``visible`` / ``hidden`` canonical body (NaN where an item has none)."""
-    if not isinstance(getattr(net, "head", None), WarpHead):
-        raise ValueError("the breakdown needs a warp head (task.net.head=warp)")
+    pixels on the ``visible`` / ``hidden`` canonical body (NaN where an item has none). ``pred``: the
+    batch's :func:`predict`, when the caller has it."""
+    p = predict(net, batch) if pred is None else pred
     depth, mask, target = batch["depth"], batch["mask"], batch["canon_mask"].float()
-    h, latent = net.features(depth, mask)
-    p = net.head.parts(h, latent)
     true_flow, true_vis = pixels_to_grid(batch["flow"].float()), batch["vis"].float()
     body = target > 0.5
     flows = {"pred": p["flow"], "true": true_flow, "true on the body": torch.where(body, true_flow, p["flow"])}
-    vis = {"pred": torch.sigmoid(p["vis_logits"]), "true": true_vis}
+    vis = {"pred": p["vis"], "true": true_vis}
     fills = {"pred": (p["fill_depth"], p["fill_mask"]), "true": (batch["canon_depth"].float(), target)}
-    out = {}
-    for name, f, v, fill in ROWS:
+    out = {ROWS[0][0]: per_sample_mask_iou(p["mask"], target)}  # the model: the output itself
+    for name, f, v, fill in ROWS[1:]:
         _, m = warp_compose(depth, mask, flows[f], p["coeffs"], vis[v], *fills[fill], net.head.normalise_depth)
-        out[name] = mask_iou(m, target)
-    out["posed input"] = mask_iou(mask, target)
-    _, model = warp_compose(depth, mask, p["flow"], p["coeffs"], vis["pred"], *fills["pred"], net.head.normalise_depth)
+        out[name] = per_sample_mask_iou(m, target)
+    out["posed input"] = per_sample_mask_iou(mask, target)
+    model = p["mask"]
     area = body.sum((1, 2, 3)).clamp_min(1).float()
-    out["missed"] = (body & (model <= 0.5)).sum((1, 2, 3)) / area
-    out["extra"] = (~body & (model > 0.5)).sum((1, 2, 3)) / area
+    out["missed"] = (body & (model < 0.5)).sum((1, 2, 3)) / area
+    out["extra"] = (~body & (model >= 0.5)).sum((1, 2, 3)) / area
     error = ((p["flow"] - true_flow) * depth.shape[-1] / 2).norm(dim=1, keepdim=True)
     for name, where in (("flow error, visible (px)", body & (true_vis > 0.5)), ("flow error, hidden (px)", body & (true_vis <= 0.5))):
         n = where.sum((1, 2, 3)).float()
@@ -97,21 +104,17 @@ def _tile(image: np.ndarray, cell: int) -> np.ndarray:
 
 
 @torch.no_grad()
-def picture(net, batch: dict, title: str, n: int = PICTURE_ITEMS, cell: int = 256):
+def picture(net, batch: dict, title: str, n: int = PICTURE_ITEMS, cell: int = 256, pred: dict | None = None):
     """A labelled grid (PIL image) of the first ``n`` items: posed and true canonical masks, the output's
     mask coloured by agreement (green kept, red extra, blue missed), the posed mask moved by the net's flow
-    alone, and the visibility (white: the moved pixel is taken)."""
-    h, latent = net.features(batch["depth"], batch["mask"])
-    p = net.head.parts(h, latent)
-    vis = torch.sigmoid(p["vis_logits"])
-    _, model = warp_compose(batch["depth"], batch["mask"], p["flow"], p["coeffs"], vis, p["fill_depth"], p["fill_mask"],
-                            net.head.normalise_depth)
-    moved = warp_compose(batch["depth"], batch["mask"], p["flow"], p["coeffs"], torch.ones_like(vis),
-                         p["fill_depth"], p["fill_mask"])[1]
-    iou = mask_iou(model, batch["canon_mask"])
+    alone, and the visibility (white: the moved pixel is taken). ``pred``: the batch's :func:`predict`."""
+    p = predict(net, batch) if pred is None else pred
+    vis, model = p["vis"], p["mask"]
+    moved = warp_image(batch["mask"], p["flow"])
+    iou = per_sample_mask_iou(model, batch["canon_mask"])
     rows = []
     for i in range(min(n, len(model))):
-        t, m = batch["canon_mask"][i, 0].numpy() > 0.5, model[i, 0].numpy() > 0.5
+        t, m = batch["canon_mask"][i, 0].numpy() > 0.5, model[i, 0].numpy() >= 0.5
         agree = np.stack([m & ~t, m & t, ~m & t], -1).astype(np.float32)
         cells = [batch["mask"][i, 0].numpy(), t.astype(np.float32), agree, moved[i, 0].numpy(), vis[i, 0].numpy()]
         rows.append({"label": f"item {i}\nIoU {float(iou[i]):.2f}", "cells": [_tile(c, cell) for c in cells]})
@@ -135,6 +138,8 @@ def markdown(means: dict[str, float], n_items: int, source: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The command line (module docstring). A bad checkpoint, data cache or output path: one line on
+    stderr, exit 2; ``--out`` / ``--picture`` never replace the checkpoint and are written atomically."""
     ap = argparse.ArgumentParser(prog="python -m lit3d.canonical.warp_breakdown", description=__doc__.split("\n\n")[0])
     ap.add_argument("ckpt", help="a canonical checkpoint with the warp head")
     ap.add_argument("--split", choices=("val", "test"), default="test")
@@ -142,31 +147,47 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", help="also write the table to this markdown file")
     ap.add_argument("--picture", help="also draw the first items (masks, agreement, moved mask, visibility) to this PNG")
     args = ap.parse_args(argv)
-    ckpt = load_checkpoint(args.ckpt, ValueError)
-    meta = ckpt.get(META_KEY, {}) if isinstance(ckpt, dict) else {}
-    data = {k: v for k, v in dict(meta.get("data") or {}).items() if k != "_target_"}
-    if not data.get("flow_targets"):
-        raise SystemExit(f"{args.ckpt}: its data have no flow targets (data.flow_targets=true is needed)")
-    if args.data_dir:
-        data["data_dir"] = args.data_dir
-    task = CanonicalTask(**ckpt["hyper_parameters"])
-    task.load_state_dict(ckpt["state_dict"])
-    task.eval()
-    dm = CanonicalDataModule(**data)
-    dm.prepare_data()
-    dm.setup("fit" if args.split == "val" else "test")
-    loader = dm.val_dataloader() if args.split == "val" else dm.test_dataloader()
-    figures = [breakdown(task.net, batch) for batch in loader]
-    if args.picture:
-        run = Path(args.ckpt).resolve().parent.parent.name  # RUN/checkpoints/NAME.ckpt
-        title = f"{run}, {args.split} split; output vs truth: green kept, red extra, blue missed"
-        picture(task.net, next(iter(loader)), title).save(args.picture)
-    n = sum(len(f["the model"]) for f in figures)
-    text = markdown(summarise(figures), n, f"{args.ckpt}, {args.split} split")
-    print(text)
-    if args.out:
-        Path(args.out).write_text(text)
+    try:
+        check_targets([p for p in (args.out, args.picture) if p], protected=[args.ckpt])
+        ckpt = load_checkpoint(args.ckpt, ValueError)
+        data = {k: v for k, v in dict(ckpt.get(META_KEY, {}).get("data") or {}).items() if k != "_target_"}
+        if not data.get("flow_targets"):
+            raise ValueError(f"{args.ckpt}: its data have no flow targets (data.flow_targets=true is needed)")
+        if args.data_dir:
+            data["data_dir"] = args.data_dir
+        task = CanonicalTask(**ckpt["hyper_parameters"])
+        task.load_state_dict(ckpt["state_dict"])
+        task.eval()
+        dm = CanonicalDataModule(**data)
+        dm.prepare_data()
+        dm.setup("fit" if args.split == "val" else "test")
+        figures, image = [], None
+        for batch in dm.val_dataloader() if args.split == "val" else dm.test_dataloader():
+            pred = predict(task.net, batch)
+            figures.append(breakdown(task.net, batch, pred))
+            if args.picture and image is None:  # the split's first items
+                run = Path(args.ckpt).resolve().parent.parent.name  # RUN/checkpoints/NAME.ckpt
+                title = f"{run}, {args.split} split; output vs truth: green kept, red extra, blue missed"
+                image = picture(task.net, batch, title, pred=pred)
+        n = sum(len(f["the model"]) for f in figures)
+        text = markdown(summarise(figures), n, f"{args.ckpt}, {args.split} split")
+        print(text)
+        for path, write in ((args.out, lambda p: atomic_write_text(p, text)), (args.picture, lambda p: _save_png(image, p))):
+            if path:
+                try:
+                    write(path)
+                except OSError as exc:
+                    raise output_error(path, exc) from None
+    except ValueError as exc:  # OutputError and DataError are ValueErrors too
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     return 0
+
+
+def _save_png(image, path: str) -> None:
+    """``image`` (PIL) to ``path`` as PNG, atomically (:func:`lit3d.utils.io.atomic_file`)."""
+    with atomic_file(path) as f:
+        image.save(f, format="PNG")
 
 
 if __name__ == "__main__":
