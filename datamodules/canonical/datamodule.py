@@ -18,9 +18,8 @@ inputs turned in the image plane by up to that many degrees (a rolled camera; th
 ``blend_poses``: that many extra training poses per subject, each a vertex blend of two of the fold's
 training poses (:mod:`datamodules.canonical.blends`; one connectivity per subject, as TOSCA).
 ``train_pose_fraction``: train on that share of each subject's training poses (a learning curve).
-``flow_targets``: also cache, for every pose whose mesh corresponds to the canonical one, the backward
-flow and visibility of the warp head and the forward flow and visibility of the splat head
-(:mod:`datamodules.canonical.flow`); items then carry them.
+``flow_targets``: also cache, for every pose whose mesh corresponds to the canonical one, the warp head's backward flow
+and visibility (:mod:`datamodules.canonical.flow`; ``forward_flow``: the splat head's forward ones too); items carry them.
 ``batch_poses`` K >= 2: training batches of ``batch_size / K`` subjects with K poses each
 (:class:`~datamodules.canonical.batches.SubjectGroupedBatches`; for ``task.contrastive_weight``).
 
@@ -30,7 +29,7 @@ Batches (``B`` samples, ``S = image_size``):
     subject (list[str]), subject_idx (B,) int64, pose (B,) int64, view (B,) int64
     flow (B, 2, S, S), vis (B, 1, S, S) float32, has_flow (B,) bool   (``flow_targets``; zeros and False
                              for items without targets; backward: at canonical pixels)
-    fflow (B, 2, S, S), fvis (B, 1, S, S) float32   (the forward flow and visibility, at posed pixels)
+    fflow (B, 2, S, S), fvis (B, 1, S, S) float32   (``forward_flow``: at posed pixels)
 
 Cache (:class:`datamodules.cache.CacheBuilder`, the one cache scheme of every DataModule):
 ``data_dir/subjects/<subject>.npz`` per subject (depth as float16, masks packed bits; layout in
@@ -79,7 +78,7 @@ log = logging.getLogger("lit3d")
 GENERATOR = "canonical"
 DATA_VERSION = "canonical-data-1"
 SUBJECTS_DIR = "subjects"  # the cache's item folder
-FLOW_VERSION = "flow-2"  # bump when datamodules.canonical.flow changes what it writes
+FLOW_VERSION = "flow-1"  # bump when datamodules.canonical.flow changes what it writes (either direction)
 
 __all__ = ["CANONICAL_SPLITS", "CanonicalDataModule", "DataError", "CanonicalPairDataset", "Shrec14Source", "SynthSource",
            "ToscaSource", "deal", "depth_image_problem", "read_subject", "split_pose", "split_subject_pose",
@@ -132,6 +131,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         blend_poses: int = 0,
         train_pose_fraction: float = 1.0,
         flow_targets: bool = False,
+        forward_flow: bool = False,
         val_subjects: int | None = None,
         phenotypes: str = "uniform",
         pose_draw: str = "shared",
@@ -192,8 +192,8 @@ class CanonicalDataModule(pl.LightningDataModule):
             cfg["skip_bad"] = True
         if hp.view_mode != "fixed":  # absent for the old convention: its caches keep their hash
             cfg["view_mode"] = hp.view_mode
-        if hp.flow_targets:  # absent without flows: those caches keep their hash
-            cfg["flow_targets"] = FLOW_VERSION
+        if hp.flow_targets:  # absent without flows, and "+forward" only with them: those caches keep their hash
+            cfg["flow_targets"] = FLOW_VERSION + ("+forward" if hp.forward_flow else "")
         return cfg
 
     def cache_builder(self) -> CacheBuilder:

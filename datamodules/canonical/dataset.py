@@ -4,7 +4,8 @@ subject-balanced training sampler.
 Items (``S = image_size``): ``depth``, ``mask``, ``canon_depth``, ``canon_mask`` ``(1, S, S)``
 float32; ``subject`` str, ``subject_idx``, ``pose``, ``view`` int; ``flow`` ``(2, S, S)`` (backward
 flow in pixels, :mod:`datamodules.canonical.flow`), ``vis`` ``(1, S, S)`` float32, ``fflow`` and
-``fvis`` (the forward flow and visibility, at posed pixels, same shapes) and ``has_flow``
+``fvis`` (the forward flow and visibility, at posed pixels, same shapes; only from a cache that holds
+them, ``data.forward_flow``) and ``has_flow``
 bool (zeros and False for an item without targets, or whose input is rolled or mirrored without its
 target); ``phenotype`` ``(P,)`` float32 when the dataset is given phenotypes. With ``flip_lr`` (training
 only) the posed images of an item are mirrored left-right with probability 1/2, and the canonical
@@ -50,6 +51,8 @@ class CanonicalPairDataset(Dataset):
         self.flip_target = flip_target  # ... and the canonical target with it (same camera only)
         self.mirror_view = dict(mirror_view or {})
         self.roll_deg = float(roll_deg)
+        # items carry the forward flow when the cache holds it (data.forward_flow): all items or none, for collation
+        self.forward_flow = any(c.get("fflow") for c in cache.values())
 
     def __len__(self):
         return len(self.records)
@@ -72,7 +75,7 @@ class CanonicalPairDataset(Dataset):
         # flow targets hold only when input and target moved together (not rolled; mirrored both or neither)
         has_flow = pk in c.get("flow", {}) and not angle and flip == flip_canon and target_view == r["view"]
         flows = {}
-        for f_name, v_name in (("flow", "vis"), ("fflow", "fvis")):
+        for f_name, v_name in (("flow", "vis"), ("fflow", "fvis"))[:2 if self.forward_flow else 1]:
             if has_flow:
                 flow = c[f_name][pk].astype(np.float32)
                 if flip:  # mirrored pair: the flow of the mirrored image, its x component negated

@@ -45,8 +45,9 @@ def unpack_mask(packed: np.ndarray | None, size: int) -> np.ndarray | None:
 def read_subject(path: Path, size: int, n_views: int) -> tuple[dict | None, list[str]]:
     """One subject's cache file -> (``{"depth", "mask", "flow", "vis", "fflow", "fvis", "poses"}`` of its
     valid images, problems). ``flow`` / ``fflow`` ``{"<p>_<v>": (2, S, S) float16}`` and ``vis`` / ``fvis``
-    (``(S, S)`` float32) hold the backward and forward flow targets present (none without them); a flow of
-    the wrong shape or not finite, or one direction without the other, is a problem.
+    (``(S, S)`` float32) hold the backward and forward flow targets present (none without them; the forward
+    ones only in a ``forward_flow`` cache); a flow of the wrong shape or not finite, or one without its
+    visibility, is a problem.
 
     A pose with a bad or missing view is left out of ``poses``; a bad canonical view gives
     ``None`` (the subject cannot be used). Each problem names the file and the image.
@@ -82,6 +83,8 @@ def read_subject(path: Path, size: int, n_views: int) -> tuple[dict | None, list
             continue
         got = {}
         for f_name, v_name in (("flow", "vis"), ("fflow", "fvis")):
+            if f_name == "fflow" and f"fflow_{key}" not in arrays and f"fvis_{key}" not in arrays:
+                continue  # a cache without the forward flow (data.forward_flow=false)
             f, m = arrays.get(f"{f_name}_{key}"), unpack_mask(arrays.get(f"{v_name}_{key}"), size)
             if f is None or f.shape != (2, size, size) or m is None or not np.isfinite(f).all():
                 problems.append(f"{path}: {f_name}_{key}: flow target not (2, {size}, {size}) and finite, or its "

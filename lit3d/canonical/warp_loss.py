@@ -70,6 +70,9 @@ def flow_targets(out, batch: dict) -> tuple[torch.Tensor, torch.Tensor, torch.Te
     ``has_flow`` ``(B,)`` in the output's frame (``out.flow_frame``: ``canonical``, the backward ``flow``
     and ``vis``; ``posed``, the forward ``fflow`` and ``fvis``); zeros and False when the batch has none."""
     f_name, v_name = ("fflow", "fvis") if out.flow_frame == "posed" else ("flow", "vis")
+    if f_name == "fflow" and "flow" in batch and "fflow" not in batch:
+        raise ValueError("the splat head learns a forward flow: its data need data.forward_flow=true (and "
+                         "data.flow_targets=true)")
     if batch.get("has_flow") is None or f_name not in batch:
         has = torch.zeros(out.flow.shape[0], dtype=torch.bool, device=out.flow.device)
         return torch.zeros_like(out.flow), torch.zeros_like(out.mask), has

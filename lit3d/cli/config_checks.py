@@ -92,6 +92,7 @@ RULES: tuple[Rule, ...] = (
     Rule("data.progress",                      "bool"),
     Rule("data.flip_lr",                       "bool"),
     Rule("data.flow_targets",                  "bool"),
+    Rule("data.forward_flow",                  "bool"),
     Rule("data.balance_subjects",              "bool"),
     # task: optimisers and losses
     Rule("task.lr",                            "number",  "> 0"),
@@ -282,12 +283,22 @@ def config_problems(cfg: DictConfig, rules: tuple[Rule, ...] = RULES) -> list[st
     return found
 
 
+def combination_problems(cfg: DictConfig) -> list[str]:
+    """Values that are each valid but do not go together: the splat head's flow terms read the forward flow,
+    which a flow cache holds only with ``data.forward_flow=true``."""
+    head = OmegaConf.select(cfg, "task.net.head", default=None)
+    flows, forward = (OmegaConf.select(cfg, f"data.{k}", default=None) for k in ("flow_targets", "forward_flow"))
+    if head == "splat" and flows is True and forward is not True:
+        return ["task.net.head=splat with data.flow_targets=true: expected data.forward_flow=true (its flow targets)"]
+    return []
+
+
 def check_config_values(cfg: DictConfig | None) -> None:
     """Raise :class:`ConfigValueError` (one line, the first problem) when a value of ``cfg`` has the
     wrong type or is out of range (:data:`RULES`); ``None`` (nothing composed) passes."""
     if cfg is None:
         return
-    found = config_problems(cfg)
+    found = config_problems(cfg) + combination_problems(cfg)
     if found:
         more = f" (and {len(found) - 1} more)" if len(found) > 1 else ""
         raise ConfigValueError(found[0] + more)
