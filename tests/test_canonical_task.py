@@ -1,6 +1,7 @@
 """Canonical task: short real training beats the posed-input baseline on held-out subjects and poses;
 retrieval and the mesh baselines come from the evaluator's protocol after the test."""
 import time
+from types import SimpleNamespace
 
 import lightning.pytorch as pl
 import pytest
@@ -229,3 +230,22 @@ def test_validation_retrieval_finds_each_subject_by_its_mask():
     assert out["retrieval_nn"] == out["retrieval_ft"] == 1.0
     assert out["retrieval_nn_input"] == pytest.approx(0.2)  # 1 of 5 tied others is the subject's
     assert validation_retrieval({"pred_mask": pred[::2], "mask": same[::2], "subject_idx": torch.arange(3)}) == {}
+
+
+def test_cosine_schedule_falls_to_zero_over_the_runs_steps(tiny_net):
+    task = CanonicalTask(net=tiny_net(), lr=2e-3, lr_schedule="cosine")
+    task._trainer = SimpleNamespace(estimated_stepping_batches=10)  # what Lightning counts for the fit
+    cfg = task.configure_optimizers()
+    opt, sched = cfg["optimizer"], cfg["lr_scheduler"]["scheduler"]
+    assert cfg["lr_scheduler"]["interval"] == "step"
+    rates = []
+    for _ in range(10):
+        rates.append(opt.param_groups[0]["lr"])
+        opt.step()
+        sched.step()
+    assert rates[0] == pytest.approx(2e-3) and rates[5] == pytest.approx(1e-3)  # half-way: half the rate
+    assert all(a > b for a, b in zip(rates, rates[1:])) and opt.param_groups[0]["lr"] == pytest.approx(0, abs=1e-12)
+    constant = CanonicalTask(net=tiny_net(), lr=2e-3).configure_optimizers()
+    assert isinstance(constant, torch.optim.Adam)
+    with pytest.raises(ValueError, match="lr_schedule"):
+        CanonicalTask(net=tiny_net(), lr_schedule="linear")

@@ -56,11 +56,12 @@ def test_zero_flow_reproduces_the_posed_input_exactly():
     assert torch.allclose(d1[..., :-1], depth[..., 1:], atol=1e-5)
 
 
-@pytest.mark.parametrize("reconstruction,parts", [("downup", 0), ("unet", 0), ("downup", 4)])
-def test_untrained_warp_net_returns_its_input(compose_cfg, reconstruction, parts):
+@pytest.mark.parametrize("reconstruction,parts,steps", [("downup", 0, 1), ("unet", 0, 1), ("downup", 4, 1), ("downup", 0, 3)])
+def test_untrained_warp_net_returns_its_input(compose_cfg, reconstruction, parts, steps):
     net_cfg = OmegaConf.to_container(compose_cfg(["experiment=canonical_tiny", "task.net.head=warp",
                                                   f"task.net.reconstruction={reconstruction}",
-                                                  f"task.net.warp_parts={parts}"]).task.net, resolve=True)
+                                                  f"task.net.warp_parts={parts}",
+                                                  f"task.net.warp_refine_steps={steps}"]).task.net, resolve=True)
     net = build_canonical_net({"kind": "canonical", **net_cfg})
     assert isinstance(net.head, WarpHead)
     assert isinstance(net.reconstruction, UNetTrunk) == (reconstruction == "unet")
@@ -70,6 +71,12 @@ def test_untrained_warp_net_returns_its_input(compose_cfg, reconstruction, parts
     out = net(depth, mask)
     assert out.flow.abs().max() == 0 and out.flow.shape == (2, 2, 48, 48)
     assert (out.depth - depth).abs().max() < 0.02 and (out.mask - mask).abs().max() < 0.02
+    assert len(net.head.steps) == steps - 1
+    if steps > 1:  # each refinement step adds its residual to the flow the next one sees
+        with torch.no_grad():
+            for step in net.head.steps:
+                step[-1].bias.fill_(0.01)
+        assert torch.allclose(net(depth, mask).flow, torch.full((2, 2, 48, 48), 0.01 * (steps - 1)), atol=1e-6)
 
 
 def _box(centre, extents, subdiv=4):

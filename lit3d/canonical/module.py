@@ -105,6 +105,9 @@ def validation_retrieval(gathered: dict[str, torch.Tensor]) -> dict[str, float]:
     return out
 
 
+LR_SCHEDULES = ("constant", "cosine")  # task.lr_schedule
+
+
 class CanonicalTask(pl.LightningModule):
     """Posed depth+mask -> canonical depth+mask (CanonicalNet; a plain U-Net with ``arch="unet"``; the
     closed-set recall net with ``arch="recall"``)."""
@@ -119,6 +122,7 @@ class CanonicalTask(pl.LightningModule):
         use_msfe: bool = True,
         lr: float = 1e-3,
         betas: Sequence[float] = (0.9, 0.999),
+        lr_schedule: str = "constant",
         use_phases: bool = True,
         phases: Sequence[dict] | None = None,
         phase_unit: str = "fraction",
@@ -162,6 +166,8 @@ class CanonicalTask(pl.LightningModule):
         # unet_baseline: accepted (false) from older checkpoints only; the evaluation settings are not the module's
         self.save_hyperparameters(ignore=["unet_baseline", *legacy_evaluation])
         validate_mode(on_nonfinite)
+        if lr_schedule not in LR_SCHEDULES:
+            raise ValueError(f"unknown task.lr_schedule '{lr_schedule}' ({', '.join(LR_SCHEDULES)})")
         check_choices(flow_on, vis_on)
         cfg = dict(net or {})
         cfg["kind"] = arch
@@ -235,7 +241,14 @@ class CanonicalTask(pl.LightningModule):
         return callbacks
 
     def configure_optimizers(self):
-        return torch.optim.Adam(self.parameters(), lr=self.hparams.lr, betas=tuple(self.hparams.betas))
+        """Adam at ``lr``; ``lr_schedule="cosine"``: the rate falls along a half cosine to 0 over the run's
+        training steps (updated every step)."""
+        opt = torch.optim.Adam(self.parameters(), lr=self.hparams.lr, betas=tuple(self.hparams.betas))
+        if self.hparams.get("lr_schedule", "constant") == "constant":
+            return opt
+        steps = max(int(self.trainer.estimated_stepping_batches), 1)
+        sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=steps)
+        return {"optimizer": opt, "lr_scheduler": {"scheduler": sched, "interval": "step"}}
 
     # ------------------------------------------------------------------ training
     def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor | None:

@@ -167,7 +167,8 @@ class CanonicalNet(nn.Module):
     ``head``: ``redraw`` (the thesis: a 1x1 conv draws depth and mask) or ``warp``
     (:class:`~lit3d.canonical.warp.WarpHead`: moves the posed pixels, ``warp_hidden`` channels; its
     coarse flow comes from the MSFE's fused latent; ``warp_parts`` > 0: its flow starts from that many
-    rigid parts, :class:`~lit3d.canonical.warp.PartFlow`; ``warp_depth``/``warp_affine_cell``: how the moved
+    rigid parts, :class:`~lit3d.canonical.warp.PartFlow`; ``warp_refine_steps``: refinement steps of its flow;
+    ``warp_depth``/``warp_affine_cell``: how the moved
     depth becomes the canonical depth).
     """
 
@@ -175,7 +176,8 @@ class CanonicalNet(nn.Module):
                  msfe_grid: int, fuser_hidden: int, fuser_out: int, msfe_dec_channels: Sequence[int], msfe_out: int,
                  rec_channels: Sequence[int], use_lfe: bool = True, use_msfe: bool = True, head: str = "redraw",
                  warp_hidden: int | None = None, warp_normalise_depth: bool = False, warp_depth: str = "offset",
-                 warp_affine_cell: int = 8, reconstruction: str = "downup", warp_parts: int = 0):
+                 warp_affine_cell: int = 8, reconstruction: str = "downup", warp_parts: int = 0,
+                 warp_refine_steps: int = 1):
         super().__init__()
         if reconstruction not in RECONSTRUCTIONS:
             raise ValueError(f"unknown canonical reconstruction '{reconstruction}' ({', '.join(RECONSTRUCTIONS)})")
@@ -199,7 +201,8 @@ class CanonicalNet(nn.Module):
         latent = fuser_out if use_msfe else 0
         if head == "warp":
             self.head = WarpHead(hidden + 2, warp_hidden, latent, normalise_depth=warp_normalise_depth,
-                                 depth_model=warp_depth, affine_cell=warp_affine_cell, parts=warp_parts)
+                                 depth_model=warp_depth, affine_cell=warp_affine_cell, parts=warp_parts,
+                                 refine_steps=warp_refine_steps)
         elif head == "splat":
             self.head = SplatHead(hidden + 2, warp_hidden, latent, depth_model=warp_depth, affine_cell=warp_affine_cell)
         else:

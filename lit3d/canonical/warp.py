@@ -181,21 +181,27 @@ class WarpHead(PixelMover):
        upsampled; to it two 3x3 convs over the features and the pixel coordinates add a per-pixel
        flow (the features are aligned with the posed image, the flow is asked at canonical pixels:
        the coordinates say which).
-    2. Refinement: the features are moved by the first flow into the canonical frame
+    2. Refinement: the features are moved by the flow so far into the canonical frame
        (:func:`warp_image`); two 3x3 convs over them, the unmoved features and the coordinates give
-       the residual flow, the depth offset, the visibility and the fills.
+       a residual flow. ``refine_steps`` - 1 such steps correct only the flow (each its own layers, as
+       iterative optical-flow refinement: a far-moving limb is found a step at a time); the last one
+       gives the residual flow, the depth offset, the visibility and the fills.
 
-    Both output layers start at zero (visibility bias :data:`VIS_BIAS`)."""
+    Every output layer starts at zero (visibility bias :data:`VIS_BIAS`)."""
 
     def __init__(self, cin: int, hidden: int, latent_dim: int = 0, coarse: int = 16, normalise_depth: bool = False,
-                 depth_model: str = "offset", affine_cell: int = 8, parts: int = 0):
+                 depth_model: str = "offset", affine_cell: int = 8, parts: int = 0, refine_steps: int = 1):
         super().__init__(latent_dim, coarse, depth_model, affine_cell)
         if parts and not latent_dim:
             raise ValueError("warp_parts > 0 needs the MSFE's latent (task.use_msfe=true)")
+        if refine_steps < 1:
+            raise ValueError(f"warp_refine_steps must be >= 1 (got {refine_steps})")
         self.part_flow = PartFlow(hidden, latent_dim, parts) if parts else None
         self.normalise_depth = normalise_depth  # warp_compose(normalise=...): no edge mixing
         self.body = two_convs(cin + 2, hidden)
         self.first = nn.Conv2d(hidden, 2, 1)
+        self.steps = nn.ModuleList(nn.Sequential(two_convs(2 * cin + 2, hidden), nn.Conv2d(hidden, 2, 1))
+                                   for _ in range(refine_steps - 1))  # flow-only refinement steps
         self.refine = two_convs(2 * cin + 2, hidden)
         self.out = nn.Conv2d(hidden, 2 + self.n_coeffs + 3, 1)  # flow, depth map, vis, fill depth, fill mask
         self.reset_output_()
@@ -203,7 +209,7 @@ class WarpHead(PixelMover):
     def reset_output_(self) -> None:
         """Output layers to zero, visibility bias :data:`VIS_BIAS`, fill mask bias -4 (an untrained head
         returns the posed input); called again after a whole-net initialisation."""
-        zero_layers_(self.first, self.out, self.coarse_flow)
+        zero_layers_(self.first, self.out, self.coarse_flow, *(step[-1] for step in self.steps))
         if self.part_flow is not None:
             self.part_flow.reset_output_()
         with torch.no_grad():
@@ -220,6 +226,8 @@ class WarpHead(PixelMover):
         flow = self.first(body) + coarse_flow_field(self.coarse_flow, latent, self.coarse, (height, width))
         if self.part_flow is not None and latent is not None:
             flow = flow + self.part_flow(body, latent, coords.permute(0, 2, 3, 1))
+        for step in self.steps:
+            flow = flow + step(torch.cat([warp_image(h, flow), h, coords], 1))
         o = self.out(self.refine(torch.cat([warp_image(h, flow), h, coords], 1)))
         return {"flow": flow + o[:, 0:2], "coeffs": cell_smooth(o[:, 2:2 + self.n_coeffs], self.affine_cell),
                 "vis_logits": o[:, -3:-2], "fill_depth": torch.sigmoid(o[:, -2:-1]), "fill_mask": torch.sigmoid(o[:, -1:])}

@@ -96,6 +96,7 @@ RULES: tuple[Rule, ...] = (
     Rule("data.balance_subjects",              "bool"),
     # task: optimisers and losses
     Rule("task.lr",                            "number",  "> 0"),
+    Rule("task.lr_schedule",                   "str"),
     Rule("task.lr_*",                          "number",  "> 0"),
     Rule("task.betas.*",                       "number",  "[0, 1)"),
     Rule("task.eps",                           "number",  "> 0"),
@@ -144,6 +145,7 @@ RULES: tuple[Rule, ...] = (
     Rule("task.net.warp_hidden",               "int",     ">= 1"),
     Rule("task.net.warp_affine_cell",          "int",     ">= 1"),
     Rule("task.net.warp_parts",                "int",     ">= 0"),
+    Rule("task.net.warp_refine_steps",         "int",     ">= 1"),
     Rule("task.net.hidden",                    "int",     ">= 1"),
     Rule("task.net.blocks",                    "int",     ">= 1"),
     # evaluation settings (the evaluator's, not the module's: lit3d.cli.eval_settings)
