@@ -16,7 +16,7 @@ from lit3d.canonical.factory import build_canonical_net
 from lit3d.canonical.nets import UNetTrunk
 from lit3d.canonical.splat import SplatHead, forward_splat
 from lit3d.canonical.losses import flow_loss
-from lit3d.canonical.warp import WarpHead, pixels_to_grid, warp_compose, warp_image
+from lit3d.canonical.warp import AttendFlow, WarpHead, pixels_to_grid, warp_compose, warp_image
 from lit3d.render.depth import render_depth
 
 HP = dict(image_size=96, azimuths=[0.0], view_mode="fixed", scale_mode="shape", skip_bad=False, flow_targets=True,
@@ -56,11 +56,12 @@ def test_zero_flow_reproduces_the_posed_input_exactly():
     assert torch.allclose(d1[..., :-1], depth[..., 1:], atol=1e-5)
 
 
-@pytest.mark.parametrize("reconstruction,parts,steps", [("downup", 0, 1), ("unet", 0, 1), ("downup", 4, 1), ("downup", 0, 3)])
-def test_untrained_warp_net_returns_its_input(compose_cfg, reconstruction, parts, steps):
+@pytest.mark.parametrize("reconstruction,parts,steps,attend", [("downup", 0, 1, 0), ("unet", 0, 1, 0), ("downup", 4, 1, 0),
+                                                              ("downup", 0, 3, 0), ("downup", 0, 1, 12)])
+def test_untrained_warp_net_returns_its_input(compose_cfg, reconstruction, parts, steps, attend):
     net_cfg = OmegaConf.to_container(compose_cfg(["experiment=canonical_tiny", "task.net.head=warp",
                                                   f"task.net.reconstruction={reconstruction}",
-                                                  f"task.net.warp_parts={parts}",
+                                                  f"task.net.warp_parts={parts}", f"task.net.warp_attend_grid={attend}",
                                                   f"task.net.warp_refine_steps={steps}"]).task.net, resolve=True)
     net = build_canonical_net({"kind": "canonical", **net_cfg})
     assert isinstance(net.head, WarpHead)
@@ -360,3 +361,21 @@ def test_part_flow_blends_rigid_motions_by_part():
     turned_y = s * right[..., 0] + c * right[..., 1]
     assert torch.allclose(flow[0, :, 8:], turned_x - right[..., 0], atol=1e-4)
     assert torch.allclose(flow[1, :, 8:], turned_y - right[..., 1], atol=1e-4)
+
+
+def test_attention_flow_reads_where_the_matching_posed_cell_is():
+    """A marker in one posed cell; the queries of the canonical cells around another ask for it: there the
+    flow points at the marker (16 cells of 8 px, 128 px); cells asking for nothing keep (almost) no flow."""
+    torch.manual_seed(0)
+    attend = AttendFlow(cin=1, channels=2, grid=16, sigma_cells=1.0)  # prior: the cells around, no border bias inside
+    with torch.no_grad():
+        attend.key.weight.zero_()
+        attend.key.bias.zero_()
+        attend.key.weight[0, 0] = 1.0  # key channel 0: the marker
+        attend.query[0, 0, 4:7, 9:12] = 400.0  # canonical cells around (row 5, col 10) ask for it (bilinear up)
+    h = torch.zeros(1, 1, 128, 128)
+    h[..., 11 * 8:12 * 8, 3 * 8:4 * 8] = 1.0  # the marker: posed cell (row 11, col 3)
+    flow = attend(h)
+    px = flow[0, :, 5 * 8 + 4, 10 * 8 + 4] * 64  # grid units -> pixels (2 = 128 px)
+    assert torch.allclose(px, torch.tensor([(3 - 10) * 8.0, (11 - 5) * 8.0]), atol=1.0), px
+    assert flow[0, :, 100:, 100:].abs().max() * 64 < 0.1  # far from the asking cell: the prior's own reading

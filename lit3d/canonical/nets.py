@@ -168,6 +168,7 @@ class CanonicalNet(nn.Module):
     (:class:`~lit3d.canonical.warp.WarpHead`: moves the posed pixels, ``warp_hidden`` channels; its
     coarse flow comes from the MSFE's fused latent; ``warp_parts`` > 0: its flow starts from that many
     rigid parts, :class:`~lit3d.canonical.warp.PartFlow`; ``warp_refine_steps``: refinement steps of its flow;
+    ``warp_attend_grid`` > 0: a coarse flow found by attention over the posed cells, :class:`~lit3d.canonical.warp.AttendFlow`;
     ``warp_depth``/``warp_affine_cell``: how the moved
     depth becomes the canonical depth).
     """
@@ -177,7 +178,7 @@ class CanonicalNet(nn.Module):
                  rec_channels: Sequence[int], use_lfe: bool = True, use_msfe: bool = True, head: str = "redraw",
                  warp_hidden: int | None = None, warp_normalise_depth: bool = False, warp_depth: str = "offset",
                  warp_affine_cell: int = 8, reconstruction: str = "downup", warp_parts: int = 0,
-                 warp_refine_steps: int = 1):
+                 warp_refine_steps: int = 1, warp_attend_grid: int = 0):
         super().__init__()
         if reconstruction not in RECONSTRUCTIONS:
             raise ValueError(f"unknown canonical reconstruction '{reconstruction}' ({', '.join(RECONSTRUCTIONS)})")
@@ -202,7 +203,7 @@ class CanonicalNet(nn.Module):
         if head == "warp":
             self.head = WarpHead(hidden + 2, warp_hidden, latent, normalise_depth=warp_normalise_depth,
                                  depth_model=warp_depth, affine_cell=warp_affine_cell, parts=warp_parts,
-                                 refine_steps=warp_refine_steps)
+                                 refine_steps=warp_refine_steps, attend_grid=warp_attend_grid)
         elif head == "splat":
             self.head = SplatHead(hidden + 2, warp_hidden, latent, depth_model=warp_depth, affine_cell=warp_affine_cell)
         else:

@@ -22,6 +22,8 @@ from the image losses.
 """
 from __future__ import annotations
 
+import math
+
 import torch
 import torch.nn as nn
 import torch.nn.functional as F
@@ -143,6 +145,52 @@ class PixelMover(nn.Module):
         self.coarse_flow = nn.Linear(latent_dim, 2 * coarse * coarse) if latent_dim else None
 
 
+class AttendFlow(nn.Module):
+    """A coarse flow found by search: every canonical cell of a ``grid`` x ``grid`` raster attends over the
+    posed cells and reads where its surface point is. Keys: a 1x1 conv of the posed features and
+    coordinates, average-pooled to the raster ``(B, C, G, G)``; queries: a learned map per canonical cell
+    ``(C, G, G)`` (what belongs there in the canonical pose), plus, with a latent, a linear term of it
+    (the figure's build). Logits ``q . k / sqrt(C) - |x_q - x_k|^2 / (2 sigma^2)`` (a locality prior with
+    a learned width, ``sigma`` in grid units, starting at ``sigma_cells`` cells); the flow is the
+    attention's mean key position minus that of the prior alone, upsampled bilinearly.
+
+    Why: a backward flow must find where a limb went, which may be 40 px away at 128^2; local convs
+    see a few pixels, and the demo's flow left the quadrupeds' legs where they were posed. Attention
+    compares every posed cell. The query map starts at zero, so the attention is the prior's and the
+    flow exactly zero."""
+
+    def __init__(self, cin: int, channels: int, grid: int, latent_dim: int = 0, sigma_cells: float = 4.0):
+        super().__init__()
+        self.grid = grid
+        self.key = nn.Conv2d(cin + 2, channels, 1)
+        self.query = nn.Parameter(torch.zeros(1, channels, grid, grid))
+        self.query_latent = nn.Linear(latent_dim, channels) if latent_dim else None
+        self.log_sigma = nn.Parameter(torch.tensor(math.log(sigma_cells * 2.0 / grid)))
+
+    def reset_output_(self) -> None:
+        """Queries to zero: the attention is the locality prior's, the flow zero."""
+        nn.init.zeros_(self.query)
+        zero_layers_(self.query_latent)
+
+    def forward(self, h: torch.Tensor, latent: torch.Tensor | None = None) -> torch.Tensor:
+        """``(B, 2, H, W)`` flow (grid units) from the posed features ``h`` ``(B, cin, H, W)`` and the latent."""
+        b, _, height, width = h.shape
+        g = self.grid
+        cells = identity_grid(b, g, g, h.device, h.dtype)  # (B, G, G, 2): cell centres, posed and canonical alike
+        pooled = F.adaptive_avg_pool2d(h, g)
+        keys = self.key(torch.cat([pooled, cells.permute(0, 3, 1, 2)], 1)).flatten(2)  # (B, C, N)
+        query = self.query.expand(b, -1, -1, -1)
+        if self.query_latent is not None and latent is not None:
+            query = query + self.query_latent(latent)[:, :, None, None]
+        query = query.flatten(2)  # (B, C, N)
+        pos = cells.reshape(b, g * g, 2)
+        prior = -torch.cdist(pos, pos).pow(2) / (2 * self.log_sigma.exp() ** 2)  # (B, N query, N key)
+        logits = torch.einsum("bcq,bck->bqk", query, keys) / math.sqrt(keys.shape[1]) + prior
+        shift = torch.softmax(logits, -1) @ pos - torch.softmax(prior, -1) @ pos  # (B, N, 2)
+        field = shift.transpose(1, 2).reshape(b, 2, g, g)
+        return F.interpolate(field, size=(height, width), mode="bilinear", align_corners=False)
+
+
 class PartFlow(nn.Module):
     """A flow made of ``parts`` rigid (affine) motions blended per pixel, as skinning blends bones:
     ``flow(x) = sum_k w_k(x) ((A_k - I) x + t_k)``, ``x`` the pixel's grid position, ``w`` a softmax over
@@ -180,7 +228,8 @@ class WarpHead(PixelMover):
        ``(B, latent_dim)`` to a coarse flow ``(B, 2, coarse, coarse)`` (the pose, seen whole),
        upsampled; to it two 3x3 convs over the features and the pixel coordinates add a per-pixel
        flow (the features are aligned with the posed image, the flow is asked at canonical pixels:
-       the coordinates say which).
+       the coordinates say which); ``parts`` > 0 adds :class:`PartFlow`, ``attend_grid`` > 0
+       :class:`AttendFlow` (a search over the posed cells).
     2. Refinement: the features are moved by the flow so far into the canonical frame
        (:func:`warp_image`); two 3x3 convs over them, the unmoved features and the coordinates give
        a residual flow. ``refine_steps`` - 1 such steps correct only the flow (each its own layers, as
@@ -190,13 +239,15 @@ class WarpHead(PixelMover):
     Every output layer starts at zero (visibility bias :data:`VIS_BIAS`)."""
 
     def __init__(self, cin: int, hidden: int, latent_dim: int = 0, coarse: int = 16, normalise_depth: bool = False,
-                 depth_model: str = "offset", affine_cell: int = 8, parts: int = 0, refine_steps: int = 1):
+                 depth_model: str = "offset", affine_cell: int = 8, parts: int = 0, refine_steps: int = 1,
+                 attend_grid: int = 0):
         super().__init__(latent_dim, coarse, depth_model, affine_cell)
         if parts and not latent_dim:
             raise ValueError("warp_parts > 0 needs the MSFE's latent (task.use_msfe=true)")
         if refine_steps < 1:
             raise ValueError(f"warp_refine_steps must be >= 1 (got {refine_steps})")
         self.part_flow = PartFlow(hidden, latent_dim, parts) if parts else None
+        self.attend = AttendFlow(cin, hidden, attend_grid, latent_dim) if attend_grid else None
         self.normalise_depth = normalise_depth  # warp_compose(normalise=...): no edge mixing
         self.body = two_convs(cin + 2, hidden)
         self.first = nn.Conv2d(hidden, 2, 1)
@@ -210,8 +261,9 @@ class WarpHead(PixelMover):
         """Output layers to zero, visibility bias :data:`VIS_BIAS`, fill mask bias -4 (an untrained head
         returns the posed input); called again after a whole-net initialisation."""
         zero_layers_(self.first, self.out, self.coarse_flow, *(step[-1] for step in self.steps))
-        if self.part_flow is not None:
-            self.part_flow.reset_output_()
+        for flow_part in (self.part_flow, self.attend):
+            if flow_part is not None:
+                flow_part.reset_output_()
         with torch.no_grad():
             self.out.bias[-3] = VIS_BIAS
             self.out.bias[-1] = -VIS_BIAS
@@ -226,6 +278,8 @@ class WarpHead(PixelMover):
         flow = self.first(body) + coarse_flow_field(self.coarse_flow, latent, self.coarse, (height, width))
         if self.part_flow is not None and latent is not None:
             flow = flow + self.part_flow(body, latent, coords.permute(0, 2, 3, 1))
+        if self.attend is not None:
+            flow = flow + self.attend(h, latent)
         for step in self.steps:
             flow = flow + step(torch.cat([warp_image(h, flow), h, coords], 1))
         o = self.out(self.refine(torch.cat([warp_image(h, flow), h, coords], 1)))

@@ -146,6 +146,7 @@ RULES: tuple[Rule, ...] = (
     Rule("task.net.warp_affine_cell",          "int",     ">= 1"),
     Rule("task.net.warp_parts",                "int",     ">= 0"),
     Rule("task.net.warp_refine_steps",         "int",     ">= 1"),
+    Rule("task.net.warp_attend_grid",          "int",     ">= 0"),
     Rule("task.net.hidden",                    "int",     ">= 1"),
     Rule("task.net.blocks",                    "int",     ">= 1"),
     # evaluation settings (the evaluator's, not the module's: lit3d.cli.eval_settings)
