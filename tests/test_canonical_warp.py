@@ -367,7 +367,7 @@ def test_attention_flow_reads_where_the_matching_posed_cell_is():
     """A marker in one posed cell; the queries of the canonical cells around another ask for it: there the
     flow points at the marker (16 cells of 8 px, 128 px); cells asking for nothing keep (almost) no flow."""
     torch.manual_seed(0)
-    attend = AttendFlow(cin=1, channels=2, grid=16, sigma_cells=1.0)  # prior: the cells around, no border bias inside
+    attend = AttendFlow(cin=1, channels=2, grid=16, sigma_cells=1.0, gain=1.0)  # prior: the cells around, no border bias inside
     with torch.no_grad():
         attend.key.weight.zero_()
         attend.key.bias.zero_()
