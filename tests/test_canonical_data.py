@@ -4,11 +4,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 import trimesh
 
 from datamodules.canonical import CanonicalDataModule, DataError, split_pose, split_subject_pose
 from datamodules.canonical import tosca
 from datamodules.canonical.sources import SynthSource
+from datamodules.canonical.splits import OWN_POSE_BASE, fold_pairs
 from datamodules.canonical.figures import KINDS, figure_mesh, joint_positions, make_pose, make_subject
 from lit3d.render.depth import depth_to_mesh, depth_to_points, render_depth
 
@@ -336,3 +338,28 @@ def test_train_pose_fraction_thins_training_poses_per_subject_and_keeps_the_test
     for subject in full.cache:
         n = sum(s == subject for s, _ in poses["full"])
         assert sum(s == subject for s, _ in poses["thin"]) == max(1, round(0.5 * n))
+
+
+def test_own_poses_train_only_and_each_figures_own(tmp_path):
+    """data.own_poses: every figure N poses of its own, given to training only; the test keeps the poses
+    that every figure shares, and no two figures share an own pose."""
+    subject_poses = {f"s{i}": [0, 1, 2, OWN_POSE_BASE, OWN_POSE_BASE + 1] for i in range(6)}
+    pairs = fold_pairs(subject_poses, "subject_pose", 3, 0, seed=0, val_subjects=1)
+    plain = fold_pairs({s: [0, 1, 2] for s in subject_poses}, "subject_pose", 3, 0, seed=0, val_subjects=1)
+    assert pairs["test"] == plain["test"] and pairs["val"] == plain["val"]
+    training = sorted({s for s, _ in plain["train"]})
+    assert sorted(pairs["train"]) == sorted(plain["train"] + [(s, OWN_POSE_BASE + k) for s in training for k in (0, 1)])
+    dm = _dm(tmp_path, own_poses=2, flow_targets=True, val_subjects=1)
+    assert dm.config_hash() != _dm(tmp_path).config_hash()
+    dm.prepare_data()
+    dm.setup()
+    train_subjects = {r["subject"] for r in dm.splits["train"]}
+    own = [r for r in dm.splits["train"] if r["pose"] >= OWN_POSE_BASE]
+    assert len(own) == 2 * len(train_subjects) and all(r["pose"] < OWN_POSE_BASE for k in ("val", "test") for r in dm.splits[k])
+    a, b = sorted(s for s in train_subjects if dm.source.category(s) == "humanoid")[:2]
+    first = dm.datasets["train"]
+    depth = {(r["subject"], r["pose"]): first[i]["mask"] for i, r in enumerate(dm.splits["train"])}
+    assert not torch.equal(depth[(a, OWN_POSE_BASE)], depth[(b, OWN_POSE_BASE)])  # each figure's own pose
+    assert all(bool(first[i]["has_flow"]) for i, r in enumerate(dm.splits["train"]) if r["pose"] >= OWN_POSE_BASE)
+    with pytest.raises(DataError, match="own_poses"):
+        CanonicalDataModule(str(tmp_path / "t"), 32, source="tosca", root=str(tmp_path), own_poses=2).source

@@ -1,7 +1,6 @@
 """Canonical-form data: pairs (posed depth + mask, canonical depth + mask) seen from the same camera.
 
-Sources (:mod:`datamodules.canonical.sources`): ``synth`` (procedural figures, no download),
-``tosca`` and ``shrec14`` (meshes under ``root``).
+Sources (:mod:`datamodules.canonical.sources`): ``synth`` (procedural figures), ``anny``, meshes under ``root``.
 
 Every shape is centred on its bounding-box centre and scaled so that its longest side is 1
 (``scale_mode="shape"``, as the thesis) or by the subject's canonical scale
@@ -15,13 +14,12 @@ with them under ``fixed`` only (:class:`~datamodules.canonical.dataset.Canonical
 val, test and the pooled held-out set use (null: all); training always sees every view, so extra
 azimuths are training augmentation while evaluation keeps one view per pose. ``roll_deg``: training
 inputs turned in the image plane by up to that many degrees (a rolled camera; the target stays).
-``blend_poses``: that many extra training poses per subject, each a vertex blend of two of the fold's
-training poses (:mod:`datamodules.canonical.blends`; one connectivity per subject, as TOSCA).
+``blend_poses``: extra training poses per subject, vertex blends of two of the fold's training poses
+(:mod:`datamodules.canonical.blends`); ``own_poses`` (synth): each subject's own training-only poses.
 ``train_pose_fraction``: train on that share of each subject's training poses (a learning curve).
 ``flow_targets``: also cache, for every pose whose mesh corresponds to the canonical one, the warp head's backward flow
 and visibility (:mod:`datamodules.canonical.flow`; ``forward_flow``: the splat head's forward ones too); items carry them.
-``batch_poses`` K >= 2: training batches of ``batch_size / K`` subjects with K poses each
-(:class:`~datamodules.canonical.batches.SubjectGroupedBatches`; for ``task.contrastive_weight``).
+``batch_poses`` K >= 2: batches of ``batch_size / K`` subjects x K poses (``task.contrastive_weight``).
 
 Batches (``B`` samples, ``S = image_size``):
     depth, mask              (B, 1, S, S) float32   posed input; mask in {0, 1}
@@ -134,7 +132,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         forward_flow: bool = False,
         val_subjects: int | None = None,
         phenotypes: str = "uniform",
-        pose_draw: str = "shared",
+        pose_draw: str = "shared", own_poses: int = 0,
         phenotype_targets: bool = False,
         batch_poses: int = 0,
     ):
@@ -188,6 +186,8 @@ class CanonicalDataModule(pl.LightningDataModule):
                 cfg["phenotypes"] = hp.phenotypes
         if hp.source in ("synth", "anny") and hp.get("pose_draw", "shared") != "shared":  # absent: old hashes kept
             cfg["pose_draw"] = hp.pose_draw
+        if hp.get("own_poses", 0):  # absent without them: old hashes kept
+            cfg["own_poses"] = int(hp.own_poses)
         if hp.skip_bad:  # a cache rendered while skipping may lack poses
             cfg["skip_bad"] = True
         if hp.view_mode != "fixed":  # absent for the old convention: its caches keep their hash

@@ -22,6 +22,7 @@ from datamodules.cache import DataError
 from datamodules.canonical import bodies, figures, shrec14, tosca
 from datamodules.canonical.flow import skinned_canonical
 from datamodules.canonical.posesets import index_faust, index_sumner
+from datamodules.canonical.splits import OWN_POSE_BASE
 
 CANONICAL_SOURCES = ("synth", "tosca", "shrec14", "anny", "faust", "sumner")
 ROOTLESS = ("synth", "anny")  # sources that need no root folder
@@ -52,15 +53,19 @@ class _Source:
 
 class SynthSource(_Source):
     """``n_subjects`` procedural figures (``kinds`` in turn) x ``n_poses`` poses drawn with ``pose_seed``: pose
-    p is the same for every subject of a kind (``pose_draw="shared"``) or each subject's own (``"per_subject"``)."""
+    p is the same for every subject of a kind (``pose_draw="shared"``) or each subject's own (``"per_subject"``).
+    ``own_poses`` = N: every subject has N more poses of its own (ids ``OWN_POSE_BASE + k``), which the
+    splits give to training only (:func:`~datamodules.canonical.splits.fold_pairs`): many distinct
+    training poses while the test keeps one pose set for every figure."""
 
     kind = "synth"
 
     def __init__(self, kinds: Sequence[str], n_subjects: int, n_poses: int, seed: int, mesh_resolution: int,
-                 pose_seed: int, yaw_range: float, pose_strength: float, pose_draw: str = "shared"):
+                 pose_seed: int, yaw_range: float, pose_strength: float, pose_draw: str = "shared", own_poses: int = 0):
         if pose_draw not in POSE_DRAWS:
             raise DataError(f"unknown pose_draw '{pose_draw}' ({', '.join(POSE_DRAWS)})")
         self.f = figures
+        self.own_poses = int(own_poses)
         self.pose_draw = pose_draw
         self.kinds = list(kinds)
         self.n_subjects, self.n_poses = n_subjects, n_poses
@@ -75,7 +80,7 @@ class SynthSource(_Source):
         return list(self._subjects)
 
     def poses(self, subject):
-        return list(range(self.n_poses))
+        return list(range(self.n_poses)) + [OWN_POSE_BASE + k for k in range(self.own_poses)]
 
     def canonical_pose(self, subject):
         return "canonical"
@@ -91,7 +96,8 @@ class SynthSource(_Source):
         turn = 90.0 if kind == "quadruped" else 0.0  # figure_mesh shows quadrupeds from the side
         if pose == "canonical":
             return subj, None, 0.0, turn
-        own = [int(subject[len(kind):])] if self.pose_draw == "per_subject" else []  # the subject's own poses
+        own = [int(subject[len(kind):])] if self.pose_draw == "per_subject" or pose >= OWN_POSE_BASE else []  # its own
+        pose = pose - OWN_POSE_BASE if pose >= OWN_POSE_BASE else pose
         rng = np.random.default_rng([self.pose_seed, int(pose), 17] + own)
         yaw = float(rng.uniform(-self.yaw_range, self.yaw_range))
         rotations = self.f.make_pose(kind, int(pose), self.pose_seed, self.strength, *own)
@@ -242,7 +248,10 @@ def make_source(hp) -> _Source:
     """The source named by ``hp.source`` built from the DataModule's hyper-parameters ``hp``."""
     if hp.source == "synth":
         return SynthSource(hp.kinds, hp.n_subjects, hp.n_poses, hp.seed, hp.mesh_resolution,
-                           hp.pose_seed, hp.yaw_range, hp.pose_strength, hp.get("pose_draw", "shared"))
+                           hp.pose_seed, hp.yaw_range, hp.pose_strength, hp.get("pose_draw", "shared"),
+                           hp.get("own_poses", 0))
+    if hp.get("own_poses", 0):
+        raise DataError(f"own_poses={hp.own_poses}: only the synth source draws poses of its own (source={hp.source})")
     if hp.source == "tosca":
         return ToscaSource(hp.root, hp.classes, hp.canonical_pose, hp.up_axis)
     if hp.source == "shrec14":

@@ -77,6 +77,7 @@ RULES: tuple[Rule, ...] = (
     Rule("data.mesh_resolution",               "int",     ">= 1"),
     Rule("data.n_subjects",                    "int",     ">= 1"),
     Rule("data.n_poses",                       "int",     ">= 1"),
+    Rule("data.own_poses",                     "int",     ">= 0"),
     Rule("data.n_folds",                       "int",     ">= 1"),
     Rule("data.fold",                          "int",     ">= 0"),
     Rule("data.max_val_items",                 "int?",    ">= 0"),
