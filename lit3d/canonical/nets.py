@@ -167,10 +167,10 @@ class CanonicalNet(nn.Module):
     ``head``: ``redraw`` (the thesis: a 1x1 conv draws depth and mask) or ``warp``
     (:class:`~lit3d.canonical.warp.WarpHead`: moves the posed pixels, ``warp_hidden`` channels; its
     coarse flow comes from the MSFE's fused latent; ``warp_parts`` > 0: its flow starts from that many
-    rigid parts, :class:`~lit3d.canonical.warp.PartFlow`; ``warp_refine_steps``: refinement steps of its flow;
-    ``warp_attend_grid`` > 0: a coarse flow found by attention over the posed cells, :class:`~lit3d.canonical.warp.AttendFlow`;
-    ``warp_depth``/``warp_affine_cell``: how the moved
-    depth becomes the canonical depth).
+    rigid parts, :class:`~lit3d.canonical.warp.PartFlow`; ``warp_refine_steps``: refinement steps of its
+    flow; ``warp_attend_grid`` > 0: a coarse flow found by attention over the posed cells,
+    :class:`~lit3d.canonical.warp.AttendFlow`; ``warp_depth``/``warp_affine_cell``: how the moved depth
+    becomes the canonical depth).
     """
 
     def __init__(self, image_size: int, lfe_channels: Sequence[int], lfe_out: int, msfe_channels: Sequence[int],
