@@ -96,8 +96,10 @@ class SynthSource(_Source):
         turn = 90.0 if kind == "quadruped" else 0.0  # figure_mesh shows quadrupeds from the side
         if pose == "canonical":
             return subj, None, 0.0, turn
-        own = [int(subject[len(kind):])] if self.pose_draw == "per_subject" or pose >= OWN_POSE_BASE else []  # its own
-        pose = pose - OWN_POSE_BASE if pose >= OWN_POSE_BASE else pose
+        own_pose = pose >= OWN_POSE_BASE  # data.own_poses: the subject's pose pose - OWN_POSE_BASE
+        if own_pose:
+            pose = pose - OWN_POSE_BASE
+        own = [int(subject[len(kind):])] if self.pose_draw == "per_subject" or own_pose else []  # the subject's own poses
         rng = np.random.default_rng([self.pose_seed, int(pose), 17] + own)
         yaw = float(rng.uniform(-self.yaw_range, self.yaw_range))
         rotations = self.f.make_pose(kind, int(pose), self.pose_seed, self.strength, *own)

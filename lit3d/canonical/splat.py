@@ -16,9 +16,9 @@ and per canonical pixel a fill (depth and mask) for what no posed pixel reaches,
 features pushed along with the pixels (:func:`forward_splat`). Output: ``c = min(1, W)``, ``W`` the
 splatted weight (posed mask x seen probability, bilinear), ``mask = c + (1 - c) fill_mask``,
 ``depth = c * splat_depth + (1 - c) fill_mask fill_depth`` (0 where nothing lands and the fill
-draws no body; ``splat_depth`` the weighted mean of the mapped depths landing there). Zero flow with every pixel seen returns the posed input exactly; the output
-layers start at zero with the seen bias at :data:`~lit3d.canonical.warp.VIS_BIAS`, so an untrained
-head returns (almost exactly) the posed input. Its flow targets need ``data.forward_flow=true`` (the
+draws no body; ``splat_depth`` the weighted mean of the mapped depths landing there). Zero flow with
+every pixel seen returns the posed input exactly; the output layers start at zero with the seen bias
+at :data:`~lit3d.canonical.warp.VIS_BIAS`, so an untrained head returns (almost exactly) the posed input. Its flow targets need ``data.forward_flow=true`` (the
 forward flow cached beside the backward one); without them its flow terms refuse the batch.
 """
 from __future__ import annotations
@@ -27,8 +27,8 @@ import torch
 import torch.nn as nn
 
 from lit3d.canonical.outputs import CanonicalOutput
-from lit3d.canonical.warp import (MASK_EPS, VIS_BIAS, PixelMover, two_convs, cell_smooth, coarse_flow_field, identity_grid,
-                                  map_depth, zero_layers_)
+from lit3d.canonical.warp import (MASK_EPS, VIS_BIAS, PixelMover, cell_smooth, coarse_flow_field, identity_grid,
+                                  map_depth, two_convs, zero_layers_)
 
 
 def forward_splat(values: torch.Tensor, weight: torch.Tensor, flow: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -187,8 +187,8 @@ class AttendFlow(nn.Module):
         if self.query_latent is not None and latent is not None:
             query = query + self.query_latent(latent)[:, :, None, None]
         query = query.flatten(2)  # (B, C, N)
-        pos = cells.reshape(b, g * g, 2)
-        prior = -torch.cdist(pos, pos).pow(2) / (2 * self.log_sigma.exp() ** 2)  # (B, N query, N key)
+        pos = cells[:1].reshape(1, g * g, 2)  # the same for every item: the prior once, broadcast over the batch
+        prior = -torch.cdist(pos, pos).pow(2) / (2 * self.log_sigma.exp() ** 2)  # (1, N query, N key)
         logits = self.gain * torch.einsum("bcq,bck->bqk", query, keys) / math.sqrt(keys.shape[1]) + prior
         shift = torch.softmax(logits, -1) @ pos - torch.softmax(prior, -1) @ pos  # (B, N, 2)
         field = shift.transpose(1, 2).reshape(b, 2, g, g)
