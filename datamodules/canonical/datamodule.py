@@ -35,7 +35,8 @@ Cache (:class:`datamodules.cache.CacheBuilder`, the one cache scheme of every Da
 under way, ``manifest.json`` (config, config hash, one item per subject file with its sha256,
 ``manifest_hash`` over them, so the same seed gives the same hash; plus ``complete``,
 ``subjects``, ``categories``, ``skipped``) is written last. An interrupted ``prepare_data``
-resumes with the subjects still missing.
+resumes with the subjects still missing. ``prepare_workers`` = N renders the subjects in N processes
+(:mod:`datamodules.canonical.prepare`; the same files as one process).
 
 Bad input: every depth image is checked when rendered and when the cache is read (finite,
 ``image_size`` square, not all background: :func:`depth_image_problem`); a bad one raises
@@ -54,15 +55,15 @@ from pathlib import Path
 import lightning.pytorch as pl
 import numpy as np
 from torch.utils.data import DataLoader
-from tqdm import tqdm
 
-from datamodules.cache import CacheBuilder, DataError, atomic_save_npz
+from datamodules.cache import CacheBuilder, DataError
 from datamodules.canonical import bodies
 from datamodules.canonical.batches import SubjectGroupedBatches
 from datamodules.canonical.blends import add_blends
 from datamodules.canonical.dataset import CanonicalPairDataset, mirror_views, subject_balanced_sampler
 from datamodules.canonical.images import (depth_image_problem, depth_pairs_png, read_subject, remove_legacy_subject_files,
                                           unpack_mask)
+from datamodules.canonical.prepare import SUBJECTS_DIR, subject_file, write_subject_files
 from datamodules.canonical.rendering import PairRenderer
 from datamodules.canonical.sheets import pose_sheet
 from datamodules.canonical.sources import ROOTLESS, CANONICAL_SOURCES, Shrec14Source, SynthSource, ToscaSource, make_source
@@ -75,7 +76,6 @@ log = logging.getLogger("lit3d")
 
 GENERATOR = "canonical"
 DATA_VERSION = "canonical-data-1"
-SUBJECTS_DIR = "subjects"  # the cache's item folder
 FLOW_VERSION = "flow-1"  # bump when datamodules.canonical.flow changes what it writes (either direction)
 
 __all__ = ["CANONICAL_SPLITS", "CanonicalDataModule", "DataError", "CanonicalPairDataset", "Shrec14Source", "SynthSource",
@@ -134,7 +134,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         phenotypes: str = "uniform",
         pose_draw: str = "shared", own_poses: int = 0,
         phenotype_targets: bool = False,
-        batch_poses: int = 0,
+        batch_poses: int = 0, prepare_workers: int = 0,
     ):
         super().__init__()
         self.save_hyperparameters()
@@ -229,20 +229,13 @@ class CanonicalDataModule(pl.LightningDataModule):
                                           before=lambda: remove_legacy_subject_files(self.data_dir))
 
     def _render_subjects(self, builder: CacheBuilder) -> tuple[list[dict], dict]:
-        """Render the subjects still missing from ``builder``; (items, manifest extra)."""
+        """Render the subjects still missing from ``builder`` (``prepare_workers`` processes); (items, manifest extra)."""
         subjects = self.source.subjects()
         builder.total_items = len(subjects)  # named by a Ctrl-C's stop line (each builder.has() is a stop point)
-        items, skipped = [], []
-        for s in tqdm(subjects, desc="render canonical pairs", leave=False):
-            rel = f"{SUBJECTS_DIR}/{s}.npz"
-            if not builder.has(rel):
-                atomic_save_npz(builder.path(rel), **self._render_subject(s))
-            with np.load(builder.path(rel), allow_pickle=False) as z:
-                skipped += [str(m) for m in z["skipped"]] if "skipped" in z.files else []
-            items.append({"file": rel, "subject": s})
-        return items, {"complete": True, "source": self.hparams.source, "image_size": self.hparams.image_size,
-                       "subjects": subjects, "categories": {s: self.source.category(s) for s in subjects},
-                       "skipped": skipped}
+        skipped = write_subject_files(builder, subjects, self._render_subject, self.hparams, self.hparams.prepare_workers)
+        return [{"file": subject_file(s), "subject": s} for s in subjects], {
+            "complete": True, "source": self.hparams.source, "image_size": self.hparams.image_size,
+            "subjects": subjects, "categories": {s: self.source.category(s) for s in subjects}, "skipped": skipped}
 
     # ------------------------------------------------------------------ loading and splits
     def _load_cache(self) -> None:
