@@ -363,3 +363,19 @@ def test_own_poses_train_only_and_each_figures_own(tmp_path):
     assert all(bool(first[i]["has_flow"]) for i, r in enumerate(dm.splits["train"]) if r["pose"] >= OWN_POSE_BASE)
     with pytest.raises(DataError, match="own_poses"):
         CanonicalDataModule(str(tmp_path / "t"), 32, source="tosca", root=str(tmp_path), own_poses=2).source
+
+
+def test_val_poses_own_validates_new_poses_of_the_validation_subjects():
+    """data.val_poses=own: the validation subjects in their own poses (none of them in any training pair);
+    training and test unchanged; refused without own poses or for an unknown name."""
+    subject_poses = {f"s{i}": [0, 1, 2, OWN_POSE_BASE, OWN_POSE_BASE + 1] for i in range(6)}
+    plain = fold_pairs(subject_poses, "subject_pose", 3, 0, seed=0, val_subjects=1)
+    own = fold_pairs(subject_poses, "subject_pose", 3, 0, seed=0, val_subjects=1, val_poses="own")
+    assert own["train"] == plain["train"] and own["test"] == plain["test"]
+    (val_subject,) = {s for s, _ in plain["val"]}
+    assert own["val"] == [(val_subject, OWN_POSE_BASE), (val_subject, OWN_POSE_BASE + 1)]
+    assert not set(own["val"]) & set(own["train"]) and val_subject not in {s for s, _ in own["train"]}
+    with pytest.raises(DataError, match="poses of their own"):
+        fold_pairs({s: [0, 1, 2] for s in subject_poses}, "subject_pose", 3, 0, seed=0, val_subjects=1, val_poses="own")
+    with pytest.raises(DataError, match="val_poses"):
+        fold_pairs(subject_poses, "subject_pose", 3, 0, seed=0, val_subjects=1, val_poses="new")

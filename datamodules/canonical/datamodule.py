@@ -15,7 +15,8 @@ val, test and the pooled held-out set use (null: all); training always sees ever
 azimuths are training augmentation while evaluation keeps one view per pose. ``roll_deg``: training
 inputs turned in the image plane by up to that many degrees (a rolled camera; the target stays).
 ``blend_poses``: extra training poses per subject, vertex blends of two of the fold's training poses
-(:mod:`datamodules.canonical.blends`); ``own_poses`` (synth): each subject's own training-only poses.
+(:mod:`datamodules.canonical.blends`); ``own_poses`` (synth): each subject's own training-only poses;
+``val_poses=own`` validates in the validation subjects' own poses (new poses, as the test), not the training ones.
 ``train_pose_fraction``: train on that share of each subject's training poses (a learning curve).
 ``flow_targets``: also cache, for every pose whose mesh corresponds to the canonical one, the warp head's backward flow
 and visibility (:mod:`datamodules.canonical.flow`; ``forward_flow``: the splat head's forward ones too); items carry them.
@@ -134,7 +135,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         phenotypes: str = "uniform",
         pose_draw: str = "shared", own_poses: int = 0,
         phenotype_targets: bool = False,
-        batch_poses: int = 0, prepare_workers: int = 0,
+        batch_poses: int = 0, prepare_workers: int = 0, val_poses: str = "training",
     ):
         super().__init__()
         self.save_hyperparameters()
@@ -319,7 +320,8 @@ class CanonicalDataModule(pl.LightningDataModule):
         """``{split: [(subject, pose), ...]}`` of fold ``fold`` over the loaded cache."""
         hp = self.hparams
         return fold_pairs({s: c["poses"] for s, c in self.cache.items()}, hp.split, hp.n_folds, fold,
-                          self.split_seed, hp.val_per_subject, hp.get("val_subjects"))
+                          self.split_seed, hp.val_per_subject, hp.get("val_subjects"),
+                          hp.get("val_poses", "training"))
 
     def held_out_records(self) -> list[dict]:
         """Every item some fold tests (``{"subject", "pose", "view"}``, sorted): the set that the

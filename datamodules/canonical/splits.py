@@ -26,6 +26,7 @@ from datamodules.cache import DataError
 CANONICAL_SPLITS = ("train", "val", "test")
 OWN_POSE_BASE = 20_000  # pose ids from here on: a subject's own training-only poses (synth data.own_poses)
 SPLIT_MODES = ("subject_pose", "pose", "all")
+VAL_POSES = ("training", "own")  # data.val_poses: which poses the validation subjects are seen in
 
 
 def deal(items: Sequence, n_groups: int, seed: int) -> list[list]:
@@ -109,18 +110,27 @@ def thin_training(train: Sequence[tuple], fraction: float, seed: int) -> list[tu
 
 
 def fold_pairs(subject_poses: dict[str, list], mode: str, n_folds: int, fold: int, seed: int,
-               val_per_subject: int = 1, val_subjects: int | None = None) -> dict[str, list[tuple]]:
+               val_per_subject: int = 1, val_subjects: int | None = None,
+               val_poses: str = "training") -> dict[str, list[tuple]]:
     """``{split: [(subject, pose), ...]}`` of fold ``fold`` under split ``mode`` (:data:`SPLIT_MODES`)
     for ``subject_poses`` ``{subject: [pose, ...]}`` (only the poses each subject has). Pose ids from
     :data:`OWN_POSE_BASE` on (a subject's own poses) are left out of the split and added to the training
-    pairs of the subjects that train: never validated or tested."""
+    pairs of the subjects that train: never tested. ``val_poses``: ``training`` validates the validation
+    subjects in the shared training poses; ``own`` in their own poses instead, which no training pair has
+    (new subjects in new poses, as the test)."""
+    if val_poses not in VAL_POSES:
+        raise DataError(f"val_poses must be one of {', '.join(VAL_POSES)}, got '{val_poses}'")
     own = {s: [p for p in ps if p >= OWN_POSE_BASE] for s, ps in subject_poses.items()}
     if any(own.values()):
         shared = {s: [p for p in ps if p < OWN_POSE_BASE] for s, ps in subject_poses.items()}
         pairs = fold_pairs(shared, mode, n_folds, fold, seed, val_per_subject, val_subjects)
         training = sorted({s for s, _ in pairs["train"]})
         pairs["train"] = pairs["train"] + [(s, p) for s in training for p in own[s]]
+        if val_poses == "own":
+            pairs["val"] = [(s, p) for s in sorted({s for s, _ in pairs["val"]}) for p in own[s]]
         return pairs
+    if val_poses == "own":
+        raise DataError("val_poses=own needs subjects with poses of their own (synth data.own_poses > 0)")
     if mode == "all":
         return {"train": [], "val": [], "test": [(s, p) for s, ps in sorted(subject_poses.items()) for p in ps]}
     if mode == "subject_pose":
