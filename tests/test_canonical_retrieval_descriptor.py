@@ -13,6 +13,7 @@ from lit3d.retrieval.descriptor import (
     DescriptorConfig,
     cube_rotations,
     distance_matrix_from_meshes,
+    mesh_features,
     octahedron_views,
     view_permutations,
 )
@@ -45,6 +46,10 @@ def test_descriptor_separates_shape_classes_and_ignores_rotation():
     D = distance_matrix_from_meshes(meshes, cfg)
     assert D.shape == (6, 6) and np.allclose(D, D.T) and np.allclose(np.diag(D), 0)
     assert retrieval_scores(D, labels)["nn"] == 1.0
+    # the view descriptors in 2 worker processes: the same features, in the meshes' order
+    workers = mesh_features(meshes, DescriptorConfig(level=1, view_size=64, vocab=48, dense_step=6, workers=2))
+    for one, two in zip(mesh_features(meshes, cfg), workers, strict=True):
+        assert len(one) == len(two) == 18 and all(np.array_equal(a, b) for a, b in zip(one, two))
 
 
 def test_mds_and_gps_baselines_are_pose_invariant():

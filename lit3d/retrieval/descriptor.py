@@ -21,6 +21,8 @@ rotations cover it).
 from __future__ import annotations
 
 import itertools
+import multiprocessing as mp
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,6 +43,7 @@ class DescriptorConfig:
     max_jump: float = 0.08       # back-projection: depth step that splits the surface
     rotations: bool = True       # minimise over the 24 cube rotations
     seed: int = 0
+    workers: int = 0             # > 1: the view descriptors in that many spawned processes (the same features)
 
 
 # ----------------------------------------------------------------------------------- geometry
@@ -201,11 +204,19 @@ def view_features(verts: np.ndarray, faces: np.ndarray, cfg: DescriptorConfig, d
     return [sift_features(img, cfg.dense_step) for img in views]
 
 
+def _mesh_view_features(mesh: tuple[np.ndarray, np.ndarray], cfg: DescriptorConfig) -> list[np.ndarray]:
+    """:func:`view_features` of one ``(verts, faces)`` from every view of ``cfg`` (a worker job)."""
+    return view_features(mesh[0], mesh[1], cfg, octahedron_views(cfg.level))
+
+
 def mesh_features(meshes: list[tuple[np.ndarray, np.ndarray]], cfg: DescriptorConfig) -> list[list[np.ndarray]]:
     """Per mesh, per view: the SIFT descriptors ``(n, 128) float32`` (the expensive part: rendering
-    and SIFT; independent of the codebook seed)."""
-    dirs = octahedron_views(cfg.level)
-    return [view_features(v, f, cfg, dirs) for v, f in progress(meshes, "view descriptors")]
+    and SIFT; independent of the codebook seed), in ``cfg.workers`` spawned processes when > 1."""
+    if cfg.workers <= 1 or len(meshes) < 2:
+        return [_mesh_view_features(m, cfg) for m in progress(meshes, "view descriptors")]
+    with ProcessPoolExecutor(int(cfg.workers), mp_context=mp.get_context("spawn")) as pool:
+        jobs = pool.map(_mesh_view_features, meshes, itertools.repeat(cfg), chunksize=max(1, len(meshes) // (8 * cfg.workers)))
+        return list(progress(jobs, "view descriptors", total=len(meshes)))
 
 
 def distance_matrix_from_features(feats: list[list[np.ndarray]], cfg: DescriptorConfig, seed: int | None = None,
