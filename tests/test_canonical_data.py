@@ -379,3 +379,5 @@ def test_val_poses_own_validates_new_poses_of_the_validation_subjects():
         fold_pairs({s: [0, 1, 2] for s in subject_poses}, "subject_pose", 3, 0, seed=0, val_subjects=1, val_poses="own")
     with pytest.raises(DataError, match="val_poses"):
         fold_pairs(subject_poses, "subject_pose", 3, 0, seed=0, val_subjects=1, val_poses="new")
+    with pytest.raises(DataError, match="val_subjects"):
+        fold_pairs(subject_poses, "subject_pose", 3, 0, seed=0, val_poses="own")

@@ -120,6 +120,8 @@ def fold_pairs(subject_poses: dict[str, list], mode: str, n_folds: int, fold: in
     (new subjects in new poses, as the test)."""
     if val_poses not in VAL_POSES:
         raise DataError(f"val_poses must be one of {', '.join(VAL_POSES)}, got '{val_poses}'")
+    if val_poses == "own" and val_subjects is None:
+        raise DataError("val_poses=own needs validation subjects of their own (data.val_subjects=N)")
     own = {s: [p for p in ps if p >= OWN_POSE_BASE] for s, ps in subject_poses.items()}
     if any(own.values()):
         shared = {s: [p for p in ps if p < OWN_POSE_BASE] for s, ps in subject_poses.items()}
