@@ -115,7 +115,8 @@ def _descriptor_row(depth: np.ndarray, mask: np.ndarray, level: int, view_size: 
 
 
 def _gen(experiment: str, tmp: str, subjects: int, poses: int):
-    cfg = _cfg(experiment, tmp, [f"data.n_subjects={subjects}", f"data.n_poses={poses}"])
+    cfg = _cfg(experiment, tmp, [f"data.n_subjects={subjects}", f"data.n_poses={poses}", "data.own_poses=0",
+                                 "data.val_poses=training", "data.prepare_workers=0"])
     dm = build_datamodule(cfg.data)
     t0 = time.perf_counter()
     dm.prepare_data()

@@ -111,7 +111,7 @@ def test_config_builds_task_and_data(compose_cfg):
     task = build_task(cfg.task)
     assert isinstance(task, CanonicalTask) and task.hparams.use_lfe and task.hparams.use_phases
     dm = build_datamodule(cfg.data)
-    assert isinstance(dm, CanonicalDataModule) and dm.hparams.image_size == 128
+    assert isinstance(dm, CanonicalDataModule) and dm.hparams.image_size == 64 and dm.hparams.val_poses == "own"
     off = compose_cfg(["experiment=canonical_demo", "task.use_lfe=false", "task.use_phases=false"])
     t2 = build_task(off.task)
     assert t2.net.lfe is None and t2.configure_callbacks() == []

@@ -45,7 +45,7 @@ CANONICAL = [
     "task.net.fuser_hidden=64", "task.net.fuser_out=48", "task.net.msfe_dec_channels=[32,16,12,8,8,8]",
     "task.net.rec_channels=[12,16,24]", "evaluation.retrieval=null",
     "evaluation.mesh_baselines=[]", "task.mask_loss=bce", "test_after_fit=false", "callbacks.progress_bar=null",
-    "+trainer.limit_val_batches=0",
+    "+trainer.limit_val_batches=0", "data.own_poses=0", "data.val_poses=training", "data.prepare_workers=0",
 ]
 CANONICAL_STEPS_PER_EPOCH = 4
 PHASES = [{"start": 0, "alpha": 10.0, "beta": 1000.0}, {"start": 1, "alpha": 1000.0, "beta": 1000.0},
