@@ -93,8 +93,8 @@ def on_signals(notify: Callable[[str], object] | None = None, ignore_after_stop:
             _state["raised"] = True
             raise StopRequested(_state["pending"])
 
+    _state.update(pending=None, armed=True, raised=False)  # first: a signal right after the handlers go in is kept
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    _state.update(pending=None, armed=True, raised=False)
     stopped = False
     try:
         yield
