@@ -251,12 +251,20 @@ def test_datamodule_on_a_mesh_folder(tmp_path):
     batch = next(iter(dm.train_dataloader()))
     assert batch["input"].shape[1:] == (1, 8, 8, 8) and batch["target"].shape[1:] == (1, 32, 32, 32)
     assert batch["target"].sum() > 0
+    # the same items rendered in 2 spawned processes (data.prepare_workers): the same files
+    CompletionDataModule(source="meshes", root=str(tmp_path / "models"), data_dir=str(tmp_path / "cache2"),
+                         target_res=32, input_factor=4, sizes=sizes, categories=["chair", "table"],
+                         unseen_categories=["car"], batch_size=4, progress=False, min_models=8,
+                         prepare_workers=2).prepare_data()
+    assert json.loads((tmp_path / "cache2" / "manifest.json").read_text())["manifest_hash"] == m["manifest_hash"]
     # a corrupt model: one error naming the file, or skipped with data.skip_bad
     (tmp_path / "models" / "chair" / "chair_03.obj").write_text("v 0 0 0\nf 1 2 3\n")
     kw = dict(source="meshes", root=str(tmp_path / "models"), target_res=32, input_factor=4, sizes=sizes,
               categories=["chair"], unseen_categories=["car"], progress=False)
     with pytest.raises(DataError, match="chair_03"):
         CompletionDataModule(data_dir=str(tmp_path / "c2"), **kw).prepare_data()
+    with pytest.raises(DataError, match="chair_03"):  # the same from a worker process
+        CompletionDataModule(data_dir=str(tmp_path / "c4"), prepare_workers=2, **kw).prepare_data()
     dm3 = CompletionDataModule(data_dir=str(tmp_path / "c3"), skip_bad=True, **kw)
     dm3.prepare_data()
     m3 = json.loads((tmp_path / "c3" / "manifest.json").read_text())

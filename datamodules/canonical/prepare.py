@@ -10,9 +10,7 @@ files already written stay, so a rerun renders only the missing subjects.
 from __future__ import annotations
 
 import json
-import multiprocessing as mp
 from collections.abc import Callable, Mapping
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from functools import lru_cache
 
 import numpy as np
@@ -22,6 +20,7 @@ from tqdm import tqdm
 from datamodules.cache import CacheBuilder, atomic_save_npz
 from datamodules.canonical.rendering import PairRenderer
 from datamodules.canonical.sources import make_source
+from datamodules.processes import spawned_results
 from lit3d.utils.stops import check_stop
 
 SUBJECTS_DIR = "subjects"  # the cache's item folder
@@ -45,15 +44,6 @@ def _render_job(hp_json: str, subject: str, path: str) -> str:
     return subject
 
 
-def _plain(value):
-    """``value`` with tuples as lists and mappings as dicts (JSON-ready hyper-parameters)."""
-    if isinstance(value, Mapping):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    return value
-
-
 def write_subject_files(builder: CacheBuilder, subjects: list[str], render: Callable[[str], dict],
                         hp: Mapping, workers: int = 0) -> list[str]:
     """Render every subject of ``subjects`` missing from ``builder`` (``render(subject) -> arrays`` in this
@@ -64,15 +54,11 @@ def write_subject_files(builder: CacheBuilder, subjects: list[str], render: Call
         for s in tqdm(todo, desc="render canonical pairs", leave=False):
             atomic_save_npz(builder.path(subject_file(s)), **render(s))
     else:
-        hp_json = json.dumps(_plain(dict(hp)), sort_keys=True)
-        with ProcessPoolExecutor(int(workers), mp_context=mp.get_context("spawn")) as pool:
-            try:
-                futures = [pool.submit(_render_job, hp_json, s, str(builder.path(subject_file(s)))) for s in todo]
-                for fut in tqdm(as_completed(futures), total=len(futures), desc="render canonical pairs", leave=False):
-                    fut.result()
-                    check_stop()  # Ctrl-C or SIGTERM: stop between finished subjects
-            finally:  # a stop or an error: the jobs not started are dropped, not waited for
-                pool.shutdown(cancel_futures=True)
+        hp_json = json.dumps(dict(hp), sort_keys=True)  # plain values (build_datamodule); tuples become lists
+        jobs = [(hp_json, s, str(builder.path(subject_file(s)))) for s in todo]
+        for _ in tqdm(spawned_results(_render_job, jobs, workers), total=len(jobs), desc="render canonical pairs",
+                      leave=False):
+            check_stop()  # Ctrl-C or SIGTERM: stop between finished subjects
     skipped = []
     for s in subjects:
         with np.load(builder.path(subject_file(s)), allow_pickle=False) as z:

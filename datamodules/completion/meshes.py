@@ -14,10 +14,8 @@ of theirs. A category with fewer models keeps procedural shapes, and the manifes
 from __future__ import annotations
 
 import logging
-import multiprocessing as mp
 from collections import Counter
 from collections.abc import Mapping
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, fields
 from pathlib import Path
 
@@ -30,6 +28,7 @@ from datamodules.completion.mesh_shapes import mesh_shape
 from datamodules.completion.plan import ItemSpec, synth_pair, view_pair
 from datamodules.completion.sweethome3d import credits_markdown, index_sweethome3d
 from datamodules.completion.voxel_cache import save_pair
+from datamodules.processes import spawned_results
 from lit3d.sensing.sensor import make_sensor
 from lit3d.utils.stops import check_stop
 
@@ -159,12 +158,7 @@ def _run_jobs(jobs: list[dict], workers: int):
         for job in jobs:
             yield make_pairs(job)
         return
-    with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
-        try:
-            for fut in as_completed([pool.submit(make_pairs, job) for job in jobs]):
-                yield fut.result()
-        finally:  # a stop (or an error): the jobs not started are dropped, not waited for
-            pool.shutdown(cancel_futures=True)
+    yield from spawned_results(make_pairs, [(job,) for job in jobs], workers)
 
 
 def prepare_mesh_items(builder: CacheBuilder, spec: ItemSpec, mesh: MeshSpec, skip_bad: bool = False,

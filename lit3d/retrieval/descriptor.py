@@ -213,7 +213,8 @@ def mesh_features(meshes: list[tuple[np.ndarray, np.ndarray]], cfg: DescriptorCo
     """Per mesh, per view: the SIFT descriptors ``(n, 128) float32`` (the expensive part: rendering
     and SIFT; independent of the codebook seed), in ``cfg.workers`` spawned processes when > 1."""
     if cfg.workers <= 1 or len(meshes) < 2:
-        return [_mesh_view_features(m, cfg) for m in progress(meshes, "view descriptors")]
+        dirs = octahedron_views(cfg.level)
+        return [view_features(v, f, cfg, dirs) for v, f in progress(meshes, "view descriptors")]
     with ProcessPoolExecutor(int(cfg.workers), mp_context=mp.get_context("spawn")) as pool:
         jobs = pool.map(_mesh_view_features, meshes, itertools.repeat(cfg), chunksize=max(1, len(meshes) // (8 * cfg.workers)))
         return list(progress(jobs, "view descriptors", total=len(meshes)))
