@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 import trimesh
+from PIL import Image
 
 from datamodules.canonical import CanonicalDataModule, DataError, split_pose, split_subject_pose
 from datamodules.canonical import tosca
@@ -93,6 +94,8 @@ def test_datamodule_cache_manifest_and_strict_split(tmp_path):
         assert b["subject_idx"][0] == b["subject_idx"][1] and b["subject_idx"][2] == b["subject_idx"][3]
     png = dm.show(3, tmp_path / "show.png")
     assert png.stat().st_size > 100
+    width, height = Image.open(png).size  # 4 labelled columns, 3 rows, the 32 px images enlarged to 256 px
+    assert width >= 4 * 256 and height >= 3 * 256
     # a second module with the same config reuses the cache (no rendering)
     first = tmp_path / "data" / "subjects" / f"{man['subjects'][0]}.npz"
     assert [it["file"] for it in man["items"]] == [f"subjects/{s}.npz" for s in man["subjects"]]

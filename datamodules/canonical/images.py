@@ -13,9 +13,9 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
 
 from datamodules.cache import DataError, read_manifest
+from lit3d.utils.figures import labelled_grid
 from lit3d.utils.io import atomic_write_bytes
 
 
@@ -97,19 +97,25 @@ def read_subject(path: Path, size: int, n_views: int) -> tuple[dict | None, list
     return {"depth": depth, "mask": mask, **flows, "poses": [int(p) for p in complete[1:]]}, problems
 
 
-def depth_pairs_png(dataset, n: int, path: str | Path) -> Path:
-    """PNG (written atomically) of ``n`` items spread over ``dataset`` (a
-    :class:`~datamodules.canonical.dataset.CanonicalPairDataset`), one row each: posed depth | posed mask |
-    canonical depth | canonical mask, ``S`` px a tile."""
-    rows = []
+def depth_pairs_png(dataset, n: int, path: str | Path, cell: int = 256) -> Path:
+    """Labelled PNG (written atomically) of ``n`` items spread over ``dataset`` (a
+    :class:`~datamodules.canonical.dataset.CanonicalPairDataset`), one row each (subject, pose): posed depth |
+    posed mask | canonical depth | canonical mask, each ``(S, S)`` image enlarged (nearest) to at least ``cell`` px."""
+    rows, size = [], 0
     for i in np.linspace(0, len(dataset) - 1, min(n, len(dataset))).astype(int):
         b = dataset[int(i)]
-        rows.append(np.concatenate([b[k][0].numpy() for k in ("depth", "mask", "canon_depth", "canon_mask")], 1))
-    img = (np.concatenate(rows, 0) * 255).clip(0, 255).astype(np.uint8)
+        size = b["depth"].shape[-1]
+        scale = -(-cell // size)  # the smallest whole factor that reaches cell px
+        tiles = [np.kron((b[k][0].numpy() * 255).clip(0, 255).astype(np.uint8), np.ones((scale, scale), np.uint8))
+                 for k in ("depth", "mask", "canon_depth", "canon_mask")]
+        rows.append({"label": f"{b['subject']}\npose {int(b['pose'])}", "cells": [np.stack([t] * 3, -1) for t in tiles]})
+    img = labelled_grid(rows, ["posed depth", "posed mask", "canonical depth", "canonical mask"],
+                        f"canonical-form pairs: {len(rows)} of {len(dataset)} items, {size}x{size} px images enlarged",
+                        cell=rows[0]["cells"][0].shape[0], left=170)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     buf = io.BytesIO()
-    Image.fromarray(img).save(buf, format="PNG")
+    img.save(buf, format="PNG")
     atomic_write_bytes(path, buf.getvalue())
     return path
 
