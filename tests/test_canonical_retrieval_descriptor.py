@@ -12,7 +12,10 @@ from lit3d.metrics.retrieval import retrieval_scores
 from lit3d.retrieval.descriptor import (
     DescriptorConfig,
     cube_rotations,
+    depth_meshes,
+    distance_matrix_from_depths,
     distance_matrix_from_meshes,
+    distinct_images,
     mesh_features,
     octahedron_views,
     view_permutations,
@@ -50,6 +53,33 @@ def test_descriptor_separates_shape_classes_and_ignores_rotation():
     workers = mesh_features(meshes, DescriptorConfig(level=1, view_size=64, vocab=48, dense_step=6, workers=2))
     for one, two in zip(mesh_features(meshes, cfg), workers, strict=True):
         assert len(one) == len(two) == 18 and all(np.array_equal(a, b) for a, b in zip(one, two))
+
+
+def test_identical_depth_images_are_described_once(monkeypatch):
+    """The true canonical row repeats one image per subject: describing the distinct images once must give
+    the distances of describing every image (the codebook weighs each image as often as it appears)."""
+    import lit3d.retrieval.descriptor as descriptor
+
+    yy, xx = np.mgrid[:32, :32] / 31.0 - 0.5
+    blobs = []
+    for a, b in ((0.35, 0.15), (0.2, 0.3), (0.3, 0.3)):
+        inside = (xx / a) ** 2 + (yy / b) ** 2 < 1
+        blobs.append((np.where(inside, 0.5 - 0.3 * np.sqrt(np.clip(1 - (xx / a) ** 2 - (yy / b) ** 2, 0, 1)), 0),
+                      inside.astype(np.float32)))
+    order = [0, 1, 0, 2, 1, 0]
+    depths = np.stack([blobs[i][0] for i in order]).astype(np.float32)
+    masks = np.stack([blobs[i][1] for i in order])
+    first, inverse = distinct_images(depths, masks)
+    assert first.tolist() == [0, 1, 3] and inverse.tolist() == [0, 1, 0, 2, 1, 0]
+    cfg = DescriptorConfig(level=1, view_size=64, vocab=16, dense_step=6)
+    every = distance_matrix_from_meshes(depth_meshes(depths, masks, cfg), cfg)
+    described = []
+    spy = descriptor.mesh_features
+    monkeypatch.setattr(descriptor, "mesh_features", lambda meshes, c: described.append(len(meshes)) or spy(meshes, c))
+    once = distance_matrix_from_depths(depths, masks, cfg)
+    assert described == [3]
+    np.testing.assert_allclose(once, every)
+    np.testing.assert_array_equal(once[0, [1, 3, 4]], once[2, [1, 3, 4]])  # copies of one image: one row
 
 
 def test_mds_and_gps_baselines_are_pose_invariant():

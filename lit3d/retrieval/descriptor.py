@@ -245,7 +245,22 @@ def depth_meshes(depths: np.ndarray, masks: np.ndarray, cfg: DescriptorConfig | 
     return [depth_to_mesh(np.asarray(d, np.float64), np.asarray(m), cfg.max_jump) for d, m in zip(depths, masks)]
 
 
+def distinct_images(depths: np.ndarray, masks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(first, inverse)``: the index of the first of each distinct (depth, mask) pair of ``(N, S, S)``
+    arrays, in order of appearance, and for every image the position of its pair in ``first``."""
+    seen: dict[bytes, int] = {}
+    inverse = np.array([seen.setdefault(np.asarray(d).tobytes() + np.asarray(m).tobytes(), len(seen))
+                        for d, m in zip(depths, masks)], dtype=np.int64)
+    first = np.array([int(np.flatnonzero(inverse == k)[0]) for k in range(len(seen))], dtype=np.int64)
+    return first, inverse
+
+
 def distance_matrix_from_depths(depths: np.ndarray, masks: np.ndarray, cfg: DescriptorConfig | None = None) -> np.ndarray:
-    """Back-project each ``(S, S)`` normalised depth + mask to a surface, then as above."""
+    """Back-project each ``(S, S)`` normalised depth + mask to a surface, then as above. Identical images
+    (every pose of a subject shares one true canonical image) are rendered and described once, and the
+    codebook sees each as often as it appears: the same distances as describing every image."""
     cfg = cfg or DescriptorConfig()
-    return distance_matrix_from_meshes(depth_meshes(depths, masks, cfg), cfg)
+    depths, masks = np.asarray(depths), np.asarray(masks)
+    first, inverse = distinct_images(depths, masks)
+    feats = mesh_features(depth_meshes(depths[first], masks[first], cfg), cfg)
+    return distance_matrix_from_features([feats[k] for k in inverse], cfg)
