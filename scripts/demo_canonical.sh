@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Canonical forms on built-in synthetic figures (procedural humanoids and quadrupeds, 128^2):
+# Canonical forms on built-in synthetic figures (procedural humanoids and quadrupeds, 64^2):
 # generate -> train (experiment=canonical_demo) -> test the best checkpoint -> retrieval tables
 # and one contact sheet per test subject (posed input | predicted canonical | truth | error).
 set -euo pipefail
