@@ -78,7 +78,12 @@ def test_identical_depth_images_are_described_once(monkeypatch):
     monkeypatch.setattr(descriptor, "mesh_features", lambda meshes, c: described.append(len(meshes)) or spy(meshes, c))
     once = distance_matrix_from_depths(depths, masks, cfg)
     assert described == [3]
-    np.testing.assert_allclose(once, every)
+    np.testing.assert_allclose(once, every, atol=1e-6)
+    compared = []
+    spy_distances = descriptor.shape_distances
+    monkeypatch.setattr(descriptor, "shape_distances", lambda h, p, **kw: compared.append(len(h)) or spy_distances(h, p, **kw))
+    np.testing.assert_allclose(distance_matrix_from_depths(depths, masks, cfg), every, atol=1e-6)
+    assert compared == [3]  # the distances too: 3 shapes compared, not 6
     np.testing.assert_array_equal(once[0, [1, 3, 4]], once[2, [1, 3, 4]])  # copies of one image: one row
 
 

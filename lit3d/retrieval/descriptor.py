@@ -177,16 +177,18 @@ def bow_histogram(desc: np.ndarray, centres: np.ndarray) -> np.ndarray:
     return h
 
 
-def shape_distances(hists: list[np.ndarray], perms: np.ndarray | None) -> np.ndarray:
+def shape_distances(hists: list[np.ndarray], perms: np.ndarray | None, diagonal: bool = False) -> np.ndarray:
     """``(n, n)`` distances from per-shape ``(V, K)`` histograms: mean over views of
-    1 - intersection, minimised over the view permutations ``perms`` ``(R, V)`` (None = identity)."""
+    1 - intersection, minimised over the view permutations ``perms`` ``(R, V)`` (None = identity).
+    ``diagonal``: also each shape against itself (what an identical copy scores: not 0 where a view has
+    no words); else the diagonal is 0."""
     n = len(hists)
     H = torch.from_numpy(np.stack(hists)).float()  # (n, V, K)
     V = H.shape[1]
     perms_t = torch.from_numpy(perms if perms is not None else np.arange(V)[None]).long()
     D = np.zeros((n, n))
     for a in range(n):
-        for b in range(a + 1, n):
+        for b in range(a if diagonal else a + 1, n):
             inter = torch.minimum(H[a][:, None, :], H[b][None, :, :]).sum(-1)  # (V, V)
             cost = 1 - inter
             per_rot = cost[torch.arange(V)[None, :], perms_t].mean(1)  # (R,)
@@ -221,15 +223,20 @@ def mesh_features(meshes: list[tuple[np.ndarray, np.ndarray]], cfg: DescriptorCo
 
 
 def distance_matrix_from_features(feats: list[list[np.ndarray]], cfg: DescriptorConfig, seed: int | None = None,
-                                  return_hists: bool = False):
+                                  return_hists: bool = False, inverse: np.ndarray | None = None):
     """``(n, n)`` distances from :func:`mesh_features`: codebook (k-means seeded by ``seed``, default
     ``cfg.seed``), histograms, view-matched distances. Cheap next to the features, so a study over
-    codebook seeds computes the features once."""
-    centres = fit_codebook([d for fs in feats for d in fs], cfg.vocab, cfg.kmeans_samples,
+    codebook seeds computes the features once. ``inverse`` ``(n,)``: item i is the shape ``feats[inverse[i]]``
+    (distinct shapes described once, :func:`distinct_images`; None: one item per entry); the codebook
+    weighs each shape as often as it appears, so the distances are those of the repeated features."""
+    inverse = np.arange(len(feats)) if inverse is None else np.asarray(inverse, dtype=np.int64)
+    centres = fit_codebook([d for k in inverse for d in feats[k]], cfg.vocab, cfg.kmeans_samples,
                            cfg.seed if seed is None else int(seed))
     hists = [np.stack([bow_histogram(d, centres) for d in fs]) for fs in feats]
-    D = shape_distances(hists, view_permutations(octahedron_views(cfg.level)) if cfg.rotations else None)
-    return (D, hists) if return_hists else D
+    D = shape_distances(hists, view_permutations(octahedron_views(cfg.level)) if cfg.rotations else None,
+                        diagonal=len(feats) < len(inverse))[np.ix_(inverse, inverse)]
+    np.fill_diagonal(D, 0.0)
+    return (D, [hists[k] for k in inverse]) if return_hists else D
 
 
 def distance_matrix_from_meshes(meshes: list[tuple[np.ndarray, np.ndarray]], cfg: DescriptorConfig | None = None,
@@ -257,10 +264,10 @@ def distinct_images(depths: np.ndarray, masks: np.ndarray) -> tuple[np.ndarray, 
 
 def distance_matrix_from_depths(depths: np.ndarray, masks: np.ndarray, cfg: DescriptorConfig | None = None) -> np.ndarray:
     """Back-project each ``(S, S)`` normalised depth + mask to a surface, then as above. Identical images
-    (every pose of a subject shares one true canonical image) are rendered and described once, and the
-    codebook sees each as often as it appears: the same distances as describing every image."""
+    (every pose of a subject shares one true canonical image) are rendered, described and compared once,
+    and the codebook sees each as often as it appears: the same distances as describing every image."""
     cfg = cfg or DescriptorConfig()
     depths, masks = np.asarray(depths), np.asarray(masks)
     first, inverse = distinct_images(depths, masks)
     feats = mesh_features(depth_meshes(depths[first], masks[first], cfg), cfg)
-    return distance_matrix_from_features([feats[k] for k in inverse], cfg)
+    return distance_matrix_from_features(feats, cfg, inverse=inverse)
