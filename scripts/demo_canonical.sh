@@ -20,8 +20,10 @@ fi
 HEADLINE=$("$BIN/python" - "$OUT/train/metrics.json" <<'PY'
 import json, sys
 m = json.load(open(sys.argv[1]))
+nn_ft = lambda row: f"{m.get(f'test/retrieval/{row}/nn', float('nan')):.2f} / {m.get(f'test/retrieval/{row}/ft', float('nan')):.2f}"
 print(f"masked depth MSE {m['test/depth_mse']:.3f} (posed input {m['test/depth_mse_input']:.3f}), "
-      f"mask IoU {m['test/iou']:.3f} (posed input {m['test/iou_input']:.3f})")
+      f"mask IoU {m['test/iou']:.3f} (posed input {m['test/iou_input']:.3f}), "
+      f"retrieval NN / FT {nn_ft('model')} (posed input {nn_ft('input')}, chance {nn_ft('chance')})")
 PY
 )
 {
