@@ -56,6 +56,16 @@ def test_results_layout_thesis_beside_ours_in_the_matching_table(tmp_path):
     assert "`task.arch=unet`" in text and "--unet UNET_RUN_DIR" in text  # how the U-Net rows are made
 
 
+def test_the_outline_row_and_its_note_only_when_the_model_is_scored_on_its_outline(tmp_path):
+    plain = report.write_results(_metrics(), tmp_path / "plain").read_text()
+    m = {**_metrics(), "test/retrieval/input_outline/nn": 0.06, "test/retrieval/input_outline/ft": 0.09}
+    text = report.write_results(m, tmp_path / "outline", dataset="synth").read_text()
+    assert "scored on its outline" not in plain
+    assert ("| posed input depth scored on its outline like the model row (evaluation.prediction_smooth_px) (ours) "
+            "| 0.06 | 0.09 | – | – |") in _section(text, "5.1")
+    assert "The model row is scored on its outline" in text
+
+
 def test_results_dataset_from_run_config_and_missing_values(tmp_path):
     (tmp_path / "config.yaml").write_text("data:\n  source: synth\n")
     m = {"test/depth_mse": 0.02, "test/iou": 0.5, "test/retrieval/model/nn": 0.5, "test/retrieval/model/dcg": 0.7}

@@ -44,6 +44,24 @@ def test_protocol_scores_and_saves_the_smoothed_prediction(tmp_path, sigma):
         assert smooth_step < rough_step / 3
 
 
+@pytest.mark.parametrize("sigma", [0.0, 1.5])
+def test_the_posed_input_is_also_scored_on_its_outline(tmp_path, sigma):
+    """With smoothing on, an ``input_outline`` row scores the posed input smoothed like the prediction: a
+    prediction that is the posed input itself scores exactly that row; without smoothing there is no such row."""
+    dm = _dm(tmp_path, n_poses=6)  # 2 test poses of each of 4 subjects: retrieval is scored
+    outputs = _fold_outputs(dm)
+    outputs = {**outputs, "pred_depth": outputs["depth"].clone(), "pred_mask": outputs["mask"].clone()}
+    task = SimpleNamespace(hparams=AttributeDict(arch="canonical", mask_threshold=0.5), _trainer=None,
+                           test_outputs=SimpleNamespace(compute=lambda: dict(outputs)))
+    settings = dict(retrieval=RETRIEVAL, chance_trials=5, mesh_baselines=[], ceiling_jitter_deg=0.0,
+                    retrieval_min_subjects=2, **{SETTING: sigma})
+    metrics = evaluator.protocol(task, dm, settings).metrics
+    outline = {k.rsplit("/", 1)[1]: v for k, v in metrics.items() if k.startswith("test/retrieval/input_outline/")}
+    assert "test/retrieval/input/nn" in metrics and bool(outline) == bool(sigma)
+    if sigma:
+        assert outline == {k.rsplit("/", 1)[1]: v for k, v in metrics.items() if k.startswith("test/retrieval/model/")}
+
+
 def test_pooled_smooths_unsmoothed_runs_once():
     items = {"pred_depth": np.random.default_rng(0).random((2, 16, 16)).astype(np.float16),
              "pred_mask": np.ones((2, 16, 16), np.float16)}

@@ -7,7 +7,8 @@ test (``task.test_outputs``, DDP-correct) and returns ``test/retrieval/<source>/
 
 - ``model`` (or ``unet`` when the task is the plain U-Net, ``arch=unet``): the predicted canonical
   depth, back-projected to a surface, then the CM-BOF-style descriptor;
-- ``input``: the posed input depth; ``target``: the true canonical depth (1.00 by construction: one
+- ``input``: the posed input depth (and ``input_outline``, with ``prediction_smooth_px`` > 0: the posed
+  input smoothed the same way as the prediction); ``target``: the true canonical depth (1.00 by construction: one
   image per subject); ``target_jitter``: the true canonical rendered with the camera turned by up to
   ``ceiling_jitter_deg`` degrees per item (the ceiling that is not trivial);
 - ``chance``: random distances;
@@ -138,14 +139,18 @@ def retrieval_results(settings: Mapping, outputs: dict[str, torch.Tensor], datam
 def depth_retrieval(settings: Mapping, outputs: dict[str, torch.Tensor], labels: np.ndarray, source: str = "model",
                     mask_threshold: float = 0.5) -> dict[str, dict]:
     """Retrieval scores of the predicted canonical forms (row ``source``, mask at ``mask_threshold``), the
-    posed inputs and the true canonical forms (each depth image back-projected to a surface, then the
-    CM-BOF-style descriptor), and chance."""
+    posed inputs (also smoothed like the prediction when the settings smooth it: ``input_outline``) and
+    the true canonical forms (each depth image back-projected to a surface, then the CM-BOF-style
+    descriptor), and chance."""
     cfg = DescriptorConfig(**(settings.get("retrieval") or {}))
     sources = {
         source: (outputs["pred_depth"], (outputs["pred_mask"] >= mask_threshold).float()),
         "input": (outputs["depth"], outputs["mask"]),
         "target": (outputs["canon_depth"], outputs["canon_mask"]),
     }
+    sigma = smoothing_of(settings)
+    if sigma > 0:  # the posed input scored on its outline too: what the smoothing gives without canonicalisation
+        sources["input_outline"] = (smooth_prediction(outputs["depth"], outputs["mask"], sigma), outputs["mask"])
     out = {}
     for name, (d, m) in sources.items():
         dist = distance_matrix_from_depths(composite_depth(d, m)[:, 0].numpy(), m[:, 0].numpy(), cfg)

@@ -31,6 +31,8 @@ THESIS = {
 ABLATION = {"Complete": (.91, .76, .80, .89), "without LFE": (.88, .62, .76, .84), "without MSFE": (.72, .48, .61, .73)}
 OURS = (("lit3d model (ours)", "model"), ("plain U-Net, same data and losses (ours)", "unet"),
         ("posed input depth, no canonicalisation (ours)", "input"),
+        ("posed input depth scored on its outline like the model row (evaluation.prediction_smooth_px) (ours)",
+         "input_outline"),
         ("true canonical depth, one image per subject: 1.00 by construction (ours)", "target"),
         ("true canonical depth, camera turned up to ceiling_jitter_deg per item: the ceiling (ours)", "target_jitter"),
         ("classical MDS, full mesh (ours)", "cmds"), ("SMACOF (least-squares MDS), full mesh (ours)", "smacof"),
@@ -109,6 +111,10 @@ def write_results(metrics: dict, out_dir: Path, dataset: str | None = None) -> P
                      "subject x pose, simplified to evaluation.baseline_max_vertices; geodesics by the heat method), "
                      "then the same descriptor; the depth rows rank every test item (subject x pose x view). "
                      + (f"Time per method (forms + descriptor): {secs}." if secs else ""))
+    if m.get("test/retrieval/input_outline/nn") is not None:
+        notes.append("The model row is scored on its outline: its depth smoothed inside its silhouette "
+                     "(evaluation.prediction_smooth_px in config.yaml) before the descriptor; the outline row "
+                     "scores the posed input the same way.")
     if m.get("test/retrieval/model/e") is not None:
         notes.append("E-measure (ours; F1 of the top min(32, n-1) results, so constant when every item is "
                      "within 32 ranks): " + ", ".join(
