@@ -9,7 +9,8 @@ Rows (CPU, one intra-op thread):
 - the CM-BOF-style retrieval descriptor per shape from one canonical depth image
   (back-projection, PCA pose, depth views, SIFT, bag-of-words histogram) at the demo (18
   views of 96^2) and paper (66 views of 128^2) settings; codebook fitting, done once per
-  collection, is given in the note;
+  collection, is given in the note; the view-matched distance of one shape pair (baseline: comparing
+  all V x V view pairs, the former way);
 - synthetic posed/canonical pair generation (``CanonicalDataModule.prepare_data``) at demo
   (128^2, mesh resolution 56) and paper (500^2, mesh resolution 96) settings.
 """
@@ -114,6 +115,41 @@ def _descriptor_row(depth: np.ndarray, mask: np.ndarray, level: int, view_size: 
                     f"(once per collection, 12 shapes' descriptors): {t_codebook:.2f} s; no baseline")
 
 
+def _all_view_pairs(hists: list[np.ndarray], perms: np.ndarray) -> np.ndarray:
+    """The baseline of the distance row: every shape pair compares all V x V view pairs, then picks the
+    rotations' matches (lit3d's comparison before 2026-11-27)."""
+    H = torch.from_numpy(np.stack(hists)).float()
+    n, V = H.shape[:2]
+    perms_t = torch.from_numpy(perms).long()
+    D = np.zeros((n, n))
+    for a in range(n):
+        for b in range(a + 1, n):
+            cost = 1 - torch.minimum(H[a][:, None, :], H[b][None, :, :]).sum(-1)  # (V, V)
+            D[a, b] = D[b, a] = float(cost[torch.arange(V)[None, :], perms_t].mean(1).min())
+    return D
+
+
+def _distance_row(level: int, vocab: int, n_shapes: int = 30, words_per_view: int = 200) -> dict:
+    from lit3d.retrieval.descriptor import octahedron_views, shape_distances, view_permutations
+
+    perms = view_permutations(octahedron_views(level))
+    rng = np.random.default_rng(0)
+    hists = []
+    for _ in range(n_shapes):
+        counts = np.stack([np.bincount(rng.integers(0, vocab, words_per_view), minlength=vocab) for _ in perms[0]])
+        hists.append(counts / words_per_view)
+    ours, base = {}, {}
+    t = median_time(lambda: ours.setdefault("D", shape_distances(hists, perms)), repeats=3, warmup=0)
+    tb = median_time(lambda: base.setdefault("D", _all_view_pairs(hists, perms)), repeats=3, warmup=0)
+    assert np.allclose(ours["D"], base["D"], atol=1e-6)
+    pairs = n_shapes * (n_shapes - 1) // 2
+    return row(f"retrieval distance per shape pair, demo settings: {perms.shape[1]} views, {len(perms)} rotations, "
+               f"vocab {vocab}", CMD, t / pairs, tb / pairs, unit="s/pair", threads=1,
+               baseline_name="all V x V view pairs, then the rotations' matches",
+               note=f"shape_distances on {n_shapes} shapes' word histograms ({words_per_view} words a view, random); "
+                    f"the same distances as the baseline (checked); 216 test items = {216 * 215 // 2} pairs")
+
+
 def _gen(experiment: str, tmp: str, subjects: int, poses: int):
     cfg = _cfg(experiment, tmp, [f"data.n_subjects={subjects}", f"data.n_poses={poses}", "data.own_poses=0",
                                  "data.val_poses=training", "data.prepare_workers=0"])
@@ -140,6 +176,7 @@ def run() -> list[dict]:
             d, m = _canonical_depth(dm_demo, int(cfg_demo.data.image_size))
             rc = cfg_demo.evaluation.retrieval
             rows.append(_descriptor_row(d, m, int(rc.level), int(rc.view_size), int(rc.vocab), "demo settings"))
+            rows.append(_distance_row(int(rc.level), int(rc.vocab)))
             d, m = _canonical_depth(dm_paper, int(cfg_paper.data.image_size))
             rc = cfg_paper.evaluation.retrieval
             rows.append(_descriptor_row(d, m, int(rc.level), int(rc.view_size), int(rc.vocab), "paper settings"))

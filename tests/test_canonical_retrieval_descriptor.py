@@ -18,6 +18,7 @@ from lit3d.retrieval.descriptor import (
     distinct_images,
     mesh_features,
     octahedron_views,
+    shape_distances,
     view_permutations,
 )
 
@@ -53,6 +54,27 @@ def test_descriptor_separates_shape_classes_and_ignores_rotation():
     workers = mesh_features(meshes, DescriptorConfig(level=1, view_size=64, vocab=48, dense_step=6, workers=2))
     for one, two in zip(mesh_features(meshes, cfg), workers, strict=True):
         assert len(one) == len(two) == 18 and all(np.array_equal(a, b) for a, b in zip(one, two))
+
+
+def test_shape_distances_against_a_loop_over_rotations_and_views():
+    """Reference: for each pair, each view rotation r, the mean over views v of 1 - sum_k min(a[v, k], b[r(v), k]),
+    minimised over r; the diagonal is each shape against itself only when asked."""
+    rng = np.random.default_rng(3)
+    hists = [rng.dirichlet(np.ones(7), size=5) * (rng.random((5, 1)) > 0.2) for _ in range(4)]  # some empty views
+    cycle = rng.permutation(5)
+    perms = np.stack([np.argsort(cycle)[(np.arange(5) + k) % 5][cycle] for k in range(5)])  # a group, as the rotations
+
+    def reference(a, b):
+        return min(np.mean([1 - np.minimum(a[v], b[p[v]]).sum() for v in range(5)]) for p in perms)
+
+    want = np.array([[reference(a, b) for b in hists] for a in hists])
+    np.testing.assert_allclose(shape_distances(hists, perms, diagonal=True), want, atol=1e-6)
+    off = want.copy()
+    np.fill_diagonal(off, 0)
+    np.testing.assert_allclose(shape_distances(hists, perms), off, atol=1e-6)
+    ident = np.array([[np.mean([1 - np.minimum(a[v], b[v]).sum() for v in range(5)]) for b in hists] for a in hists])
+    np.fill_diagonal(ident, 0)
+    np.testing.assert_allclose(shape_distances(hists, None), ident, atol=1e-6)
 
 
 def test_identical_depth_images_are_described_once(monkeypatch):

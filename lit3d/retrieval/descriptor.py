@@ -181,18 +181,19 @@ def shape_distances(hists: list[np.ndarray], perms: np.ndarray | None, diagonal:
     """``(n, n)`` distances from per-shape ``(V, K)`` histograms: mean over views of
     1 - intersection, minimised over the view permutations ``perms`` ``(R, V)`` (None = identity).
     ``diagonal``: also each shape against itself (what an identical copy scores: not 0 where a view has
-    no words); else the diagonal is 0."""
+    no words); else the diagonal is 0. Each shape's views are put in every rotation's order once
+    (``(R, V, K)``), so a pair compares the R x V matched views only, not all V x V. The rotations are a
+    group (each one's inverse is among them), so one order of a pair gives both entries."""
     n = len(hists)
     H = torch.from_numpy(np.stack(hists)).float()  # (n, V, K)
     V = H.shape[1]
     perms_t = torch.from_numpy(perms if perms is not None else np.arange(V)[None]).long()
     D = np.zeros((n, n))
-    for a in range(n):
-        for b in range(a if diagonal else a + 1, n):
-            inter = torch.minimum(H[a][:, None, :], H[b][None, :, :]).sum(-1)  # (V, V)
-            cost = 1 - inter
-            per_rot = cost[torch.arange(V)[None, :], perms_t].mean(1)  # (R,)
-            D[a, b] = D[b, a] = float(per_rot.min())
+    for b in range(n):
+        turned = H[b][perms_t]  # (R, V, K): view perms[r, v] of shape b, matched to view v of the other
+        for a in range(b + 1 if diagonal else b):
+            cost = 1 - torch.minimum(H[a][None], turned).sum(-1)  # (R, V)
+            D[a, b] = D[b, a] = float(cost.mean(1).min())
     return D
 
 
