@@ -259,8 +259,7 @@ def distinct_images(depths: np.ndarray, masks: np.ndarray) -> tuple[np.ndarray, 
     seen: dict[bytes, int] = {}
     inverse = np.array([seen.setdefault(np.asarray(d).tobytes() + np.asarray(m).tobytes(), len(seen))
                         for d, m in zip(depths, masks)], dtype=np.int64)
-    first = np.array([int(np.flatnonzero(inverse == k)[0]) for k in range(len(seen))], dtype=np.int64)
-    return first, inverse
+    return np.unique(inverse, return_index=True)[1].astype(np.int64), inverse  # labels are in order of appearance
 
 
 def distance_matrix_from_depths(depths: np.ndarray, masks: np.ndarray, cfg: DescriptorConfig | None = None) -> np.ndarray:
