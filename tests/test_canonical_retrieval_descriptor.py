@@ -14,8 +14,9 @@ from lit3d.retrieval.descriptor import (
     cube_rotations,
     depth_meshes,
     distance_matrix_from_depths,
+    distance_matrix_from_features,
     distance_matrix_from_meshes,
-    distinct_images,
+    distinct,
     mesh_features,
     octahedron_views,
     shape_distances,
@@ -91,15 +92,18 @@ def test_identical_depth_images_are_described_once(monkeypatch):
     order = [0, 1, 0, 2, 1, 0]
     depths = np.stack([blobs[i][0] for i in order]).astype(np.float32)
     masks = np.stack([blobs[i][1] for i in order])
-    first, inverse = distinct_images(depths, masks)
+    first, inverse = distinct([d.tobytes() + m.tobytes() for d, m in zip(depths, masks)])
     assert first.tolist() == [0, 1, 3] and inverse.tolist() == [0, 1, 0, 2, 1, 0]
     cfg = DescriptorConfig(level=1, view_size=64, vocab=16, dense_step=6)
-    every = distance_matrix_from_meshes(depth_meshes(depths, masks, cfg), cfg)
+    # the reference: every image described on its own (separate lists, so nothing is shared or compared once)
+    dirs = octahedron_views(cfg.level)
+    every = distance_matrix_from_features([descriptor.view_features(v, f, cfg, dirs)
+                                          for v, f in depth_meshes(depths, masks, cfg)], cfg)
     described = []
-    spy = descriptor.mesh_features
-    monkeypatch.setattr(descriptor, "mesh_features", lambda meshes, c: described.append(len(meshes)) or spy(meshes, c))
+    spy = descriptor.view_features
+    monkeypatch.setattr(descriptor, "view_features", lambda v, f, c, d: described.append(len(f)) or spy(v, f, c, d))
     once = distance_matrix_from_depths(depths, masks, cfg)
-    assert described == [3]
+    assert len(described) == 3
     np.testing.assert_allclose(once, every, atol=1e-6)
     compared = []
     spy_distances = descriptor.shape_distances

@@ -212,30 +212,46 @@ def _mesh_view_features(mesh: tuple[np.ndarray, np.ndarray], cfg: DescriptorConf
     return view_features(mesh[0], mesh[1], cfg, octahedron_views(cfg.level))
 
 
+def distinct(keys: list) -> tuple[np.ndarray, np.ndarray]:
+    """``(first, inverse)`` of hashable ``keys``: the index of the first of each distinct key, in order of
+    appearance, and for every key the position of its first in ``first``."""
+    seen: dict = {}
+    inverse = np.array([seen.setdefault(k, len(seen)) for k in keys], dtype=np.int64)
+    return np.unique(inverse, return_index=True)[1].astype(np.int64), inverse  # labels are in order of appearance
+
+
 def mesh_features(meshes: list[tuple[np.ndarray, np.ndarray]], cfg: DescriptorConfig) -> list[list[np.ndarray]]:
     """Per mesh, per view: the SIFT descriptors ``(n, 128) float32`` (the expensive part: rendering
-    and SIFT; independent of the codebook seed), in ``cfg.workers`` spawned processes when > 1."""
-    if cfg.workers <= 1 or len(meshes) < 2:
+    and SIFT; independent of the codebook seed), in ``cfg.workers`` spawned processes when > 1.
+    Identical meshes (every pose of a subject shares one true canonical image) are described once and
+    share one list, so :func:`distance_matrix_from_features` compares them once too."""
+    first, inverse = distinct([np.asarray(v).tobytes() + np.asarray(f).tobytes() for v, f in meshes])
+    unique = [meshes[i] for i in first]
+    if cfg.workers <= 1 or len(unique) < 2:
         dirs = octahedron_views(cfg.level)
-        return [view_features(v, f, cfg, dirs) for v, f in progress(meshes, "view descriptors")]
-    with ProcessPoolExecutor(int(cfg.workers), mp_context=mp.get_context("spawn")) as pool:
-        jobs = pool.map(_mesh_view_features, meshes, itertools.repeat(cfg), chunksize=max(1, len(meshes) // (8 * cfg.workers)))
-        return list(progress(jobs, "view descriptors", total=len(meshes)))
+        feats = [view_features(v, f, cfg, dirs) for v, f in progress(unique, "view descriptors")]
+    else:
+        with ProcessPoolExecutor(int(cfg.workers), mp_context=mp.get_context("spawn")) as pool:
+            jobs = pool.map(_mesh_view_features, unique, itertools.repeat(cfg),
+                            chunksize=max(1, len(unique) // (8 * cfg.workers)))
+            feats = list(progress(jobs, "view descriptors", total=len(unique)))
+    return [feats[k] for k in inverse]
 
 
 def distance_matrix_from_features(feats: list[list[np.ndarray]], cfg: DescriptorConfig, seed: int | None = None,
-                                  return_hists: bool = False, inverse: np.ndarray | None = None):
+                                  return_hists: bool = False):
     """``(n, n)`` distances from :func:`mesh_features`: codebook (k-means seeded by ``seed``, default
     ``cfg.seed``), histograms, view-matched distances. Cheap next to the features, so a study over
-    codebook seeds computes the features once. ``inverse`` ``(n,)``: item i is the shape ``feats[inverse[i]]``
-    (distinct shapes described once, :func:`distinct_images`; None: one item per entry); the codebook
-    weighs each shape as often as it appears, so the distances are those of the repeated features."""
-    inverse = np.arange(len(feats)) if inverse is None else np.asarray(inverse, dtype=np.int64)
-    centres = fit_codebook([d for k in inverse for d in feats[k]], cfg.vocab, cfg.kmeans_samples,
+    codebook seeds computes the features once. Entries that are one list (identical shapes, as
+    :func:`mesh_features` gives them) get one histogram and are compared once (a copy's distance is the
+    shape's distance to itself); the codebook still weighs each entry, so the distances are those of
+    comparing every entry."""
+    first, inverse = distinct([id(fs) for fs in feats])
+    centres = fit_codebook([d for fs in feats for d in fs], cfg.vocab, cfg.kmeans_samples,
                            cfg.seed if seed is None else int(seed))
-    hists = [np.stack([bow_histogram(d, centres) for d in fs]) for fs in feats]
+    hists = [np.stack([bow_histogram(d, centres) for d in feats[i]]) for i in first]
     D = shape_distances(hists, view_permutations(octahedron_views(cfg.level)) if cfg.rotations else None,
-                        diagonal=len(feats) < len(inverse))[np.ix_(inverse, inverse)]
+                        diagonal=len(first) < len(feats))[np.ix_(inverse, inverse)]
     np.fill_diagonal(D, 0.0)
     return (D, [hists[k] for k in inverse]) if return_hists else D
 
@@ -253,21 +269,8 @@ def depth_meshes(depths: np.ndarray, masks: np.ndarray, cfg: DescriptorConfig | 
     return [depth_to_mesh(np.asarray(d, np.float64), np.asarray(m), cfg.max_jump) for d, m in zip(depths, masks)]
 
 
-def distinct_images(depths: np.ndarray, masks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(first, inverse)``: the index of the first of each distinct (depth, mask) pair of ``(N, S, S)``
-    arrays, in order of appearance, and for every image the position of its pair in ``first``."""
-    seen: dict[bytes, int] = {}
-    inverse = np.array([seen.setdefault(np.asarray(d).tobytes() + np.asarray(m).tobytes(), len(seen))
-                        for d, m in zip(depths, masks)], dtype=np.int64)
-    return np.unique(inverse, return_index=True)[1].astype(np.int64), inverse  # labels are in order of appearance
-
-
 def distance_matrix_from_depths(depths: np.ndarray, masks: np.ndarray, cfg: DescriptorConfig | None = None) -> np.ndarray:
-    """Back-project each ``(S, S)`` normalised depth + mask to a surface, then as above. Identical images
-    (every pose of a subject shares one true canonical image) are rendered, described and compared once,
-    and the codebook sees each as often as it appears: the same distances as describing every image."""
+    """Back-project each ``(S, S)`` normalised depth + mask to a surface, then as above (identical images are
+    described and compared once)."""
     cfg = cfg or DescriptorConfig()
-    depths, masks = np.asarray(depths), np.asarray(masks)
-    first, inverse = distinct_images(depths, masks)
-    feats = mesh_features(depth_meshes(depths[first], masks[first], cfg), cfg)
-    return distance_matrix_from_features(feats, cfg, inverse=inverse)
+    return distance_matrix_from_meshes(depth_meshes(depths, masks, cfg), cfg)
