@@ -49,7 +49,9 @@ fi
 echo "bootstrap: installing $TORCH_SPEC and lit3d[dev]"
 "$VENV/bin/pip" install -q "$TORCH_SPEC"
 "$VENV/bin/pip" install -q -e ".[dev]"
-# piq: test-only reference of tests/test_fsim_piq.py. --no-deps: piq requires torchvision, whose PyPI wheels are CUDA
-# builds that replace the CPU torch (or fail to load beside it); piq's FSIM needs only torch. Not in [dev] for that reason.
-"$VENV/bin/pip" install -q --no-deps "piq==0.8.0" || echo "bootstrap: piq not installed: tests/test_fsim_piq.py will be skipped"
+# piq: the colour image measures of the quality features (FSIMc, VIF, GMSD, HaarPSI, MDSI, VSI of coloured point
+# clouds, lit3d.metrics.image.colour_measures) and the reference of tests/test_fsim_piq.py. --no-deps: piq requires
+# torchvision, whose PyPI wheels are CUDA builds that replace the CPU torch (or fail to load beside it); the six
+# measures need only torch. Not a package dependency for that reason.
+"$VENV/bin/pip" install -q --no-deps "piq==0.8.0" || echo "bootstrap: piq not installed: coloured point-cloud pairs need it"
 touch "$VENV/.installed"

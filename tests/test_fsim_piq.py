@@ -20,15 +20,13 @@ loaded here without running that ``__init__``.
 """
 from __future__ import annotations
 
-import importlib
-import importlib.util
 import io
-import sys
-import types
 
 import numpy as np
 import pytest
 import torch
+
+from piq_helpers import piq_functions
 
 from lit3d.metrics.image import fsim
 
@@ -37,19 +35,8 @@ TOLERANCE = 2e-5
 
 @pytest.fixture(scope="module")
 def piq_fsim():
-    spec = importlib.util.find_spec("piq")
-    if spec is None:
-        pytest.skip("piq is not installed (scripts/bootstrap.sh installs it: pip install --no-deps piq==0.8.0)")
-    saved = {k: v for k, v in sys.modules.items() if k == "piq" or k.startswith("piq.")}
-    package = types.ModuleType("piq")  # the package without its __init__ (which imports torchvision)
-    package.__path__ = list(spec.submodule_search_locations)
-    sys.modules["piq"] = package
-    try:
-        yield importlib.import_module("piq.fsim").fsim
-    finally:
-        for k in [k for k in sys.modules if k == "piq" or k.startswith("piq.")]:
-            del sys.modules[k]
-        sys.modules.update(saved)
+    with piq_functions({"fsim": ("fsim", "fsim")}) as funcs:
+        yield funcs["fsim"]
 
 
 def _pairs():

@@ -163,7 +163,7 @@ def coloured_sphere(noise: float, seed: int = 0) -> PointShape:
 
 
 FAST = FeatureConfig(render=RenderConfig(size=48, shadings=("flat",)), styles=("ceramic_lightbulb", "metal_lead"),
-                     measures=("mask_ssim", "ssim", "psnr"), workers=1)
+                     measures=("mask_ssim", "ssim", "psnr"), colour_measures=("ciede2000",), point_measures=(), workers=1)
 
 
 def test_colour_noise_only_changes_colour_features_monotonically():

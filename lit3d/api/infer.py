@@ -4,7 +4,7 @@
     probs = complete_grid(partial, completer)               # (r, r, r) bool -> (R, R, R) probabilities
     form = canonical_form(mesh_or_depth, mapper)            # -> canonical (S, S) depth and mask
     points = canonical_points(depth, mapper)                # (H, W) metres -> canonical-pose points
-    out = score(reference, distorted)                       # mean Mask-SSIM (or a quality model's score)
+    out = score(reference, distorted)                       # the shipped model's MOS (coloured clouds) or Mask-SSIM
 
 A wrong model for the function or an array of the wrong shape is one
 :class:`lit3d.reconstruct.depth_io.InputError` line naming the argument and what it expected.
@@ -19,6 +19,7 @@ from lit3d.cli.score import DEFAULT_SIZE
 from lit3d.features.table import FeatureConfig, feature_table
 from lit3d.geometry.normalise import normalise_vertices
 from lit3d.quality.predict import QualityPredictor
+from lit3d.quality.shipped import load_shipped
 from lit3d.reconstruct.backproject import RECGAN_FOV_DEG, Intrinsics, backproject
 from lit3d.reconstruct.canonical import CanonicalMapper
 from lit3d.reconstruct.depth_io import InputError
@@ -139,31 +140,45 @@ def _feature_config(model: QualityPredictor | None, size: int | None, styles) ->
 
 
 def score(reference, distorted, model: QualityPredictor | None = None, *, size: int | None = None,
-          styles=None, cache_dir=None, device=None) -> dict:
+          styles=None, cache_dir=None, device=None, unlearned: bool = False) -> dict:
     """Quality of ``distorted`` against ``reference`` (``lit3d-score``'s measure).
 
     Args:
         reference, distorted: meshes, point clouds, voxel or SDF grids (paths or in-memory objects:
             anything :func:`lit3d.features.table.feature_table` reads).
-        model: a quality model (:func:`lit3d.load`) or None.
+        model: a quality model (:func:`lit3d.load`) or None: the shipped quality model
+            (:mod:`lit3d.quality.shipped`) where the pair has its features (two coloured point
+            clouds at the default renders), else the unlearned score.
         size, styles: render size in pixels (default 256) and MatCap style names (a list or a
-            comma-separated string, default all); a model renders as it was trained instead.
+            comma-separated string, default all); a model renders as it was trained instead. Either
+            one given without a model: the unlearned score.
         cache_dir: folder of cached feature tables (None: no cache).
+        unlearned: the unlearned score even where the shipped model could score the pair.
 
     Returns:
-        ``{"score", "mask_ssim", "features"}``: without a model ``score`` = ``mask_ssim``, the mean
-        Mask-SSIM over styles, shadings and the 12 views (1 = identical renders); with one, the
-        model's prediction on its training data's scale, plus what :meth:`QualityPredictor.predict`
-        returns (``target``, ``higher_is_better``, ``score_range``, ...; its ``features``, the names the
-        model uses, as ``model_features``).
+        ``{"score", "mask_ssim", "features", "model"}``: without a model's prediction ``score`` =
+        ``mask_ssim``, the mean Mask-SSIM over styles, shadings and the 12 views (1 = identical
+        renders) and ``model`` None; with one, the model's prediction on its training data's scale
+        (``model``: the checkpoint path or ``shipped <name>``), plus what the model's ``predict``
+        returns (``description``, ``distortion``, ...; the names it uses as ``model_features``).
     """
+    shipped = None
     if model is not None:
         _model(model, QualityPredictor, "score", "quality")
-    table = feature_table(reference, distorted, _feature_config(model, size, styles), cache_dir=cache_dir,
-                          device=device)
-    out = {"score": table.overall_score(), "mask_ssim": table.overall_score(), "features": dict(table.features)}
-    if model is not None:
-        prediction = model.predict(table.features)
+        if unlearned:
+            raise InputError("score: unlearned=True asks for the unlearned score: give no model with it")
+    elif not unlearned and size is None and styles is None:
+        shipped = load_shipped()
+    cfg = shipped.feature_config() if shipped is not None else _feature_config(model, size, styles)
+    table = feature_table(reference, distorted, cfg, cache_dir=cache_dir, device=device)
+    out = {"score": table.overall_score(), "mask_ssim": table.overall_score(), "features": dict(table.features),
+           "model": None}
+    if shipped is not None and shipped.missing(table.features):
+        shipped = None  # not a coloured point-cloud pair: the unlearned score
+    predictor = model if model is not None else shipped
+    if predictor is not None:
+        prediction = predictor.predict(table.features)
         prediction["model_features"] = prediction.pop("features")  # the selected names it used
+        prediction["model"] = model.path if model is not None else f"shipped {shipped.name}"
         out.update(prediction)
     return out

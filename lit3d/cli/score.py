@@ -2,15 +2,19 @@
 
 Examples::
 
-    lit3d-score bunny.obj bunny_noisy.ply                 # summary + overall score
+    lit3d-score ref.ply distorted.ply                     # coloured clouds: the shipped model's opinion score
+    lit3d-score bunny.obj bunny_noisy.ply --unlearned     # summary + unlearned score (mean Mask-SSIM)
     lit3d-score target.npz prediction.npz --json          # every feature as JSON
     lit3d-score a.obj b.obj --styles jade,toon --size 128 --save-views out/
     lit3d-score ref.obj dist.ply --ckpt logs/quality/runs/X/checkpoints/best-059.ckpt
     lit3d-score --pairs pairs.tsv                         # many pairs, one process, one table
     lit3d-score --pairs targets/ predictions/ --json      # files with the same name stem in both folders
 
-The overall score is the mean Mask-SSIM over styles, shadings and the 12 views
-(1 = identical renders). Two point clouds (.xyz, a .ply without faces, a .zip holding one
+Without ``--ckpt`` the score is the shipped quality model's predicted opinion score (MOS 1..5,
+trained on CPCD2.0 phil's human ratings of coloured point clouds: ``lit3d.quality.shipped``, card in
+``docs/quality_model.md``) when the pair has the features it uses (two coloured point clouds, the
+default 256 px renders); otherwise, and with ``--unlearned``, the unlearned score: the mean
+Mask-SSIM over styles, shadings and the 12 views (1 = identical renders). Two point clouds (.xyz, a .ply without faces, a .zip holding one
 .ply) are rendered as points, with colour styles when both carry colour (the overall score
 is then the mean Mask-SSIM over the colour styles alone; the MatCap styles stay in the
 table as features for a learned score) and the D1/D2/Y-PSNR baselines. PLY colours are
@@ -54,13 +58,16 @@ def _parser() -> argparse.ArgumentParser:
                    help="many pairs in one process, one table out: FILE.tsv (reference<TAB>distorted a line, "
                         "paths relative to the file) or REF_DIR DIST_DIR (files with the same name stem)")
     p.add_argument("--size", type=int, default=None,
-                   help=f"render size in pixels (default {DEFAULT_SIZE}; with --ckpt: the model's)")
+                   help=f"render size in pixels (default {DEFAULT_SIZE}; with --ckpt: the model's; set: the unlearned "
+                        "score, the shipped model scores its own renders only)")
     p.add_argument("--styles", default=None,
                    help="'all' (default) or comma-separated style names (with --ckpt: the model's)")
     p.add_argument("--json", action="store_true", help="print every feature as JSON on stdout")
     p.add_argument("--save-views", metavar="DIR", help="write contact sheets (views, styles, SSIM maps) here")
     p.add_argument("--ckpt", metavar="PATH",
                    help="quality model checkpoint (lit3d-train task=quality): print its predicted score")
+    p.add_argument("--unlearned", action="store_true",
+                   help="print the unlearned score (mean Mask-SSIM) instead of the shipped model's opinion score")
     p.add_argument("--no-cache", action="store_true", help="do not read or write the feature cache")
     p.add_argument("--device", default=None, help="torch device for the measures (default cpu)")
     p.add_argument("--debug", action="store_true", help="show full tracebacks")
@@ -83,7 +90,8 @@ def _summary(table, ref: str, dist: str, seconds: float, prediction: dict | None
             for m, d in measures.items()]
     lines = [f"reference: {ref}", f"distorted: {dist}",
              markdown_table(["measure (mean over styles, 12 views)"] + shadings, rows)]
-    for k in ("chamfer", "hausdorff", "d1_psnr", "d2_psnr", "y_psnr"):
+    for k in ("chamfer", "hausdorff", "d1_psnr", "d2_psnr", "y_psnr", "pointssim_geometry", "pointssim_normal",
+              "pointssim_curvature", "pointssim_colour", "pcqm"):
         if k in feats:
             lines.append(f"{k}: {feats[k]:.5f}")
     lines.append(f"features: {len(feats)}  ({'cached' if table.cached else f'{seconds:.1f} s'})")
@@ -167,6 +175,8 @@ def _run(args) -> int:
     ref, dist = _load_pair(args.ref, args.dist)
     cfg, predictor, notes = _feature_setup(args)
     table, seconds, prediction = _score(args, cfg, predictor, ref, dist)
+    if predictor is not None and prediction is None:
+        notes.append(_shipped_unusable(predictor, table))
     if args.save_views:
         for p in save_contact_sheets(ref, dist, cfg, args.save_views, names=(args.ref, args.dist),
                                      protected=_inputs(args)):
@@ -198,6 +208,8 @@ def _run_pairs(args) -> int:
     for i, (ref_path, dist_path) in enumerate(pairs, 1):
         table, seconds, prediction = _score(args, cfg, predictor, *_load_pair(ref_path, dist_path))
         docs.append(_doc(ref_path, dist_path, table, seconds, prediction))
+        if predictor is not None and prediction is None:
+            model_notes.append(f"{ref_path} vs {dist_path}: {_shipped_unusable(predictor, table)}")
         took = "cached" if table.cached else f"{seconds:.1f} s"
         print(f"[{i}/{len(pairs)}] {ref_path} vs {dist_path}: {table.overall_score():.4f} ({took})", file=sys.stderr)
     if args.json:
@@ -219,14 +231,23 @@ def _load_pair(ref: str | Path, dist: str | Path):
 
 
 def _feature_setup(args):
-    """``(FeatureConfig, predictor or None, notes)`` from ``--size``/``--styles`` or ``--ckpt``."""
+    """``(FeatureConfig, predictor or None, notes)`` from ``--size``/``--styles``, ``--ckpt`` or the shipped model."""
     from lit3d.features.table import FeatureConfig
 
     cfg = FeatureConfig.rendered(args.size or DEFAULT_SIZE, args.styles)
     if args.ckpt:
+        if args.unlearned:
+            raise ValueError("--unlearned prints the unlearned score: give it without --ckpt")
         predictor, cfg, notes = _model_features(args, cfg)
         return cfg, predictor, notes
-    return cfg, None, []
+    if args.unlearned:
+        return cfg, None, []
+    from lit3d.quality.shipped import load_shipped
+
+    if args.size is not None or args.styles is not None:  # the shipped model scores its own renders only
+        return cfg, None, []
+    shipped = load_shipped()
+    return shipped.feature_config(), shipped, []
 
 
 def _score(args, cfg, predictor, ref, dist):
@@ -262,10 +283,20 @@ def _score(args, cfg, predictor, ref, dist):
                   "the cache, LIT3D_CACHE=DIR moves it)", file=sys.stderr, flush=True)
     seconds = time.perf_counter() - t0
     prediction = None
-    if predictor is not None:
+    if predictor is not None and args.ckpt:
         out = predictor.predict(table.features)
         prediction = {"score": out.pop("score"), "source": {"model": str(args.ckpt), **out}}
+    elif predictor is not None and not predictor.missing(table.features):  # the shipped model
+        out = predictor.predict(table.features)
+        prediction = {"score": out.pop("score"), "source": {**out, "model": f"shipped {out['model']}"}}
     return table, seconds, prediction
+
+
+def _shipped_unusable(model, table) -> str:
+    """The note for a pair the shipped model cannot score (it lacks the model's features)."""
+    missing = model.missing(table.features)
+    return (f"the shipped quality model '{model.name}' scores coloured point-cloud pairs; this pair lacks "
+            f"{len(missing)} of its features (e.g. {missing[0]}): unlearned score")
 
 
 def _doc(ref, dist, table, seconds: float, prediction: dict | None) -> dict:

@@ -21,7 +21,7 @@ from pathlib import Path
 from lit3d.utils.tables import markdown_table
 
 HEADERS = ({"ref", "dist"}, {"reference", "distorted"})
-SHOWN_EXTRA = ("chamfer", "hausdorff")
+SHOWN_EXTRA = ("chamfer", "hausdorff", "y_psnr", "pcqm")
 
 
 def read_pairs(spec: Sequence[str]) -> tuple[list[tuple[Path, Path]], list[str]]:
@@ -104,7 +104,7 @@ def pairs_table(rows: Sequence[dict]) -> str:
     for i, r in enumerate(rows, 1):
         cells = [str(i), r["ref"], r["dist"], f"{r['overall_score']:.4f}"]
         if predicted:
-            cells.append(f"{r['predicted_score']:.4f}")
+            cells.append(f"{r['predicted_score']:.4f}" if "predicted_score" in r else "–")
         cells += [f"{r['features'][k]:.5f}" if k in r["features"] else "–" for k in extra]
         cells.append("cached" if r["cached"] else f"{r['seconds']:.1f}")
         body.append(cells)

@@ -34,7 +34,6 @@ import numpy as np
 import torch
 
 from lit3d.metrics import image as im
-from lit3d.render.colour_styles import COLOUR_STYLES
 from lit3d.render.gbuffer import RenderConfig
 from lit3d.render.styles import apply_styles, resolve_styles
 from lit3d.utils.io import output_error, write_json
@@ -43,6 +42,14 @@ FEATURE_VERSION = 2
 IMAGE_MEASURES = ("mask_ssim", "mask_ssim_window", "mask_ssim_negative", "mask_ssim_merge", "ssim",
                   "ms_ssim", "fsim", "mse", "rmse", "psnr", "canny", "sre")
 MESH_MEASURES = ("chamfer", "hausdorff")
+# measures of the RGB colour styles of coloured shapes (lit3d.metrics.image.colour_measures): CIEDE2000 inside
+# the masks and piq's full-reference colour measures
+COLOUR_MEASURES = ("ciede2000", "fsimc", "vif", "gmsd", "haarpsi", "mdsi", "vsi")
+# the field's point-cloud metrics of two point clouds (lit3d.metrics.pointssim, lit3d.metrics.pcqm)
+POINT_MEASURES = ("pointssim", "pcqm")
+# the colour styles the unlearned score averages (the later ``matcap_*`` styles are features only, so the
+# unlearned score keeps the figures published for it)
+UNLEARNED_COLOUR_STYLES = ("albedo_rgb", "albedo_luma", "lit_rgb", "lit_luma")
 CROP_MARGIN = 8  # > SSIM radius (5) + 1 and > Canny support (2 blur + 1 Sobel + 1 NMS) + 1
 
 
@@ -55,7 +62,10 @@ class FeatureConfig:
         render: image size, view extent, shadings.
         styles: style names (default: all 30).
         measures: image measures to compute (default: all of :data:`IMAGE_MEASURES`).
-        mesh_measures: include Chamfer/Hausdorff.
+        mesh_measures: include Chamfer/Hausdorff (and, for point clouds, D1/D2/Y-PSNR).
+        colour_measures: measures of the RGB colour styles of coloured point clouds (subset of
+            :data:`COLOUR_MEASURES`, ``fsimc`` being piq's chromatic FSIM; names ``<measure>/<style>/<shading>``).
+        point_measures: the field's point-cloud metrics of two point clouds (subset of :data:`POINT_MEASURES`).
         n_samples: surface samples per mesh for the 3-D measures.
         fsim_downsample: FSIM image reduction factor (2: 256 px renders -> 128 px).
         chunk: styles per batched measure call (memory bound; 0 = all styles of a view at once).
@@ -66,6 +76,8 @@ class FeatureConfig:
     styles: tuple[str, ...] = ()
     measures: tuple[str, ...] = IMAGE_MEASURES
     mesh_measures: bool = True
+    colour_measures: tuple[str, ...] = COLOUR_MEASURES
+    point_measures: tuple[str, ...] = POINT_MEASURES
     n_samples: int = 20000
     fsim_downsample: int = 2
     chunk: int = 8
@@ -81,6 +93,8 @@ class FeatureConfig:
         d["render"] = self.render.as_dict()
         d["styles"] = self.resolved_styles()
         d["measures"] = list(self.measures)
+        d["colour_measures"] = list(self.colour_measures)
+        d["point_measures"] = list(self.point_measures)
         d.pop("chunk")  # neither changes the numbers
         d.pop("workers")
         d["version"] = FEATURE_VERSION
@@ -104,7 +118,7 @@ def feature_config(options: Mapping[str, Any] | None = None) -> FeatureConfig:
     if "shadings" in o:
         render_kw["shadings"] = tuple(o.pop("shadings"))
     o.pop("cache_dir", None)
-    for k in ("styles", "measures"):
+    for k in ("styles", "measures", "colour_measures", "point_measures"):
         if k in o and o[k] is not None:
             o[k] = tuple(o[k])
     return FeatureConfig(render=RenderConfig(**render_kw), **o)
@@ -148,7 +162,7 @@ def overall_score(features: dict[str, float], measure: str = "mask_ssim") -> flo
     """The unlearned score: mean of ``measure/<style>/<shading>`` (default Mask-SSIM).
 
     Colour-less tables: the mean over every style and shading. Tables with colour styles
-    (:data:`lit3d.render.colour_styles.COLOUR_STYLES`: coloured point clouds or meshes): the
+    (:data:`UNLEARNED_COLOUR_STYLES`: coloured point clouds or meshes): the
     mean over the colour styles only, i.e. over the images an observer of the coloured shape
     sees (its colours, silhouette and, in the lit styles, the shading of its geometry); the
     MatCap styles stay in the table as features for the learned score. (Until this revision the
@@ -158,7 +172,11 @@ def overall_score(features: dict[str, float], measure: str = "mask_ssim") -> flo
     geo, col = [], []
     for k, v in features.items():
         if k.split("/")[0] == measure and k.count("/") == 2:
-            (col if k.split("/")[1] in COLOUR_STYLES else geo).append(v)
+            style = k.split("/")[1]
+            if style in UNLEARNED_COLOUR_STYLES:
+                col.append(v)
+            elif not style.startswith("matcap_"):
+                geo.append(v)
     if not geo and not col:
         raise ValueError(f"no {measure}/* features in the table")
     return float(np.mean(col if col else geo))

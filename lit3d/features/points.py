@@ -5,13 +5,18 @@ measure of every MatCap style, shading and view, names ``measure/style/shading``
 the native splat renderer (:mod:`lit3d.render.splat`), plus:
 
 - colour styles (:mod:`lit3d.render.colour_styles`) when both clouds carry colour:
-  ``albedo_luma`` and ``lit_luma`` get every image measure (they are grey images);
-  ``albedo_rgb`` and ``lit_rgb`` get the SSIM family and MSE/RMSE/PSNR on RGB
-  (:data:`RGB_MEASURES`; SSIM maps averaged over the channels, PSNR from the mean
-  channel MSE);
+  ``albedo_luma``, ``lit_luma`` and ``matcap_luma`` get every image measure (they are grey
+  images); ``albedo_rgb``, ``lit_rgb`` and ``matcap_rgb`` get the SSIM family and MSE/RMSE/PSNR
+  on RGB (:data:`RGB_MEASURES`; SSIM maps averaged over the channels, PSNR from the mean
+  channel MSE) and the colour measures of ``cfg.colour_measures``: CIEDE2000 inside the masks
+  (every RGB colour style) and piq's FSIMc, VIF, GMSD, HaarPSI, MDSI, VSI (:data:`PIQ_STYLES`,
+  first shading, half size; :func:`_colour_measures`);
 - the point-cloud baselines of :mod:`lit3d.metrics.pointcloud` (``d1_psnr``,
   ``d2_psnr``, ``y_psnr``, their MSEs, ``hausdorff``, ``chamfer``) in the reference's
-  normalised frame (longest bounding-box side 1), when ``mesh_measures`` is on.
+  normalised frame (longest bounding-box side 1), when ``mesh_measures`` is on, and the
+  field's metrics of ``cfg.point_measures`` in the same frame: PointSSIM
+  (:mod:`lit3d.metrics.pointssim`, ``pointssim_{geometry,normal,curvature,colour}``) and, for
+  coloured clouds, PCQM (:mod:`lit3d.metrics.pcqm`, ``pcqm`` and ``pcqm_<feature>``).
 
 Both clouds are placed in the reference's frame. Local frames (PCA normals, spacing)
 of recently seen clouds are kept in memory, so a dataset with one reference computes
@@ -29,6 +34,7 @@ from concurrent.futures import Future
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 
 from lit3d.features.common import (
     FeatureConfig,
@@ -43,18 +49,22 @@ from lit3d.features.common import (
     write_cached_table,
 )
 from lit3d.metrics.image import PSNR_MAX_DB
+from lit3d.metrics.image.colour_measures import PIQ_MIN_SIZE, ciede2000, piq_measures
+from lit3d.metrics.pcqm import pcqm
+from lit3d.metrics.pointssim import pointssim
 from lit3d.metrics.pointcloud import pointcloud_baselines
 from lit3d.render.colour_styles import apply_colour_styles
 from lit3d.render.points import PointShape, load_points, local_frames
 from lit3d.render.splat import point_frame, render_point_gbuffers
 from lit3d.render.styles import apply_styles
 
-POINT_PATH_VERSION = 2
+POINT_PATH_VERSION = 3
 RGB_MEASURES = ("mask_ssim", "mask_ssim_window", "mask_ssim_negative", "mask_ssim_merge", "ssim", "mse", "rmse",
                 "psnr")
-GREY_COLOUR_STYLES = ("albedo_luma", "lit_luma")
+GREY_COLOUR_STYLES = ("albedo_luma", "lit_luma", "matcap_luma")
 ALBEDO_STYLES = ("albedo_luma", "albedo_rgb")  # unlit: independent of the normals
-RGB_COLOUR_STYLES = ("albedo_rgb", "lit_rgb")
+RGB_COLOUR_STYLES = ("albedo_rgb", "lit_rgb", "matcap_rgb")
+PIQ_STYLES = ("matcap_rgb",)  # the colour style piq's measures see: the colours under the MatCap's studio light
 _FRAMES: OrderedDict[str, dict[str, np.ndarray]] = OrderedDict()  # key -> frames, least recent first
 _FRAMES_KEEP = 4
 _FRAMES_LOCK = threading.Lock()  # guards _FRAMES and _FRAMES_PENDING
@@ -111,6 +121,37 @@ def _rgb_measures(a: torch.Tensor, b: torch.Tensor, ma, mb, crop, measures) -> d
     return {k: v for k, v in out.items() if k in want}
 
 
+def _colour_measures(a: torch.Tensor, b: torch.Tensor, ma, mb, crop, measures, styles: list[str], first: bool,
+                     downsample: int) -> dict[tuple[str, str], torch.Tensor]:
+    """``{(measure, style): (1,)}`` of the RGB colour styles ``a, b (S, 3, h, w)`` of one view (its crop, masks
+    ``(1, 1, h, w)``) for ``measures`` within :data:`lit3d.features.common.COLOUR_MEASURES`: CIEDE2000 inside
+    the masks for every style; piq's measures (``fsimc``: piq's chromatic FSIM) for :data:`PIQ_STYLES` under the
+    first shading only (``first``), on the full canvas averaged down by ``downsample`` (piq's measures pool
+    global statistics: 60 full-size images a pair would cost about 20 s on two cores), less where that would
+    leave fewer pixels than a measure needs (:data:`PIQ_MIN_SIZE`); a canvas too small for a measure has none."""
+    out = {}
+    if "ciede2000" in measures:
+        de = ciede2000(a, b, ma, mb)
+        out.update({("ciede2000", s): de[j:j + 1] for j, s in enumerate(styles)})
+    want = {m: "fsim" if m == "fsimc" else m for m in measures if m != "ciede2000"}
+    rows = [j for j, s in enumerate(styles) if s in PIQ_STYLES]
+    if want and first and rows:
+        y0, x0, hh, ww = crop
+        h, w = a.shape[-2:]
+        pad = (x0, ww - x0 - w, y0, hh - y0 - h)
+        ca, cb = F.pad(a[rows], pad), F.pad(b[rows], pad)
+        side = min(hh, ww)
+        downsample = max(1, min(downsample, side // max(PIQ_MIN_SIZE[m] for m in want.values())))
+        if downsample > 1:
+            ca, cb = F.avg_pool2d(ca, downsample), F.avg_pool2d(cb, downsample)
+        # a canvas smaller than a measure's smallest image (VIF: 41 px) has no such feature
+        want = {name: m for name, m in want.items() if side // downsample >= PIQ_MIN_SIZE[m]}
+        res = piq_measures(ca, cb, tuple(want.values()))
+        for name, m in want.items():
+            out.update({(name, styles[j]): res[m][i:i + 1] for i, j in enumerate(rows)})
+    return out
+
+
 def _point_view_measures(ga, gb, v: int, names: list[str], cfg: FeatureConfig, colour: bool,
                    albedo: bool = True) -> dict[tuple[str, str], torch.Tensor]:
     """``{(measure, style): (1,) float32}`` for view ``v`` of two point G-buffers (crop of the union of masks).
@@ -131,11 +172,15 @@ def _point_view_measures(ga, gb, v: int, names: list[str], cfg: FeatureConfig, c
         ia = torch.cat([ia] + [ca[s] for s in grey])
         ib = torch.cat([ib] + [cb[s] for s in grey])
         styles += grey
-        rgb = _rgb_measures(torch.cat([ca[s] for s in rgb_styles]), torch.cat([cb[s] for s in rgb_styles]),
-                            ma, mb, crop, cfg.measures)
+        stack_a, stack_b = torch.cat([ca[s] for s in rgb_styles]), torch.cat([cb[s] for s in rgb_styles])
+        rgb = _rgb_measures(stack_a, stack_b, ma, mb, crop, cfg.measures)
         for k, t in rgb.items():
             for j, s in enumerate(rgb_styles):
                 out[(k, s)] = t[j:j + 1].float().cpu()
+        if cfg.colour_measures:
+            found = _colour_measures(stack_a, stack_b, ma, mb, crop, cfg.colour_measures, rgb_styles, albedo,
+                                     cfg.fsim_downsample)
+            out.update({k: t.float().cpu() for k, t in found.items()})
     for i, j, res in chunked_measures(ia, ib, ma, mb, crop, cfg):
         for k, t in res.items():
             for o, s in enumerate(styles[i:j]):
@@ -169,7 +214,8 @@ def point_feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_di
         fa, fb = fa.result(), fb.result()
         ga, gb = (submit(render_point_gbuffers, s, cfg.render, frame=frame, frames=f) for s, f in ((pa, fa), (pb, fb)))
         ga, gb = ga.result(), gb.result()
-        base = submit(_baselines, pa, pb, fa, fb, frame, colour) if cfg.mesh_measures else None
+        base = submit(_baselines, pa, pb, fa, fb, frame, colour, cfg) if cfg.mesh_measures or cfg.point_measures \
+            else None
         pending = []
         for i, shading in enumerate(cfg.render.shadings):
             sa, sb = ga[shading], gb[shading]
@@ -192,8 +238,15 @@ def point_feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_di
     return FeatureTable(feats, key, cached=False, per_view={k: np.asarray(v) for k, v in per.items()})
 
 
-def _baselines(pa: PointShape, pb: PointShape, fa, fb, frame, colour: bool) -> dict[str, float]:
-    """The point-cloud baselines of the pair in the reference's normalised frame."""
+def _baselines(pa: PointShape, pb: PointShape, fa, fb, frame, colour: bool, cfg: FeatureConfig) -> dict[str, float]:
+    """The point-cloud baselines of the pair in the reference's normalised frame: D1/D2/Y-PSNR, Hausdorff and
+    Chamfer (``cfg.mesh_measures``), PointSSIM and PCQM (``cfg.point_measures``; PCQM needs colour)."""
     c, s = frame
-    return pointcloud_baselines((pa.points - c) * s, (pb.points - c) * s, fa["smooth"], fb["smooth"],
-                                pa.colours if colour else None, pb.colours if colour else None)
+    a, b = (pa.points - c) * s, (pb.points - c) * s
+    ca, cb = (pa.colours, pb.colours) if colour else (None, None)
+    out = pointcloud_baselines(a, b, fa["smooth"], fb["smooth"], ca, cb) if cfg.mesh_measures else {}
+    if "pointssim" in cfg.point_measures:
+        out.update(pointssim(a, b, ca, cb))
+    if "pcqm" in cfg.point_measures and colour:
+        out.update(pcqm(a, b, ca, cb))
+    return out

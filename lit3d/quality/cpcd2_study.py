@@ -20,6 +20,7 @@ families; the cross-dataset figure (train on the synthetic set) is not.
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 import numpy as np
@@ -28,18 +29,23 @@ from datamodules.quality import QualityDataModule
 from datamodules.quality.cpcd2 import read_cpcd2
 from lit3d.features.matrix import FeatureMatrix
 from lit3d.features.table import FeatureConfig, default_cache_dir, feature_config, feature_table, overall_score
-from lit3d.quality.correlation import pearson, spearman
+from lit3d.quality.correlation import correlation_ci, pearson, spearman
+from lit3d.quality.fusion import KINDS, ChosenFusion, LinearFusion, nested_group_out, out_of_group
 from lit3d.quality.protocol import LearnedScore
 from lit3d.quality.trainer import TrainConfig
 from lit3d.utils.tables import markdown_table
 
-LOWER_IS_BETTER = ("mse", "rmse", "canny", "hausdorff", "chamfer", "d1_mse", "d2_mse", "y_mse")
-BASELINES = ("d1_psnr", "d2_psnr", "y_psnr", "hausdorff", "chamfer")
+LOWER_IS_BETTER = ("mse", "rmse", "canny", "hausdorff", "chamfer", "d1_mse", "d2_mse", "y_mse", "pcqm", "ciede2000",
+                   "gmsd", "mdsi")
+BASELINES = ("d1_psnr", "d2_psnr", "y_psnr", "pointssim_geometry", "pointssim_normal", "pointssim_curvature",
+             "pointssim_colour", "pcqm", "hausdorff", "chamfer")
+FAMILIES = {"G": "G-PCC", "V": "V-PCC", "N": "noise"}
 
 
 def orientation(name: str) -> float:
     """+1 when a larger value of feature ``name`` means better quality, -1 otherwise (a priori)."""
-    return -1.0 if name.split("/")[0] in LOWER_IS_BETTER else 1.0
+    head = name.split("/")[0]
+    return -1.0 if head in LOWER_IS_BETTER or head.startswith("pcqm_") else 1.0
 
 
 def family(stimulus: str) -> str:
@@ -154,6 +160,111 @@ def synth_matrix(feature_options: dict, data_dir: str | Path, n_levels: int | No
     return dm.load_matrix()
 
 
+# --------------------------------------------------------------------------- rows with intervals
+# the feature sets the fusion may use, fixed before looking at any correlation (a priori: what the field
+# measures on coloured clouds); nested leave-one-family-out chooses among them, never the test family
+FUSION_SETS = {
+    "points": ("y_psnr", "d1_psnr", "d2_psnr", "pointssim_colour", "pointssim_geometry", "pcqm"),
+    "renders": ("ciede2000/matcap_rgb/flat", "ciede2000/albedo_rgb/flat", "mask_ssim_window/matcap_rgb/flat",
+                "mask_ssim_window/albedo_rgb/flat", "fsimc/matcap_rgb/flat", "gmsd/matcap_rgb/flat",
+                "mdsi/matcap_rgb/flat", "vsi/matcap_rgb/flat", "haarpsi/matcap_rgb/flat", "vif/matcap_rgb/flat"),
+}
+FUSION_SETS["points+renders"] = FUSION_SETS["points"] + FUSION_SETS["renders"]
+
+
+def fusion_candidates(names) -> dict:
+    """The fusion's candidates of the nested protocol: each linear kind on each feature set of
+    :data:`FUSION_SETS` (the features the table holds), strength chosen inside the training families."""
+    out = {}
+    for set_name, feats in FUSION_SETS.items():
+        have = [f for f in feats if f in names]
+        if have:
+            signs = [orientation(f) for f in have]
+            for kind in KINDS:
+                out[f"{kind}:{set_name}"] = lambda have=have, signs=signs, kind=kind: LinearFusion(have, signs, kind)
+    return out
+
+
+def learned_predictions(items, tables, mlp: bool = True) -> dict[str, tuple[str, np.ndarray, dict]]:
+    """Out-of-family predictions (quality: higher = better) of the learned scores, leave-one-family-out:
+    ``{row name: (kind, (N,) values, details)}``. The fusion's kind, strength and feature set are chosen by
+    leave-one-family-out inside the training families (nested); the thesis MLP + SFS (at most 3 features
+    of :func:`family_candidates`) is fitted on the training families."""
+    fm = study_matrix(items, tables)
+    pred, choices = nested_group_out(fm, fusion_candidates(fm.names))
+    out = {"learned fusion (ours, leave-one-family-out)": ("ours, learned", -pred, choices)}
+    if mlp:
+        p = out_of_group(fm, learned_factory(3, family_candidates(fm.names)))
+        out["thesis MLP + SFS (leave-one-family-out)"] = ("thesis model, learned", -p, {})
+    return out
+
+
+def score_columns(items, tables, learned: dict | None = None) -> dict[str, tuple[str, np.ndarray]]:
+    """Every row of the interval tables: the unlearned score, each field baseline present, the learned rows."""
+    scores = {"overall (unlearned)": ("ours, unlearned", np.array([overall_score(t) for t in tables]))}
+    for b in BASELINES:
+        if all(b in t for t in tables):
+            scores[b] = ("baseline", orientation(b) * np.array([t[b] for t in tables]))
+    for name, (kind, values, _) in (learned or {}).items():
+        scores[name] = (kind, values)
+    return scores
+
+
+def interval_rows(items, tables, scores: dict, n_resamples: int = 2000) -> list[dict]:
+    """Per score: SROCC / PLCC / KROCC with their 95% bootstrap intervals (stimuli resampled) on every
+    subset (:func:`subsets`) and each distortion family (``family_G`` ...)."""
+    mos = np.array([it.score for it in items])
+    masks = dict(subsets(tables))
+    fams = np.array([family(it.name) for it in items])
+    masks.update({f"family_{f}": fams == f for f in FAMILIES if (fams == f).any()})
+    rows = []
+    for name, (kind, v) in scores.items():
+        row = {"score": name, "kind": kind}
+        for sub, m in masks.items():
+            row[f"n_{sub}"] = int(m.sum())
+            for c in ("srocc", "plcc", "krocc"):
+                row[f"{c}_{sub}"] = correlation_ci(v[m], mos[m], c, n_resamples=n_resamples)
+        rows.append(row)
+    return rows
+
+
+def interval_markdown(rows) -> str:
+    """Three tables: all stimuli; the geometry / colour-only subsets; SROCC per family."""
+    def cell(t):
+        r, lo, hi = t
+        return f"{r:.3f}" if not np.isfinite(lo) else f"{r:.3f} [{lo:.2f}, {hi:.2f}]"
+
+    head = ["score", "kind"]
+    first = rows[0]
+    t1 = markdown_table(head + [f"{c.upper()} all (n={first['n_all']})" for c in ("srocc", "plcc", "krocc")],
+                        [[r["score"], r["kind"]] + [cell(r[f"{c}_all"]) for c in ("srocc", "plcc", "krocc")]
+                         for r in rows])
+    subs = [("geometry", "geometry"), ("colour_only", "colour-only")]
+    t2 = markdown_table(head + [f"{c.upper()} {lab} (n={first[f'n_{s}']})" for s, lab in subs
+                                for c in ("srocc", "plcc", "krocc")],
+                        [[r["score"], r["kind"]] + [cell(r[f"{c}_{s}"]) for s, _ in subs
+                                                    for c in ("srocc", "plcc", "krocc")] for r in rows])
+    fams = [f for f in FAMILIES if f"n_family_{f}" in first]
+    t3 = markdown_table(head + [f"SROCC {FAMILIES[f]} (n={first[f'n_family_{f}']})" for f in fams],
+                        [[r["score"], r["kind"]] + [cell(r[f"srocc_family_{f}"]) for f in fams] for r in rows])
+    return "\n\n".join([t1, t2, t3])
+
+
+def shipped_model(items, tables, feature_options: dict, cv_rows: list[dict], command: str) -> dict:
+    """The shipped model's JSON (:mod:`lit3d.quality.shipped`): the fusion candidate chosen by
+    leave-one-family-out on every stimulus, fitted on all of them, with its cross-validated rows."""
+    fm = study_matrix(items, tables)
+    chosen = ChosenFusion(fusion_candidates(fm.names)).fit(fm)
+    cv = {r["score"]: {k: [round(x, 4) for x in v] if isinstance(v, tuple) else v for k, v in r.items()
+                       if k not in ("score", "kind")} for r in cv_rows}
+    return {"name": "cpcd2-phil-fusion",
+            "trained_on": f"CPCD2.0 phil ({len(items)} coloured point clouds, MOS 1..5)",
+            "target": {"name": "MOS", "lo": 1.0, "hi": 5.0, "higher_is_better": True},
+            "feature_options": dict(feature_options), "fusion": chosen.model.to_dict(), "chosen": chosen.chosen,
+            "inner_scores": {k: round(v, 4) for k, v in chosen.scores.items()},
+            "cross_validated": cv, "command": command}
+
+
 def markdown(rows) -> str:
     subs = ("all", "geometry", "colour_only")
     head = ["score", "kind"] + [f"SROCC {s} (n={rows[0][f'n_{s}']})" for s in subs] + [f"PLCC {s}" for s in subs]
@@ -172,6 +283,11 @@ def main(argv=None) -> int:
                    help="also the learned score: leave-one-family-out here, and trained on the synthetic set")
     p.add_argument("--family-out", action="store_true",
                    help="also the learned score, leave-one-distortion-family-out (fitted on this set)")
+    p.add_argument("--fusion", action="store_true",
+                   help="the interval tables (SROCC/PLCC/KROCC with bootstrap intervals, subsets, families) with the "
+                        "learned rows: the fusion (nested leave-one-family-out) and the thesis MLP + SFS")
+    p.add_argument("--ship", metavar="JSON", default=None,
+                   help="with --fusion: write the chosen fusion, fitted on every stimulus, as a shipped model here")
     p.add_argument("--synth-dir", default="data/quality_synth_cpcd2", help="cache of the synthetic set (--learned)")
     p.add_argument("--out", default=None, help="write the markdown table here too")
     args = p.parse_args(argv)
@@ -183,6 +299,23 @@ def main(argv=None) -> int:
     if args.measures:
         opts["measures"] = args.measures.split(",")
     items, tables = study_tables(args.root, feature_config(opts), default_cache_dir())
+    if args.fusion:
+        learned = learned_predictions(items, tables)
+        for name, (_, _, choices) in learned.items():
+            for fam, c in choices.items():
+                print(f"{name}, held-out family {fam}: chose {c['chosen']} (inner SROCC "
+                      + ", ".join(f"{k} {v:.3f}" for k, v in c["scores"].items()) + ")")
+        rows = interval_rows(items, tables, score_columns(items, tables, learned))
+        text = interval_markdown(rows)
+        if args.ship:
+            doc = shipped_model(items, tables, opts, rows, "python -m lit3d.quality.cpcd2_study --root ROOT --fusion "
+                                "--ship " + args.ship)
+            Path(args.ship).write_text(json.dumps(doc, indent=1) + "\n")
+            print(f"wrote {args.ship}: {doc['chosen']}, weights {doc['fusion']['coef']}")
+        print(text)
+        if args.out:
+            Path(args.out).write_text(text + "\n")
+        return 0
     text = markdown(correlation_rows(items, tables))
     if args.family_out or args.learned:
         fm = study_matrix(items, tables)

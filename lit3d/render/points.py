@@ -288,6 +288,19 @@ def neighbour_covariance(x: np.ndarray) -> np.ndarray:
     return c
 
 
+def smallest_eigenvalue(cov: np.ndarray, p_floor: float = 1e-300) -> np.ndarray:
+    """Smallest eigenvalue ``(N,) float64`` of symmetric ``(N, 3, 3)`` matrices: the trigonometric solution of
+    the characteristic cubic (``p_floor`` keeps isotropic matrices finite)."""
+    a = np.asarray(cov, dtype=np.float64)
+    a00, a01, a02, a11, a12, a22 = a[:, 0, 0], a[:, 0, 1], a[:, 0, 2], a[:, 1, 1], a[:, 1, 2], a[:, 2, 2]
+    q = (a00 + a11 + a22) / 3.0
+    b00, b11, b22 = a00 - q, a11 - q, a22 - q
+    p = np.sqrt((b00 ** 2 + b11 ** 2 + b22 ** 2 + 2.0 * (a01 ** 2 + a02 ** 2 + a12 ** 2)) / 6.0)
+    det = b00 * (b11 * b22 - a12 * a12) - a01 * (a01 * b22 - a12 * a02) + a02 * (a01 * a12 - b11 * a02)
+    r = np.clip(det / np.maximum(p, p_floor) ** 3 / 2.0, -1.0, 1.0)
+    return q + 2.0 * p * np.cos(np.arccos(r) / 3.0 + 2.0 * np.pi / 3.0)
+
+
 def smallest_eigenvector(cov: np.ndarray) -> np.ndarray:
     """Unit eigenvector ``(N, 3) float32`` of the smallest eigenvalue of symmetric ``(N, 3, 3)`` matrices.
 
@@ -298,12 +311,7 @@ def smallest_eigenvector(cov: np.ndarray) -> np.ndarray:
     """
     a = np.asarray(cov, dtype=np.float64)
     a00, a01, a02, a11, a12, a22 = a[:, 0, 0], a[:, 0, 1], a[:, 0, 2], a[:, 1, 1], a[:, 1, 2], a[:, 2, 2]
-    q = (a00 + a11 + a22) / 3.0
-    b00, b11, b22 = a00 - q, a11 - q, a22 - q
-    p = np.sqrt((b00 ** 2 + b11 ** 2 + b22 ** 2 + 2.0 * (a01 ** 2 + a02 ** 2 + a12 ** 2)) / 6.0)
-    det = b00 * (b11 * b22 - a12 * a12) - a01 * (a01 * b22 - a12 * a02) + a02 * (a01 * a12 - b11 * a02)
-    r = np.clip(det / np.maximum(p, 1e-30) ** 3 / 2.0, -1.0, 1.0)
-    lam = q + 2.0 * p * np.cos(np.arccos(r) / 3.0 + 2.0 * np.pi / 3.0)
+    lam = smallest_eigenvalue(a, p_floor=1e-30)
     m00, m11, m22 = a00 - lam, a11 - lam, a22 - lam  # rows (m00 a01 a02), (a01 m11 a12), (a02 a12 m22)
     cands = np.stack([
         np.stack([a01 * a12 - a02 * m11, a02 * a01 - m00 * a12, m00 * m11 - a01 * a01], 1),  # row0 x row1

@@ -1,0 +1,64 @@
+"""The shipped quality model (lit3d.quality.shipped): its file, its defaults in lit3d-score and lit3d.score."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lit3d.quality.shipped import DEFAULT_MODEL, MODELS_DIR, ShippedModelError, load_shipped, model_names
+
+PHIL = Path(__file__).resolve().parents[2] / "shared" / "data" / "cpcd2_phil"
+
+
+def test_the_shipped_model_is_package_data_with_its_card():
+    assert DEFAULT_MODEL in model_names()
+    model = load_shipped()
+    doc = json.loads((MODELS_DIR / f"{DEFAULT_MODEL}.json").read_text())
+    assert model.features and all(np.isfinite(model.fusion.coef)) and (model.fusion.coef >= 0).all()
+    assert "phil" in model.trained_on and doc["command"] and doc["cross_validated"]
+    assert model.scaling.name == "MOS" and (model.scaling.lo, model.scaling.hi) == (1.0, 5.0)
+
+
+def test_prediction_moves_with_its_features_and_refuses_a_table_without_them():
+    model = load_shipped()
+    centre = dict(zip(model.features, model.fusion.mean * np.asarray(model.fusion.signs)))
+    mid = model.predict(centre)["score"]
+    assert 1.0 <= mid <= 5.0
+    j = int(np.argmax(model.fusion.coef))  # the feature with the largest weight, moved towards "better"
+    better = dict(centre)
+    better[model.features[j]] += model.fusion.signs[j] * model.fusion.scale[j]
+    assert model.predict(better)["score"] > mid
+    with pytest.raises(ShippedModelError, match="coloured point-cloud"):
+        model.predict({"mask_ssim/jade/flat": 0.9})
+
+
+def test_a_broken_model_file_is_one_clear_error(tmp_path, monkeypatch):
+    import lit3d.quality.shipped as shipped
+
+    (tmp_path / "bad.json").write_text('{"name": "bad", "fusion": {"features": ["a"], "coef": [1, 2]}}')
+    monkeypatch.setattr(shipped, "MODELS_DIR", tmp_path)
+    with pytest.raises(ShippedModelError, match="bad.json: not a readable shipped quality model"):
+        shipped.load_shipped("bad")
+    with pytest.raises(ShippedModelError, match="no shipped quality model 'nope'"):
+        shipped.load_shipped("nope")
+
+
+@pytest.mark.skipif(not (PHIL / "mos.csv").is_file(), reason="../shared/data/cpcd2_phil not here")
+def test_lit3d_score_prints_the_shipped_models_opinion_score_on_two_cpcd2_files(tmp_path):
+    ref, dist = PHIL / "Original" / "phil.zip", PHIL / "Database_10" / "phil_N_35.zip"
+    env = {"LIT3D_CACHE": str(tmp_path), "PATH": str(Path(sys.executable).parent)}
+    out = subprocess.run([sys.executable, "-m", "lit3d.cli.score", str(ref), str(dist)], capture_output=True,
+                         text=True, env=env, timeout=600)
+    assert out.returncode == 0, out.stderr
+    last = out.stdout.strip().splitlines()
+    line = next(ln for ln in last if ln.startswith("predicted quality (model shipped"))
+    score = float(line.rsplit(":", 1)[1])
+    assert 1.0 <= score <= 5.0 and "trained on CPCD2.0 phil" in out.stdout
+    raw = subprocess.run([sys.executable, "-m", "lit3d.cli.score", str(ref), str(dist), "--unlearned"],
+                         capture_output=True, text=True, env=env, timeout=600)
+    assert raw.returncode == 0 and "predicted quality" not in raw.stdout
+    assert raw.stdout.strip().splitlines()[-1].startswith("overall score (mean Mask-SSIM)")
