@@ -16,6 +16,7 @@ Each test reports every offender at once, with file and line.
 from __future__ import annotations
 
 import ast
+import re
 import sys
 import warnings
 from pathlib import Path
@@ -199,7 +200,15 @@ MAX_LINES = 400  # issue 34: small modules with one job
 
 
 def test_no_python_file_over_400_lines():
-    folders = ("lit3d", "datamodules", "scripts", "benchmarks", "tests")
+    folders = ("lit3d", "datamodules", "scripts", "benchmarks", "tests", "studies")
     long = {str(p.relative_to(ROOT)): n for f in folders for p in (ROOT / f).rglob("*.py")
             if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_LINES}
     assert not long, f"files over {MAX_LINES} lines (split them by job): {long}"
+
+
+def test_the_package_never_imports_the_studies():
+    """``studies/`` sits beside the package (research programs and their logs): the product does not depend on it."""
+    pattern = re.compile(r"^\s*(?:from|import)\s+studies\b", re.MULTILINE)
+    found = [str(p.relative_to(ROOT)) for f in ("lit3d", "datamodules") for p in (ROOT / f).rglob("*.py")
+             if pattern.search(p.read_text(encoding="utf-8"))]
+    assert not found, f"the package imports studies: {found}"

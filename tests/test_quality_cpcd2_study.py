@@ -8,7 +8,7 @@ import pytest
 from scipy.stats import spearmanr
 
 from datamodules.quality.mos import MosItem
-from lit3d.quality.cpcd2_study import correlation_rows, family, orientation, subsets
+from studies.quality.cpcd2_study import correlation_rows, family, orientation, subsets
 
 
 def fake(n: int = 12):

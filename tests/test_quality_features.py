@@ -129,7 +129,7 @@ def test_monotone_on_real_meshes(name):
 
 
 def test_canvas_study_mask_ssim_stable_plain_ssim_drifts(tmp_path):
-    from lit3d.quality import canvas_study
+    from studies.quality import canvas_study
 
     ref, dist = canvas_study.default_pair()
     rows = canvas_study.canvas_rows(ref, dist, canvases=(64, 128, 256), styles=("toon", "jade"), base_canvas=64)

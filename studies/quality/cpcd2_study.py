@@ -1,6 +1,6 @@
 """Evaluation on coloured point-cloud data in the CPCD2 layout (one reference, rated distortions).
 
-    python -m lit3d.quality.cpcd2_study --root ../shared/data/cpcd2_phil [--out report.md]
+    python -m studies.quality.cpcd2_study --root ../shared/data/cpcd2_phil [--out report.md]
 
 Computes (or reads from the feature cache) the table of every rated pair with
 :func:`lit3d.features.table.feature_table` (point clouds rendered as points), then reports
@@ -274,7 +274,7 @@ def markdown(rows) -> str:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m lit3d.quality.cpcd2_study", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m studies.quality.cpcd2_study", description=__doc__.split("\n\n")[0])
     p.add_argument("--root", required=True, help="dataset folder (mos.csv, Original/, Database_10/)")
     p.add_argument("--size", type=int, default=None, help="render size (default: the feature default, 256)")
     p.add_argument("--styles", default=None, help="comma-separated MatCap styles (default all)")
@@ -308,7 +308,7 @@ def main(argv=None) -> int:
         rows = interval_rows(items, tables, score_columns(items, tables, learned))
         text = interval_markdown(rows)
         if args.ship:
-            doc = shipped_model(items, tables, opts, rows, "python -m lit3d.quality.cpcd2_study --root ROOT --fusion "
+            doc = shipped_model(items, tables, opts, rows, "python -m studies.quality.cpcd2_study --root ROOT --fusion "
                                 "--ship " + args.ship)
             Path(args.ship).write_text(json.dumps(doc, indent=1) + "\n")
             print(f"wrote {args.ship}: {doc['chosen']}, weights {doc['fusion']['coef']}")

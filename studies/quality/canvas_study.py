@@ -8,7 +8,7 @@ creeps towards 1; Mask-SSIM only looks at the shape and stays put.
 
 Run::
 
-    python -m lit3d.quality.canvas_study --out docs/canvas_study.md
+    python -m studies.quality.canvas_study --out docs/canvas_study.md
 
 ``--ref``/``--dist`` take any shape files; by default a procedural bumpy sphere
 and a copy with normal-direction vertex noise are used.
