@@ -42,6 +42,7 @@ from lit3d.utils.checkpoints import first_line
 from lit3d.utils.config_dir import config_dir
 from lit3d.utils.errors import Lit3dError
 from lit3d.utils.io import OutputError
+from lit3d.utils.stops import start_up
 
 log = logging.getLogger("lit3d")
 
@@ -276,24 +277,25 @@ def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None, c
     if "--debug" in args:
         args = [a for a in args if a != "--debug"]
         os.environ["HYDRA_FULL_ERROR"] = "1"
-    try:
-        check_group_overrides(args)
-        composed = check_composes(args, config_name)
-        check_config_values(composed)  # types and ranges (lit3d.cli.config_checks)
-        check_output_paths(composed)
-        args, run_dir_lock = claim_run_dir(composed, args)  # one process per run dir (lit3d.cli.rundir)
-    except (UserError, ConfigValueError, OutputError) as exc:
-        if _debug_requested():
-            raise
-        fail(exc, EXIT_USER)
-    except KeyboardInterrupt:
-        stopped_early()
-    sys.argv = [sys.argv[0], *args]
-    try:
-        with run_dir_lock:
-            return hydra_main()
-    except KeyboardInterrupt:  # in Hydra's start, before run_cli
-        stopped_early()
+    with start_up():  # a Ctrl-C lost during the start still stops the command at its first stage
+        try:
+            check_group_overrides(args)
+            composed = check_composes(args, config_name)
+            check_config_values(composed)  # types and ranges (lit3d.cli.config_checks)
+            check_output_paths(composed)
+            args, run_dir_lock = claim_run_dir(composed, args)  # one process per run dir (lit3d.cli.rundir)
+        except (UserError, ConfigValueError, OutputError) as exc:
+            if _debug_requested():
+                raise
+            fail(exc, EXIT_USER)
+        except KeyboardInterrupt:
+            stopped_early()
+        sys.argv = [sys.argv[0], *args]
+        try:
+            with run_dir_lock:
+                return hydra_main()
+        except KeyboardInterrupt:  # in Hydra's start, before run_cli
+            stopped_early()
 
 
 def stopped_early() -> None:

@@ -24,7 +24,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 LABELS = {"SIGINT": "SIGINT (Ctrl-C)", "SIGTERM": "SIGTERM"}
-_state: dict = {"pending": None, "armed": False, "shielded": 0, "raised": False}
+_state: dict = {"pending": None, "armed": False, "shielded": 0, "raised": False, "early": None}
 
 
 class StopRequested(BaseException):
@@ -47,6 +47,29 @@ class StopRequested(BaseException):
     def label(self) -> str:
         """``"SIGINT (Ctrl-C)"`` or ``"SIGTERM"``."""
         return LABELS.get(self.signame, self.signame)
+
+
+@contextlib.contextmanager
+def start_up() -> Iterator[None]:
+    """A command's start (before any :func:`on_signals` stage): Ctrl-C raises ``KeyboardInterrupt`` as usual, and
+    is also remembered, so that one lost on the way (raised inside a finaliser or a callback that a library
+    runs, where Python prints "Exception ignored" and goes on) still stops the command when its first stage
+    begins: :func:`on_signals` raises ``KeyboardInterrupt`` at its start. Outside the main thread: as is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def remember(signum, frame) -> None:
+        _state["early"] = signal.Signals(signum).name
+        signal.default_int_handler(signum, frame)
+
+    before = signal.signal(signal.SIGINT, remember)
+    try:
+        yield
+    finally:
+        _state["early"] = None
+        if signal.getsignal(signal.SIGINT) is remember:  # not when a stage ignores signals on the way out
+            signal.signal(signal.SIGINT, before if before is not None else signal.SIG_DFL)
 
 
 def pending() -> str | None:
@@ -82,6 +105,8 @@ def on_signals(notify: Callable[[str], object] | None = None, ignore_after_stop:
     if threading.current_thread() is not threading.main_thread() or _state["armed"]:
         yield
         return
+    if _state["early"]:  # a Ctrl-C of the command's start that something swallowed (:func:`start_up`)
+        raise KeyboardInterrupt
 
     def on_signal(signum, _frame) -> None:
         name = signal.Signals(signum).name
