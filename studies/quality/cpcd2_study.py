@@ -34,6 +34,7 @@ from lit3d.quality.fusion import KINDS, ChosenFusion, LinearFusion, nested_group
 from lit3d.quality.protocol import LearnedScore
 from lit3d.quality.trainer import TrainConfig
 from lit3d.utils.tables import markdown_table
+from studies.quality.figure import write_figure
 
 LOWER_IS_BETTER = ("mse", "rmse", "canny", "hausdorff", "chamfer", "d1_mse", "d2_mse", "y_mse", "pcqm", "ciede2000",
                    "gmsd", "mdsi")
@@ -286,6 +287,8 @@ def main(argv=None) -> int:
     p.add_argument("--fusion", action="store_true",
                    help="the interval tables (SROCC/PLCC/KROCC with bootstrap intervals, subsets, families) with the "
                         "learned rows: the fusion (nested leave-one-family-out) and the thesis MLP + SFS")
+    p.add_argument("--figure", metavar="PNG", default=None,
+                   help="with --fusion: scatter panels of MOS against PCQM, Y-PSNR, the unlearned and the learned scores")
     p.add_argument("--ship", metavar="JSON", default=None,
                    help="with --fusion: write the chosen fusion, fitted on every stimulus, as a shipped model here")
     p.add_argument("--synth-dir", default="data/quality_synth_cpcd2", help="cache of the synthetic set (--learned)")
@@ -305,8 +308,16 @@ def main(argv=None) -> int:
             for fam, c in choices.items():
                 print(f"{name}, held-out family {fam}: chose {c['chosen']} (inner SROCC "
                       + ", ".join(f"{k} {v:.3f}" for k, v in c["scores"].items()) + ")")
-        rows = interval_rows(items, tables, score_columns(items, tables, learned))
+        columns = score_columns(items, tables, learned)
+        rows = interval_rows(items, tables, columns)
         text = interval_markdown(rows)
+        if args.figure:
+            keys = {"pcqm": "PCQM", "y_psnr": "Y-PSNR", "overall (unlearned)": "lit3d unlearned",
+                    "learned fusion (ours, leave-one-family-out)": "lit3d learned, leave-one-family-out"}
+            shown = {k: columns[k][1] for k in keys if k in columns}
+            print("wrote", write_figure(args.figure, np.array([it.score for it in items]),
+                                        [family(it.name) for it in items], shown, keys,
+                                        "CPCD2 phil: 30 coloured point clouds, MOS against each score"))
         if args.ship:
             doc = shipped_model(items, tables, opts, rows, "python -m studies.quality.cpcd2_study --root ROOT --fusion "
                                 "--ship " + args.ship)
