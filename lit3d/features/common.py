@@ -34,6 +34,7 @@ import numpy as np
 import torch
 
 from lit3d.metrics import image as im
+from lit3d.render.colour_styles import COLOUR_STYLES
 from lit3d.render.gbuffer import RenderConfig
 from lit3d.render.styles import apply_styles, resolve_styles
 from lit3d.utils.io import output_error, write_json
@@ -47,8 +48,8 @@ MESH_MEASURES = ("chamfer", "hausdorff")
 COLOUR_MEASURES = ("ciede2000", "fsimc", "vif", "gmsd", "haarpsi", "mdsi", "vsi")
 # the field's point-cloud metrics of two point clouds (lit3d.metrics.pointssim, lit3d.metrics.pcqm)
 POINT_MEASURES = ("pointssim", "pcqm")
-# the colour styles the unlearned score averages (the later ``matcap_*`` styles are features only, so the
-# unlearned score keeps the figures published for it)
+# the colour styles (of lit3d.render.colour_styles.COLOUR_STYLES) the unlearned score averages (the later
+# ``matcap_*`` styles are features only, so the unlearned score keeps the figures published for it)
 UNLEARNED_COLOUR_STYLES = ("albedo_rgb", "albedo_luma", "lit_rgb", "lit_luma")
 CROP_MARGIN = 8  # > SSIM radius (5) + 1 and > Canny support (2 blur + 1 Sobel + 1 NMS) + 1
 
@@ -175,7 +176,7 @@ def overall_score(features: dict[str, float], measure: str = "mask_ssim") -> flo
             style = k.split("/")[1]
             if style in UNLEARNED_COLOUR_STYLES:
                 col.append(v)
-            elif not style.startswith("matcap_"):
+            elif style not in COLOUR_STYLES:  # the MatCap styles; the other colour styles are features only
                 geo.append(v)
     if not geo and not col:
         raise ValueError(f"no {measure}/* features in the table")

@@ -34,7 +34,6 @@ from concurrent.futures import Future
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from lit3d.features.common import (
     FeatureConfig,
@@ -136,17 +135,11 @@ def _colour_measures(a: torch.Tensor, b: torch.Tensor, ma, mb, crop, measures, s
     want = {m: "fsim" if m == "fsimc" else m for m in measures if m != "ciede2000"}
     rows = [j for j, s in enumerate(styles) if s in PIQ_STYLES]
     if want and first and rows:
-        y0, x0, hh, ww = crop
-        h, w = a.shape[-2:]
-        pad = (x0, ww - x0 - w, y0, hh - y0 - h)
-        ca, cb = F.pad(a[rows], pad), F.pad(b[rows], pad)
-        side = min(hh, ww)
+        side = min(crop[2:])  # the full canvas: piq_measures pads the crop back to it
         downsample = max(1, min(downsample, side // max(PIQ_MIN_SIZE[m] for m in want.values())))
-        if downsample > 1:
-            ca, cb = F.avg_pool2d(ca, downsample), F.avg_pool2d(cb, downsample)
         # a canvas smaller than a measure's smallest image (VIF: 41 px) has no such feature
         want = {name: m for name, m in want.items() if side // downsample >= PIQ_MIN_SIZE[m]}
-        res = piq_measures(ca, cb, tuple(want.values()))
+        res = piq_measures(a[rows], b[rows], tuple(want.values()), crop=crop, downsample=downsample)
         for name, m in want.items():
             out.update({(name, styles[j]): res[m][i:i + 1] for i, j in enumerate(rows)})
     return out

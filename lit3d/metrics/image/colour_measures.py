@@ -177,7 +177,7 @@ def piq_functions() -> dict[str, Callable]:
 
 
 def piq_measures(a: torch.Tensor, b: torch.Tensor, measures: Sequence[str] = PIQ_MEASURES,
-                 crop: tuple[int, int, int, int] | None = None) -> dict[str, torch.Tensor]:
+                 crop: tuple[int, int, int, int] | None = None, downsample: int = 1) -> dict[str, torch.Tensor]:
     """piq's colour full-reference measures per image: ``{measure: (N,) float32}``.
 
     Args:
@@ -189,6 +189,8 @@ def piq_measures(a: torch.Tensor, b: torch.Tensor, measures: Sequence[str] = PIQ
             canvases that are 0 outside it (as in :func:`lit3d.features.common.pair_measures`);
             they are zero-padded back to the canvas first, so the values are the full-canvas ones
             (all six measures pool global statistics; none has an exact crop shortcut).
+        downsample: average ``downsample x downsample`` blocks of the (padded) images first (the
+            feature table's reduction of these global measures, as for the grey FSIM).
 
     Each measure is piq's function with ``data_range=1.0, reduction="none"`` and its defaults:
 
@@ -224,6 +226,8 @@ def piq_measures(a: torch.Tensor, b: torch.Tensor, measures: Sequence[str] = PIQ
         if min(pad) < 0:
             raise ValueError(f"crop {tuple(crop)} does not hold a {h} x {w} window")
         a, b = F.pad(a, pad), F.pad(b, pad)
+    if downsample > 1:
+        a, b = F.avg_pool2d(a, downsample), F.avg_pool2d(b, downsample)
     side = min(a.shape[-2:])
     small = [m for m in measures if side < PIQ_MIN_SIZE[m]]
     if small:
