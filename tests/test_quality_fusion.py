@@ -7,7 +7,8 @@ import scipy.stats
 
 from lit3d.features.matrix import FeatureMatrix
 from lit3d.quality.correlation import _rowwise, correlation_ci, kendall
-from lit3d.quality.fusion import LinearFusion, inner_score, nested_group_out, out_of_group
+from lit3d.quality.fusion import (AnchoredFusion, LinearFusion, fusion_from_dict, inner_score, nested_group_out,
+                                 out_of_group)
 
 
 def matrix(n_per_group: int = 10, noise: float = 0.02, seed: int = 0, informative: bool = True) -> FeatureMatrix:
@@ -74,6 +75,67 @@ def test_nested_protocol_chooses_without_the_held_out_group_and_a_broken_target_
     pred, _ = nested_group_out(broken, cands)
     assert abs(scipy.stats.spearmanr(pred, broken.target)[0]) < 0.5
     assert inner_score(broken, cands["ridge"]) < 0.5
+
+
+def anchored_matrix(correction: float = 0.0, seed: int = 0) -> FeatureMatrix:
+    """Three groups; quality = -anchor (a distance) + correction * extra."""
+    rng = np.random.default_rng(seed)
+    n = 30
+    groups = np.repeat(["G", "V", "N"], 10)
+    anchor = rng.random(n)
+    extra = rng.random(n)
+    quality = -anchor + correction * extra
+    return FeatureMatrix(np.stack([anchor, extra], 1), ["anchor", "extra"], groups, -quality)
+
+
+def test_anchored_fusion_alone_keeps_the_anchors_order_across_folds():
+    # a per-fold linear map would rescale each held-out group differently; the anchored score does not
+    fm = anchored_matrix(correction=0.0)
+    pred = out_of_group(fm, lambda: AnchoredFusion("anchor", -1.0, ["extra"], [1.0], strength=float("inf")))
+    np.testing.assert_allclose(pred, fm.columns(["anchor"])[:, 0], atol=1e-12)  # -score = the raw anchor
+    model = AnchoredFusion("anchor", -1.0, ["extra"], [1.0], strength=float("inf")).fit(fm)
+    assert model.corrections.tolist() == [0.0] and model.opinion["kind"] in ("logistic", "linear")
+    q = model.quality(fm.columns(model.inputs))
+    assert scipy.stats.pearsonr(q, 1.0 - fm.target)[0] > 0.99
+
+
+def test_anchored_fusion_learns_a_correction_in_the_anchors_units_and_round_trips():
+    fm = anchored_matrix(correction=0.5)
+    model = AnchoredFusion("anchor", -1.0, ["extra"], [1.0], strength=0.01).fit(fm)
+    assert model.corrections[0] == pytest.approx(0.5, abs=0.02)  # quality = -anchor + 0.5 extra
+    again = fusion_from_dict(model.to_dict())
+    assert isinstance(again, AnchoredFusion)
+    np.testing.assert_allclose(again.predict(fm), model.predict(fm), atol=1e-12)
+    alone = fusion_from_dict(AnchoredFusion("anchor", -1.0, ["extra"], [1.0], float("inf")).fit(fm).to_dict())
+    assert alone.strength == float("inf") and isinstance(fusion_from_dict(
+        LinearFusion(["extra"], [1.0], "ridge", 0.1).fit(fm).to_dict()), LinearFusion)
+
+
+def test_anchored_fusion_refuses_a_correction_against_its_sign_and_chooses_its_strength_inside():
+    fm = anchored_matrix(correction=-0.5)  # "extra" lowers quality but is declared "higher = better"
+    model = AnchoredFusion("anchor", -1.0, ["extra"], [1.0], strength=0.01).fit(fm)
+    assert model.corrections[0] == pytest.approx(0.0, abs=1e-9)
+    chosen = AnchoredFusion("anchor", -1.0, ["extra"], [1.0]).fit(anchored_matrix(correction=1.0, seed=1))
+    assert np.isfinite(chosen.strength) and chosen.corrections[0] > 0.5 and "inf" in chosen.inner
+    with pytest.raises(ValueError, match="finite values"):
+        fusion_from_dict({**model.to_dict(), "corrections": [float("nan")]})
+
+
+def test_opinion_map_is_an_increasing_logistic_that_fits_a_saturating_opinion():
+    from lit3d.quality.opinion_map import apply_opinion_map, check_opinion_map, fit_opinion_map
+
+    rng = np.random.default_rng(0)
+    s = np.sort(rng.normal(size=40))
+    q = 0.1 + 0.8 / (1.0 + np.exp(-(s - 0.3) / 0.4)) + 0.01 * rng.normal(size=40)
+    m = fit_opinion_map(s, q)
+    assert m["kind"] == "logistic"
+    np.testing.assert_allclose(m["params"], [0.1, 0.9, 0.3, 0.4], atol=0.05)
+    fitted = apply_opinion_map(m, s)
+    assert (np.diff(fitted) >= 0).all() and np.abs(fitted - q).max() < 0.05
+    line = fit_opinion_map(s[:4], q[:4])  # too few scores for four parameters: a line
+    assert line["kind"] == "linear" and line["params"][1] > 0
+    with pytest.raises(ValueError, match="opinion map"):
+        check_opinion_map({"kind": "logistic", "params": [1.0, 2.0]})
 
 
 def test_row_wise_correlations_equal_scipy_and_intervals_hold_the_estimate():

@@ -18,19 +18,20 @@ def test_the_shipped_model_is_package_data_with_its_card():
     assert DEFAULT_MODEL in model_names()
     model = load_shipped()
     doc = json.loads((MODELS_DIR / f"{DEFAULT_MODEL}.json").read_text())
-    assert model.features and all(np.isfinite(model.fusion.coef)) and (model.fusion.coef >= 0).all()
+    assert model.features and model.features[0] == doc["fusion"]["anchor"] == "pcqm"
+    assert np.isfinite(model.fusion.corrections).all() and (model.fusion.corrections >= 0).all()
+    assert model.fusion.opinion["kind"] == "logistic"
     assert "phil" in model.trained_on and doc["command"] and doc["cross_validated"]
     assert model.scaling.name == "MOS" and (model.scaling.lo, model.scaling.hi) == (1.0, 5.0)
 
 
 def test_prediction_moves_with_its_features_and_refuses_a_table_without_them():
     model = load_shipped()
-    centre = dict(zip(model.features, model.fusion.mean * np.asarray(model.fusion.signs)))
+    centre = {f: 0.5 for f in model.features}
+    centre["pcqm"] = 0.02  # a middling PCQM on CPCD2 phil (its values there: 0 .. 0.11)
     mid = model.predict(centre)["score"]
     assert 1.0 <= mid <= 5.0
-    j = int(np.argmax(model.fusion.coef))  # the feature with the largest weight, moved towards "better"
-    better = dict(centre)
-    better[model.features[j]] += model.fusion.signs[j] * model.fusion.scale[j]
+    better = dict(centre, pcqm=0.005)  # the anchor, a distance, moved towards "better"
     assert model.predict(better)["score"] > mid
     with pytest.raises(ShippedModelError, match="coloured point-cloud"):
         model.predict({"mask_ssim/jade/flat": 0.9})

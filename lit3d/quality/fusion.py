@@ -16,8 +16,16 @@ the distortion family or the reference shape; the pooled Spearman of the inner o
 predictions), so :func:`nested_group_out` (outer leave-one-group-out, inner choice of the model
 kind and its strength) never looks at the held-out group.
 
-A fitted model is a plain linear map, kept as JSON (:meth:`LinearFusion.to_dict`): the package's
-shipped quality model (:mod:`lit3d.quality.shipped`) is one.
+A second kind, :class:`AnchoredFusion`, keeps one published measure (the anchor, e.g. PCQM) as the
+scale of its score and learns only non-negative corrections in the anchor's units; its strength may
+be infinite (the anchor alone). Its score is not re-centred or re-scaled per training fold, so the
+out-of-fold scores of different folds stay on one scale, as a published measure's values do; the
+opinion scale is a separate linear map of that score. (Round 1 of ``studies/quality/LOG.md``: a linear
+map fitted per fold loses the order between the held-out families, even for one measure alone.)
+
+A fitted model is a plain linear map, kept as JSON (:meth:`LinearFusion.to_dict`,
+:meth:`AnchoredFusion.to_dict`, read back by :func:`fusion_from_dict`): the package's shipped
+quality model (:mod:`lit3d.quality.shipped`) is one.
 """
 from __future__ import annotations
 
@@ -25,13 +33,17 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import math
+
 import numpy as np
 
 from lit3d.features.matrix import FeatureMatrix
 from lit3d.quality.correlation import spearman
+from lit3d.quality.opinion_map import apply_opinion_map, check_opinion_map, fit_opinion_map
 
 KINDS = ("ridge",)
 STRENGTHS = {"ridge": (0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0)}
+STRENGTHS["anchored"] = STRENGTHS["ridge"] + (math.inf,)  # inf: the anchor alone, no correction
 
 
 class PositiveRidge:
@@ -81,6 +93,11 @@ class LinearFusion:
     intercept: float = 0.0
     inner: dict[str, float] = field(default_factory=dict)
 
+    @property
+    def inputs(self) -> list[str]:
+        """Every feature the model reads, in the order :meth:`quality` takes them."""
+        return list(self.features)
+
     def _oriented(self, fm: FeatureMatrix) -> np.ndarray:
         return fm.columns(list(self.features)) * np.asarray(self.signs, dtype=np.float64)
 
@@ -94,10 +111,8 @@ class LinearFusion:
     def fit(self, train: FeatureMatrix) -> LinearFusion:
         """Fit on ``train``; with ``strength=None`` choose it first by leave-one-group-out inside ``train``."""
         if self.strength is None:
-            self.inner = {str(s): inner_score(train, lambda s=s: LinearFusion(self.features, self.signs, self.kind, s))
-                          for s in STRENGTHS[self.kind]}
-            best = max(self.inner.values())
-            strength = min(float(s) for s, v in self.inner.items() if v >= best - 1e-12)
+            strength, self.inner = _choose_strength(
+                train, lambda s: LinearFusion(self.features, self.signs, self.kind, s), STRENGTHS[self.kind])
         else:
             strength = float(self.strength)
         self.mean, self.scale, self.coef, self.intercept = self._fit_at(train, strength)
@@ -136,6 +151,130 @@ class LinearFusion:
             raise ValueError(f"fusion model: {bad or ['intercept']} do not hold {f} finite values")
         return cls(list(d["features"]), arrays["signs"].tolist(), d["kind"], d["strength"], arrays["mean"],
                    arrays["scale"], arrays["coef"], float(d["intercept"]))
+
+
+def _choose_strength(train: FeatureMatrix, make: Callable[[float], Any], strengths) -> tuple[float, dict]:
+    """The strength of ``strengths`` with the best :func:`inner_score` of ``make(strength)`` on ``train``
+    (the smallest of equals) and every strength's inner score."""
+    inner = {str(s): inner_score(train, lambda s=s: make(s)) for s in strengths}
+    best = max(inner.values())
+    return min(float(s) for s, v in inner.items() if v >= best - 1e-12), inner
+
+
+@dataclass
+class AnchoredFusion:
+    """A published measure plus non-negative corrections in its units: ``score = sign_a * a + corrections . x``.
+
+    ``x`` are the raw oriented correction features (each times its sign: higher = better), ``a`` the raw
+    anchor. Fitting regresses quality on ``[a, x]`` (standardised, the anchor unpenalised, every weight
+    >= 0) at ``strength`` and divides the corrections by the anchor's weight, so the score keeps the
+    anchor's scale with no per-fold centring; ``strength`` inf (or an anchor weight of 0) is the anchor
+    alone. Quality on the [0, 1] opinion scale is a monotone map of the score fitted on the training rows
+    (:mod:`lit3d.quality.opinion_map`: the VQEG's four-parameter logistic, or a line). :meth:`predict` returns ``-score`` (the target's orientation); the
+    out-of-fold scores of different folds are on the anchor's one scale.
+
+    Attributes:
+        anchor, anchor_sign: the anchor feature and its orientation (+1: higher is better).
+        features, signs: F correction features and their orientations; ``corrections``: (F,) >= 0.
+        strength: ridge strength of the corrections (None: chosen by inner leave-one-group-out).
+        opinion: the opinion map of the score (:func:`lit3d.quality.opinion_map.fit_opinion_map`).
+    """
+
+    anchor: str
+    anchor_sign: float
+    features: Sequence[str]
+    signs: Sequence[float]
+    strength: float | None = None
+    corrections: np.ndarray | None = None
+    opinion: dict | None = None
+    inner: dict[str, float] = field(default_factory=dict)
+    kind: str = "anchored"
+
+    @property
+    def inputs(self) -> list[str]:
+        """Every feature the model reads: the anchor, then the corrections."""
+        return [self.anchor, *self.features]
+
+    def _score(self, x: np.ndarray) -> np.ndarray:
+        """``(N,)`` scores of raw ``(N, 1 + F)`` rows of :attr:`inputs`."""
+        x = np.asarray(x, dtype=np.float64)
+        return self.anchor_sign * x[:, 0] + (x[:, 1:] * np.asarray(self.signs)) @ self.corrections
+
+    def _corrections_at(self, a: np.ndarray, x: np.ndarray, q: np.ndarray, strength: float) -> np.ndarray:
+        if math.isinf(strength) or x.shape[1] == 0:
+            return np.zeros(x.shape[1])
+        z = np.column_stack([a, x])
+        sd = z.std(0)
+        sd = np.where(sd > 0, sd, 1.0)
+        zc, qc = (z - z.mean(0)) / sd, q - q.mean()
+        pen = np.sqrt(strength) * np.eye(z.shape[1])
+        pen[0, 0] = 0.0  # the anchor's weight is not shrunk
+        from scipy.optimize import nnls
+
+        w = nnls(np.vstack([zc, pen]), np.concatenate([qc, np.zeros(z.shape[1])]))[0] / sd
+        return w[1:] / w[0] if w[0] > 0 else np.zeros(x.shape[1])
+
+    def fit(self, train: FeatureMatrix) -> AnchoredFusion:
+        """Fit on ``train``; with ``strength=None`` choose it first by leave-one-group-out inside ``train``."""
+        if self.strength is None:
+            strength, self.inner = _choose_strength(
+                train, lambda s: AnchoredFusion(self.anchor, self.anchor_sign, self.features, self.signs, s),
+                STRENGTHS["anchored"])
+        else:
+            strength = float(self.strength)
+        cols = train.columns(self.inputs)
+        a = self.anchor_sign * cols[:, 0]
+        x = cols[:, 1:] * np.asarray(self.signs, dtype=np.float64)
+        q = 1.0 - train.target
+        self.corrections = self._corrections_at(a, x, q, strength)
+        self.opinion = fit_opinion_map(self._score(cols), q)
+        self.strength = strength
+        return self
+
+    def quality(self, x: np.ndarray) -> np.ndarray:
+        """Predicted quality ``1 - target`` (the [0, 1] opinion scale) of raw ``(N, 1 + F)`` rows of :attr:`inputs`."""
+        if self.corrections is None:
+            raise RuntimeError("AnchoredFusion used before fit")
+        return apply_opinion_map(self.opinion, self._score(x))
+
+    def predict(self, test: FeatureMatrix) -> np.ndarray:
+        """``(N,)`` minus the score of every row of ``test`` (the target's orientation, on the anchor's scale)."""
+        if self.corrections is None:
+            raise RuntimeError("AnchoredFusion used before fit")
+        return -self._score(test.columns(self.inputs))
+
+    def describe(self) -> dict:
+        alone = self.strength is not None and math.isinf(self.strength)
+        return {"kind": self.kind, "anchor": self.anchor, "strength": "inf: the anchor alone" if alone else self.strength,
+                "corrections": dict(zip(self.features, np.round(self.corrections, 6).tolist()))
+                if self.corrections is not None else {}}
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able parameters (see :meth:`from_dict`); an infinite strength is written as None."""
+        if self.corrections is None:
+            raise RuntimeError("AnchoredFusion.to_dict before fit")
+        return {"kind": self.kind, "anchor": self.anchor, "anchor_sign": float(self.anchor_sign),
+                "strength": None if math.isinf(self.strength) else self.strength, "features": list(self.features),
+                "signs": [float(s) for s in self.signs], "corrections": self.corrections.tolist(),
+                "opinion": self.opinion}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> AnchoredFusion:
+        f = len(d["features"])
+        arrays = {k: np.asarray(d[k], dtype=np.float64) for k in ("signs", "corrections")}
+        bad = [k for k, v in arrays.items() if v.shape != (f,) or not np.isfinite(v).all()]
+        if bad or not np.isfinite(float(d["anchor_sign"])):
+            raise ValueError(f"anchored fusion model: {bad or ['anchor_sign']} do not hold finite values for "
+                             f"{f} corrections")
+        check_opinion_map(d["opinion"])
+        strength = math.inf if d["strength"] is None else float(d["strength"])
+        return cls(str(d["anchor"]), float(d["anchor_sign"]), list(d["features"]), arrays["signs"].tolist(),
+                   strength, arrays["corrections"], dict(d["opinion"]))
+
+
+def fusion_from_dict(d: Mapping[str, Any]) -> LinearFusion | AnchoredFusion:
+    """A fitted fusion model from its :meth:`to_dict` form, by its ``kind``."""
+    return AnchoredFusion.from_dict(d) if d.get("kind") == "anchored" else LinearFusion.from_dict(d)
 
 
 def out_of_group(fm: FeatureMatrix, factory: Callable[[], Any]) -> np.ndarray:
@@ -187,5 +326,5 @@ def nested_group_out(fm: FeatureMatrix, candidates: Mapping[str, Callable[[], An
         rows = fm.shapes == g
         chosen = ChosenFusion(candidates).fit(fm.without_shape(g))
         pred[rows] = chosen.predict(fm.rows(rows))
-        choices[g] = {"chosen": chosen.chosen, "scores": chosen.scores}
+        choices[g] = {"chosen": chosen.chosen, "scores": chosen.scores, "described": chosen.model.describe()}
     return pred, choices

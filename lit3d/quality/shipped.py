@@ -1,8 +1,9 @@
-"""The quality model that ships with the package: a fitted :class:`lit3d.quality.fusion.LinearFusion`
-kept as JSON package data (``lit3d/quality/models/<name>.json``), with its card.
+"""The quality model that ships with the package: a fitted fusion of :mod:`lit3d.quality.fusion`
+(``AnchoredFusion`` or ``LinearFusion``) kept as JSON package data (``lit3d/quality/models/<name>.json``),
+with its card.
 
 The file holds ``{"name", "trained_on", "target": {"name", "lo", "hi", "higher_is_better"},
-"feature_options": {...}, "fusion": LinearFusion.to_dict(), "cross_validated": {...}, "command"}``:
+"feature_options": {...}, "fusion": <the model>.to_dict(), "cross_validated": {...}, "command"}``:
 the feature options are those of :func:`lit3d.features.common.feature_config` (how the training
 features were computed), the target says how the fusion's [0, 1] distortion maps back to the
 opinion scale. ``lit3d-score`` and :func:`lit3d.score` use :data:`DEFAULT_MODEL` unless told
@@ -21,7 +22,7 @@ import numpy as np
 
 from lit3d.features.common import FeatureConfig, feature_config
 from lit3d.features.matrix import TargetScaling
-from lit3d.quality.fusion import LinearFusion
+from lit3d.quality.fusion import AnchoredFusion, LinearFusion, fusion_from_dict
 from lit3d.utils.errors import Lit3dError
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
@@ -37,7 +38,7 @@ class ShippedQualityModel:
     """A loaded shipped model. ``predict`` maps one feature table to the opinion score."""
 
     name: str
-    fusion: LinearFusion
+    fusion: LinearFusion | AnchoredFusion
     scaling: TargetScaling
     trained_on: str
     feature_options: dict
@@ -45,7 +46,7 @@ class ShippedQualityModel:
 
     @property
     def features(self) -> list[str]:
-        return list(self.fusion.features)
+        return self.fusion.inputs
 
     def feature_config(self) -> FeatureConfig:
         """The configuration the training features were computed with."""
@@ -53,7 +54,7 @@ class ShippedQualityModel:
 
     def missing(self, features: Mapping[str, float]) -> list[str]:
         """The model's features that ``features`` lacks or holds as non-finite values."""
-        return [f for f in self.fusion.features if not math.isfinite(float(features.get(f, math.nan)))]
+        return [f for f in self.fusion.inputs if not math.isfinite(float(features.get(f, math.nan)))]
 
     def predict(self, features: Mapping[str, float]) -> dict:
         """``{"score": opinion score, "distortion": [0, 1] model output (higher = worse), "model", "trained_on",
@@ -63,7 +64,7 @@ class ShippedQualityModel:
         if missing:
             raise ShippedModelError(f"the shipped quality model '{self.name}' needs {len(missing)} feature(s) this "
                                     f"table lacks, e.g. {missing[:3]} (it scores coloured point-cloud pairs)")
-        x = np.array([[float(features[f]) for f in self.fusion.features]])
+        x = np.array([[float(features[f]) for f in self.fusion.inputs]])
         distortion = float(np.clip(1.0 - self.fusion.quality(x)[0], 0.0, 1.0))
         s = self.scaling
         better = "higher = better" if s.higher_is_better else "higher = more distorted"
@@ -91,7 +92,7 @@ def _load(path: str) -> ShippedQualityModel:
         d = json.loads(Path(path).read_text())
         t = d["target"]
         scaling = TargetScaling(float(t["lo"]), float(t["hi"]), bool(t["higher_is_better"]), str(t["name"]))
-        return ShippedQualityModel(d["name"], LinearFusion.from_dict(d["fusion"]), scaling, d["trained_on"],
+        return ShippedQualityModel(d["name"], fusion_from_dict(d["fusion"]), scaling, d["trained_on"],
                                    dict(d.get("feature_options") or {}), d)
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise ShippedModelError(f"{path}: not a readable shipped quality model ({exc})") from exc

@@ -30,7 +30,7 @@ from datamodules.quality.cpcd2 import read_cpcd2
 from lit3d.features.matrix import FeatureMatrix
 from lit3d.features.table import FeatureConfig, default_cache_dir, feature_config, feature_table, overall_score
 from lit3d.quality.correlation import correlation_ci, pearson, spearman
-from lit3d.quality.fusion import KINDS, ChosenFusion, LinearFusion, nested_group_out, out_of_group
+from lit3d.quality.fusion import KINDS, AnchoredFusion, ChosenFusion, LinearFusion, nested_group_out, out_of_group
 from lit3d.quality.protocol import LearnedScore
 from lit3d.quality.trainer import TrainConfig
 from lit3d.utils.tables import markdown_table
@@ -171,6 +171,7 @@ FUSION_SETS = {
                 "mdsi/matcap_rgb/flat", "vsi/matcap_rgb/flat", "haarpsi/matcap_rgb/flat", "vif/matcap_rgb/flat"),
 }
 FUSION_SETS["points+renders"] = FUSION_SETS["points"] + FUSION_SETS["renders"]
+ANCHOR = "pcqm"  # the anchored fusion's scale: the field's published colour-aware measure (a priori)
 
 
 def fusion_candidates(names) -> dict:
@@ -183,7 +184,28 @@ def fusion_candidates(names) -> dict:
             signs = [orientation(f) for f in have]
             for kind in KINDS:
                 out[f"{kind}:{set_name}"] = lambda have=have, signs=signs, kind=kind: LinearFusion(have, signs, kind)
+    if ANCHOR in names:
+        for set_name, feats in FUSION_SETS.items():
+            have = [f for f in feats if f in names and f != ANCHOR]
+            out[f"anchored:{ANCHOR}+{set_name}"] = lambda have=have: AnchoredFusion(
+                ANCHOR, orientation(ANCHOR), have, [orientation(f) for f in have])
     return out
+
+
+class PredictedOpinion:
+    """The nested choice of :func:`fusion_candidates` whose held-out output is its predicted opinion (the chosen
+    model's opinion map, fitted on the training families) instead of its score: ``predict`` -> ``(N,)`` distortion."""
+
+    def __init__(self, candidates):
+        self.chosen = ChosenFusion(candidates)
+
+    def fit(self, train):
+        self.chosen.fit(train)
+        return self
+
+    def predict(self, test):
+        model = self.chosen.model
+        return 1.0 - model.quality(test.columns(model.inputs))
 
 
 def learned_predictions(items, tables, mlp: bool = True) -> dict[str, tuple[str, np.ndarray, dict]]:
@@ -194,6 +216,8 @@ def learned_predictions(items, tables, mlp: bool = True) -> dict[str, tuple[str,
     fm = study_matrix(items, tables)
     pred, choices = nested_group_out(fm, fusion_candidates(fm.names))
     out = {"learned fusion (ours, leave-one-family-out)": ("ours, learned", -pred, choices)}
+    mapped = out_of_group(fm, lambda: PredictedOpinion(fusion_candidates(fm.names)))
+    out["its predicted MOS (opinion map of the training families)"] = ("ours, learned", -mapped, {})
     if mlp:
         p = out_of_group(fm, learned_factory(3, family_candidates(fm.names)))
         out["thesis MLP + SFS (leave-one-family-out)"] = ("thesis model, learned", -p, {})
@@ -262,6 +286,7 @@ def shipped_model(items, tables, feature_options: dict, cv_rows: list[dict], com
             "trained_on": f"CPCD2.0 phil ({len(items)} coloured point clouds, MOS 1..5)",
             "target": {"name": "MOS", "lo": 1.0, "hi": 5.0, "higher_is_better": True},
             "feature_options": dict(feature_options), "fusion": chosen.model.to_dict(), "chosen": chosen.chosen,
+            "described": chosen.model.describe(),
             "inner_scores": {k: round(v, 4) for k, v in chosen.scores.items()},
             "cross_validated": cv, "command": command}
 
@@ -306,7 +331,7 @@ def main(argv=None) -> int:
         learned = learned_predictions(items, tables)
         for name, (_, _, choices) in learned.items():
             for fam, c in choices.items():
-                print(f"{name}, held-out family {fam}: chose {c['chosen']} (inner SROCC "
+                print(f"{name}, held-out family {fam}: chose {c['chosen']} {c.get('described', '')} (inner SROCC "
                       + ", ".join(f"{k} {v:.3f}" for k, v in c["scores"].items()) + ")")
         columns = score_columns(items, tables, learned)
         rows = interval_rows(items, tables, columns)
@@ -322,7 +347,7 @@ def main(argv=None) -> int:
             doc = shipped_model(items, tables, opts, rows, "python -m studies.quality.cpcd2_study --root ROOT --fusion "
                                 "--ship " + args.ship)
             Path(args.ship).write_text(json.dumps(doc, indent=1) + "\n")
-            print(f"wrote {args.ship}: {doc['chosen']}, weights {doc['fusion']['coef']}")
+            print(f"wrote {args.ship}: {doc['chosen']}, {doc['described']}")
         print(text)
         if args.out:
             Path(args.out).write_text(text + "\n")
