@@ -3,6 +3,7 @@ TorchScript export giving the eager outputs. The worked examples are docs/api.md
 (tests/test_api_docs.py)."""
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
 
@@ -146,3 +147,37 @@ def test_export_command_line(ckpts, tmp_path, capsys):
     assert api_main(["export", str(tmp_path / "missing.ckpt"), str(tmp_path / "x.pt")]) == 2
     err = capsys.readouterr().err.strip()
     assert err == f"python -m lit3d.api export: error: {tmp_path / 'missing.ckpt'}: checkpoint not found"
+
+
+def test_export_never_writes_over_a_checkpoint(ckpts, tmp_path, capsys):
+    """``export(load(p), p)`` and ``python -m lit3d.api export CKPT CKPT`` once replaced the checkpoint
+    with TorchScript (exit 0). Now: its own checkpoint (also through a link), any other checkpoint and a
+    folder are refused with one line naming the file, before anything is written; an earlier export
+    is replaced through a temp file and a rename."""
+    from lit3d.utils.io import OutputError
+
+    own, other = tmp_path / "own.ckpt", tmp_path / "other.ckpt"
+    shutil.copy(ckpts["completion"], own)
+    shutil.copy(ckpts["canonical"], other)
+    (tmp_path / "link.pt").symlink_to(own)
+    (tmp_path / "folder.pt").mkdir()
+    before = {p: p.read_bytes() for p in (own, other)}
+    model = load(own)
+    cases = {own: f"{own}: the output would replace the input {own} (choose another output file)",
+             tmp_path / "link.pt": f"{tmp_path / 'link.pt'}: the output would replace the input {own}",
+             other: f"{other}: is a checkpoint (a torch.save archive); export writes TorchScript and never replaces",
+             tmp_path / "folder.pt": f"{tmp_path / 'folder.pt'}: an output file of this name exists as a folder"}
+    for out, message in cases.items():
+        with pytest.raises(OutputError) as info:
+            export(model, out)
+        assert str(info.value).startswith(message) and "\n" not in str(info.value), str(info.value)
+        assert api_main(["export", str(own), str(out)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith(f"python -m lit3d.api export: error: {message}") and "\n" not in err, err
+    assert {p: p.read_bytes() for p in (own, other)} == before  # both checkpoints as they were
+    assert torch.load(own, weights_only=True)["lit3d"]  # still a checkpoint, not TorchScript
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["folder.pt", "link.pt", "other.ckpt", "own.ckpt"]
+    out = tmp_path / "net.pt"
+    out.write_bytes(b"an earlier export")
+    assert export(model, out) == out and torch.jit.load(out) is not None  # a non-checkpoint is replaced
+    assert not list(tmp_path.glob(".*.tmp"))  # no temp file left

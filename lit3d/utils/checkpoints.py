@@ -40,3 +40,19 @@ def load_checkpoint(path: str | Path, error: type[Exception] = ValueError) -> di
         raise error(f"{path}: not a readable checkpoint: refused to load pickled Python objects ({detail})") from exc
     except Exception as exc:  # corrupt archive, not a torch file
         raise error(f"{path}: not a readable checkpoint ({type(exc).__name__}: {first_line(exc)})") from exc
+
+
+def is_checkpoint(path: str | Path) -> bool:
+    """True when ``path`` is a file written by ``torch.save`` (a Lightning or torch checkpoint: a zip
+    archive with ``<name>/data.pkl``), not a TorchScript archive (``torch.jit.save`` adds ``code/``
+    and ``constants.pkl``); a file that cannot be read as a zip archive, a folder or a FIFO (never
+    opened: it could block) is not one."""
+    if not Path(path).is_file():
+        return False
+    try:
+        with zipfile.ZipFile(path) as z:
+            names = z.namelist()
+    except (OSError, zipfile.BadZipFile, ValueError):
+        return False
+    parts = [n.split("/", 1)[-1] for n in names]
+    return "data.pkl" in parts and "constants.pkl" not in parts and not any(n.startswith("code/") for n in parts)
