@@ -11,6 +11,8 @@ import pickle
 import zipfile
 from pathlib import Path
 
+from lit3d.utils.files import path_problem
+
 # where lit3d-train stores what evaluation needs (task, data config, W&B id) in every checkpoint
 META_KEY = "lit3d"
 
@@ -23,13 +25,14 @@ def first_line(exc: BaseException, default: str = "") -> str:
 
 def load_checkpoint(path: str | Path, error: type[Exception] = ValueError) -> dict:
     """``torch.load(path, weights_only=True, mmap=True)`` on CPU; every failure is one ``error``
-    naming the file: missing, not a ``torch.save`` zip archive, pickled objects refused, corrupt.
+    naming the file: missing, a folder or FIFO (:func:`lit3d.utils.files.path_problem`), not a ``torch.save`` zip archive, pickled objects refused, corrupt.
     """
     import torch
 
     path = Path(path)
-    if not path.is_file():
-        raise error(f"{path}: checkpoint not found")
+    problem = path_problem(path, "checkpoint")  # a folder, a FIFO (never opened): named as such
+    if problem is not None:
+        raise error(f"{path}: {'checkpoint not found' if problem == 'no such checkpoint' else problem}")
     if not zipfile.is_zipfile(path):  # torch.save writes a zip archive; torch.load's own error here is about mmap
         raise error(f"{path}: not a readable checkpoint (not a torch.save zip archive)")
     try:
