@@ -2,7 +2,8 @@
 
 Used as a Hydra callback by every multirun (``hydra.callbacks.collect`` in ``conf/hydra/``;
 the configs in ``sweeps/`` set its metrics and title; written when the multirun ends) and by
-hand:  ``python -m lit3d.sweeps SWEEP_DIR [METRIC ...]``.
+hand:  ``python -m lit3d.sweeps SWEEP_DIR [METRIC ...]``. :class:`StudyStorage` makes a kept Optuna
+study (``hydra.sweeper.storage=sqlite:///optuna.db``) work and resume without replacing earlier trial dirs.
 """
 from __future__ import annotations
 
@@ -149,6 +150,66 @@ class CollectResults(Callback):
         except Exception as exc:  # the jobs ran: a summary problem must not fail the multirun
             log.warning("%s: no sweep_results.md (%s: %s); re-collect with python -m lit3d.sweeps %s",
                         sweep_dir, type(exc).__name__, exc, sweep_dir)
+
+
+def prepare_study_storage(url: str) -> None:
+    """Make the Optuna RDB storage at ``url`` (``sqlite:///optuna.db``) one that optuna 2.10 opens.
+
+    optuna 2.10 (the last version ``hydra-optuna-sweeper`` 1.x takes) stamps a new database's schema
+    version (alembic's ``alembic_version`` table) on a connection it never commits. SQLAlchemy 1.x
+    committed it by itself; SQLAlchemy 2 (which alembic >= 1.16 needs) rolls it back, and optuna's next
+    check found no version: an ``AssertionError`` in ``get_current_version`` before the first trial.
+    Here the tables are made and the version stamped in a committed transaction, once, before the
+    sweeper opens the storage; a storage that has its version already is left as it is."""
+    import os
+
+    import alembic.config
+    import alembic.migration
+    import alembic.script
+    import optuna
+    import sqlalchemy
+    from optuna.storages._rdb import models
+
+    engine = sqlalchemy.create_engine(url)
+    try:
+        with engine.connect() as conn:
+            if alembic.migration.MigrationContext.configure(conn).get_current_revision() is not None:
+                return
+        models.BaseModel.metadata.create_all(engine)
+        rdb = os.path.dirname(optuna.storages._rdb.storage.__file__)  # noqa: SLF001 (optuna's own migrations)
+        config = alembic.config.Config(os.path.join(rdb, "alembic.ini"))
+        config.set_main_option("script_location", os.path.join(rdb, "alembic").replace("%", "%%"))
+        script = alembic.script.ScriptDirectory.from_config(config)
+        with engine.begin() as conn:  # committed when the block ends
+            alembic.migration.MigrationContext.configure(conn).stamp(script, script.get_current_head())
+    finally:
+        engine.dispose()
+
+
+class StudyStorage(Callback):
+    """Hydra callback, on for every multirun (``conf/hydra/default.yaml``: ``hydra.callbacks.study_storage``);
+    does nothing unless the Optuna sweeper keeps its study (``hydra.sweeper.storage=sqlite:///...``). Then,
+    before the sweeper opens the storage: :func:`prepare_study_storage`; and a sweep dir that holds the
+    trial dirs of an earlier run (``0/``, ``1/`` ...) is refused with one line and exit 2: a resumed study
+    numbers its trial dirs from 0 again and would replace them (the default sweep dir is a new
+    timestamped folder per run)."""
+
+    def on_multirun_start(self, config, **kwargs) -> None:
+        from omegaconf import OmegaConf
+
+        storage = OmegaConf.select(config, "hydra.sweeper.storage", default=None)
+        if not storage:
+            return
+        sweep_dir = Path(str(config.hydra.sweep.dir))
+        earlier = sorted((p.name for p in sweep_dir.iterdir() if p.is_dir() and (p / ".hydra").is_dir()),
+                         key=lambda n: (len(n), n)) if sweep_dir.is_dir() else []
+        if earlier:
+            shown = ", ".join(earlier[:5]) + (", ..." if len(earlier) > 5 else "")
+            print(f"error: {sweep_dir}: holds the trial dirs of an earlier sweep ({shown}); a resumed study "
+                  f"({storage}) numbers its trial dirs from 0 again and would replace them: leave hydra.sweep.dir "
+                  "to its default (a new timestamped folder) or choose another one", file=sys.stderr, flush=True)
+            sys.exit(2)
+        prepare_study_storage(str(storage))
 
 
 if __name__ == "__main__":

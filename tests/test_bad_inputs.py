@@ -289,8 +289,8 @@ CASES = [
     ("mesh-garbage-ply", _file("garbage.ply", GARBAGE), score, ["unreadable ply file"]),
     ("mesh-garbage-obj", _file("garbage.obj", GARBAGE), score, ["no geometry in file"]),
     ("mesh-garbage-stl", _file("garbage.stl", GARBAGE), mesh_loader, ["no geometry in file"]),
-    ("mesh-is-a-directory", _dir("adir.ply"), score, ["is a directory"]),
-    ("mesh-missing", _missing("missing.obj"), score, ["file not found"]),
+    ("mesh-is-a-directory", _dir("adir.ply"), score, ["a folder, not a file"]),
+    ("mesh-missing", _missing("missing.obj"), score, ["no such file"]),
     # voxel grids (3D-RecGAN++ loader and lit3d-score)
     ("voxels-no-arr_0-key", _npz("nokey.npz", voxels=BOX), grid_loader, ["missing key 'arr_0'", "voxels"]),
     ("voxels-no-arrays-score", _npz("none.npz"), score, ["holds no arrays"]),

@@ -72,3 +72,68 @@ def test_two_optuna_trials_of_a_tiny_config(tmp_path):
                 if o.startswith("task.lr=")) for i in range(2)}
     assert len(lrs) == 2  # the sampler proposed two settings
     assert all((sweep / str(i) / "curves.png").is_file() for i in range(2))
+
+
+def test_a_kept_study_opens_and_loads_again(tmp_path):
+    """``hydra.sweeper.storage=sqlite:///...`` ended in optuna's AssertionError (its RDB storage's schema
+    version stamped on a connection that SQLAlchemy 2 never commits) before any trial: the storage is now
+    prepared first (lit3d.sweeps.prepare_study_storage), and the study keeps its trials across openings."""
+    import optuna
+
+    from lit3d.sweeps import prepare_study_storage
+
+    url = f"sqlite:///{tmp_path / 'study.db'}"
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    for n in (1, 2):  # a new database, then one prepared before (left as it is)
+        prepare_study_storage(url)
+        study = optuna.create_study(study_name="s", storage=url, load_if_exists=True)
+        study.optimize(lambda t: t.suggest_float("x", 0, 1), n_trials=1)
+        assert len(optuna.load_study(study_name="s", storage=url).trials) == n
+
+
+@pytest.mark.slow
+def test_a_kept_study_resumes_after_a_kill_without_replacing_its_trial_dirs(tmp_path):
+    """A 2-trial study kept in SQLite, killed (SIGKILL) during its second trial, then resumed: the resumed run
+    adds its trial to the same study in a new sweep dir; the first run's trial dir is as it was. Resuming into
+    the first run's sweep dir is refused with one line (its trial dirs would be numbered from 0 again)."""
+    import time
+
+    import optuna
+
+    db = tmp_path / "study.db"
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "WANDB_MODE": "offline"}
+    env.pop("HYDRA_FULL_ERROR", None)
+
+    def command(sweep: Path, n: int) -> list[str]:
+        return [str(Path(sys.executable).parent / "lit3d-train"), "hparams_search=canonical_optuna",
+                "experiment=canonical_tiny", "debug=limit", "trainer.max_epochs=1", "test_after_fit=false",
+                "logger=none", "callbacks.progress_bar=null", "evaluation.retrieval=null", f"hydra.sweeper.n_trials={n}",
+                f"hydra.sweeper.storage=sqlite:///{db}", "hydra.sweeper.study_name=kept", f"hydra.sweep.dir={sweep}",
+                f"paths.data_dir={tmp_path / 'data'}"]
+
+    first, second = tmp_path / "sweep1", tmp_path / "sweep2"
+    with open(tmp_path / "first.err", "w") as err:
+        proc = subprocess.Popen(command(first, 2), cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=err)
+    try:
+        t0 = time.monotonic()
+        while not (first / "1" / ".hydra").is_dir():  # trial 0 finished, trial 1 started
+            assert proc.poll() is None, (tmp_path / "first.err").read_text()[-3000:]
+            assert time.monotonic() - t0 < 400, "timed out"
+            time.sleep(0.05)
+    finally:
+        proc.kill()
+        proc.wait(timeout=60)
+    kept = (first / "0" / "metrics.json").read_bytes()
+    res = subprocess.run(command(first, 1), cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr[-3000:]
+    assert res.stderr.strip().splitlines()[-1].startswith(f"error: {first}: holds the trial dirs of an earlier sweep "
+                                                          "(0, 1); a resumed study")
+    res = subprocess.run(command(second, 1), cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert (first / "0" / "metrics.json").read_bytes() == kept  # the first run's trial dir as it was
+    trials = optuna.load_study(study_name="kept", storage=f"sqlite:///{db}").trials
+    states = [t.state.name for t in trials]
+    assert states == ["COMPLETE", "RUNNING", "COMPLETE"], states  # the killed trial stays RUNNING, never told
+    assert json.loads((second / "0" / "metrics.json").read_text())["monitored_value"] == pytest.approx(trials[2].value)
+    assert yaml.safe_load((second / "optimization_results.yaml").read_text())["best_value"] == pytest.approx(
+        min(trials[0].value, trials[2].value))

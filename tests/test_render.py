@@ -121,9 +121,9 @@ def test_to_mesh_errors_name_the_file(tmp_path, content, msg):
 
 
 def test_to_mesh_directory_and_missing(tmp_path):
-    with pytest.raises(ShapeError, match="directory"):
+    with pytest.raises(ShapeError, match="a folder, not a file"):
         to_mesh(tmp_path)
-    with pytest.raises(ShapeError, match="not found"):
+    with pytest.raises(ShapeError, match="no such file"):
         to_mesh(tmp_path / "nope.obj")
     np.savez(tmp_path / "e.npz", arr_0=np.zeros((8, 8, 8)))
     with pytest.raises(ShapeError, match="empty"):

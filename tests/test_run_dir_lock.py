@@ -116,3 +116,56 @@ def test_timestamped_run_dirs_never_collide(tmp_path):
         stamp, _, k = d.name.rpartition("_")
         assert runs / stamp in taken and int(k) >= 2, d.name
         assert (d / ".hydra" / "config.yaml").is_file()
+
+
+def test_a_run_that_waited_never_replaces_the_finished_run(tmp_path):
+    """``wait_for_run_dir=true`` once waited, then trained afresh in the same dir, replacing the finished
+    run's metrics.json, config.yaml, results.md, curves.png and last.ckpt without a word. Now it stops
+    with one line naming the dir, its results and how to continue that run, and writes nothing."""
+    run = tmp_path / "run"
+    holder = _holder(run)
+    args = ["lit3d-train", *TINY_DATA, "logger=none", f"paths.data_dir={tmp_path}/data", f"hydra.run.dir={run}",
+            "wait_for_run_dir=true"]
+    waiting = _start(args, tmp_path / "waiting")
+    err = tmp_path / "waiting.err"
+    _wait_for(lambda: "waiting for it" in err.read_text(), waiting, tmp_path / "waiting")
+    # the run it waits for finishes: its results are in the dir when it lets go
+    (run / "checkpoints").mkdir()
+    results = {run / "metrics.json": b'{"test/iou": 0.5}\n', run / "config.yaml": b"seed: 42\n",
+               run / "results.md": b"# results\n", run / "curves.png": b"png", run / "checkpoints" / "last.ckpt": b"ckpt"}
+    for path, data in results.items():
+        path.write_bytes(data)
+    holder.stdin.close()
+    assert holder.wait(timeout=30) == 0
+    assert waiting.wait(timeout=180) == 2, err.read_text()[-3000:]
+    text = err.read_text()
+    assert "Traceback" not in text
+    assert _errors(text) == [ln for ln in text.splitlines() if ln.strip()][-1:]
+    assert _errors(text)[0] == (
+        f"error: {run}: the run this one waited for left its results here (metrics.json, results.md, config.yaml, "
+        f"curves.png, checkpoints/last.ckpt); a run started with wait_for_run_dir=true never replaces them: "
+        f"continue it with the same overrides plus hydra.run.dir={run} ckpt_path=last, or choose another "
+        "hydra.run.dir")
+    assert {p: p.read_bytes() for p in results} == results
+    assert not (run / ".hydra").exists()  # Hydra wrote nothing there
+
+
+def test_what_a_run_that_waited_may_do(tmp_path):
+    """The rule of :func:`lit3d.cli.rundir.check_waited`: a training that continues the run (``ckpt_path=last``
+    or one of its checkpoints) and the commands that write no results go on; a fresh one and an evaluation stop."""
+    import pytest
+
+    from lit3d.cli.rundir import check_waited
+    from lit3d.utils.io import OutputError
+
+    run = tmp_path / "run"
+    check_waited(run, "train")  # no run dir yet: nothing to replace
+    (run / "checkpoints").mkdir(parents=True)
+    check_waited(run, "train")  # an empty dir (a lit3d-data run's, Hydra's folder only): nothing to replace
+    (run / "checkpoints" / "epoch=1.ckpt").write_bytes(b"x")
+    for command, ckpt in (("train", "last"), ("train", run / "checkpoints" / "epoch=1.ckpt"), ("data", None),
+                          ("summary", None)):
+        check_waited(run, command, ckpt)
+    for command, ckpt in (("train", None), ("train", tmp_path / "elsewhere.ckpt"), ("eval", "last")):
+        with pytest.raises(OutputError, match=r"left its results here \(checkpoints/epoch=1.ckpt\).*: choose another"):
+            check_waited(run, command, ckpt)

@@ -74,7 +74,7 @@ def _bad_lists(root):
         ([str(root / "three.tsv")], "three.tsv line 1: expected 2 tab-separated fields"),
         ([str(root / "missing.tsv")], f"missing.tsv line 2: {root / 'refs' / 'nope.obj'}: no such file"),
         ([str(root / "empty.tsv")], "empty.tsv: no pairs"),
-        ([str(root / "binary.tsv")], "binary.tsv: not a text file"),
+        ([str(root / "binary.tsv")], "binary.tsv line 1: not a text file of pairs (a NUL byte)"),
         ([str(root / "refs")], "a folder; give a .tsv file"),
         ([str(root / "refs"), str(root / "dists"), str(root / "refs")], "got 3 arguments"),
         ([str(root / "refs"), str(root / "nodir")], "nodir: not a folder"),
@@ -103,3 +103,57 @@ def test_pairs_with_conflicting_options(shapes, capsys, args, expected):
     assert main([*args, *FAST]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and expected in err
+
+
+@pytest.mark.timeout(60)  # a FIFO that were opened would block: fail, not hang
+def test_fifo_folder_and_missing_file_have_one_wording(shapes, capsys):
+    """A FIFO was an "empty file" for lit3d-score and "no such file" for --pairs, a folder "no such file":
+    now every path is named for what it is, in the words of lit3d-reconstruct (lit3d.utils.files), and a
+    FIFO is never opened."""
+    import os
+
+    os.mkfifo(shapes / "pipe.obj")
+    os.mkfifo(shapes / "pipe.tsv")
+    (shapes / "folder.obj").mkdir()
+    fifo, folder, missing = shapes / "pipe.obj", shapes / "folder.obj", shapes / "gone.obj"
+    ref = shapes / "refs" / "s0.obj"
+    for name, bad in (("fifo.tsv", "pipe.obj"), ("folder.tsv", "folder.obj"), ("missing.tsv", "gone.obj")):
+        (shapes / name).write_text(f"refs/s0.obj\tdists/s0.ply\nrefs/s1.obj\t{bad}\n")
+    fifo_said, folder_said = "a named pipe (FIFO), not a regular file", "a folder, not a file"
+    cases = [
+        ([str(fifo), str(ref)], f"{fifo}: {fifo_said}"),
+        ([str(ref), str(folder)], f"{folder}: {folder_said}"),
+        ([str(ref), str(missing)], f"{missing}: no such file"),
+        (["--pairs", str(shapes / "pipe.tsv")], f"{shapes / 'pipe.tsv'}: {fifo_said} (--pairs)"),
+        (["--pairs", str(shapes / "fifo.tsv")], f"{shapes / 'fifo.tsv'} line 2: {fifo}: {fifo_said}"),
+        (["--pairs", str(shapes / "folder.tsv")], f"{shapes / 'folder.tsv'} line 2: {folder}: {folder_said}"),
+        (["--pairs", str(shapes / "missing.tsv")], f"{shapes / 'missing.tsv'} line 2: {missing}: no such file"),
+    ]
+    for args, expected in cases:
+        assert main([*args, *FAST]) == 2, args
+        err = [ln for ln in capsys.readouterr().err.splitlines() if not ln.startswith(("[", "note: "))]
+        assert err == [f"lit3d-score: error: {expected}"], (args, err)
+
+
+def test_a_byte_order_mark_and_a_latin1_name_in_a_pairs_file(shapes, capsys):
+    """A UTF-8 BOM made the header a pair ('\\ufeffreference: no such file'); a Latin-1 file name made the
+    whole file "not a text file" with no line number. Now the BOM is dropped, and the name is read byte
+    for byte (surrogateescape): the file it names is scored, printed with \\xNN escapes."""
+    import os
+
+    bom = shapes / "bom.tsv"
+    bom.write_bytes(b"\xef\xbb\xbfreference\tdistorted\r\nrefs/s0.obj\tdists/s0.ply\r\n")
+    assert main(["--pairs", str(bom), *FAST, "--json"]) == 0
+    pairs = json.loads(capsys.readouterr().out)["pairs"]
+    assert [p["dist"] for p in pairs] == [str(shapes / "dists" / "s0.ply")]
+    latin1 = os.fsencode(shapes / "dists") + b"/caf\xe9.ply"
+    with open(shapes / "dists" / "s1.ply", "rb") as src, open(latin1, "wb") as dst:
+        dst.write(src.read())
+    (shapes / "latin1.tsv").write_bytes(b"# a Latin-1 name\nrefs/s1.obj\tdists/caf\xe9.ply\n")
+    assert main(["--pairs", str(shapes / "latin1.tsv"), *FAST]) == 0
+    out, err = capsys.readouterr()
+    assert "caf\\xe9.ply" in out and "caf\\xe9.ply" in err
+    (shapes / "gone.tsv").write_bytes(b"refs/s1.obj\tdists/gon\xe9.ply\n")
+    assert main(["--pairs", str(shapes / "gone.tsv"), *FAST]) == 2
+    assert capsys.readouterr().err.strip() == (f"lit3d-score: error: {shapes / 'gone.tsv'} line 1: "
+                                               f"{shapes / 'dists'}/gon\\xe9.ply: no such file")

@@ -1,12 +1,13 @@
 """``python -m lit3d.api export CKPT OUT.pt [--device cpu]``: TorchScript of a checkpoint's net
-(:func:`lit3d.api.export.export`). A bad checkpoint or output path is one line on stderr, exit status 2."""
+(:func:`lit3d.api.export.export`). A bad checkpoint or output path (the checkpoint itself, any other
+checkpoint, a folder) is one line on stderr, exit status 2; nothing is written then."""
 from __future__ import annotations
 
 import argparse
 import sys
 
 from lit3d.api.checkpoints import load
-from lit3d.api.export import export
+from lit3d.api.export import check_export_path, export
 from lit3d.utils.checkpoints import first_line
 from lit3d.utils.quiet import install
 
@@ -21,6 +22,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     install()
     try:
+        check_export_path(args.out, args.ckpt)  # before the checkpoint is loaded: never over a checkpoint
         print(export(load(args.ckpt, args.device), args.out))
     except ValueError as exc:  # InputError, OutputError, QualityCheckpointError: one line naming the file
         print(f"python -m lit3d.api export: error: {first_line(exc)}", file=sys.stderr)

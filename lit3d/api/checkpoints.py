@@ -19,7 +19,8 @@ import torch
 from omegaconf import DictConfig, open_dict
 
 from lit3d.callbacks.metadata import MetadataCallback
-from lit3d.cli.common import build_task, compose_config, task_meta, to_plain
+from lit3d.cli.common import UserError, build_task, check_composes, check_group_overrides, task_meta, to_plain
+from lit3d.cli.config_checks import ConfigValueError, check_config_values
 from lit3d.quality.predict import QualityPredictor, load_predictor
 from lit3d.reconstruct.canonical import CanonicalMapper, load_canonical
 from lit3d.reconstruct.depth_io import InputError
@@ -64,10 +65,27 @@ def load(path: str | Path, device: str = "cpu") -> Model:
     return load_predictor(path)
 
 
+def _check_overrides(overrides) -> None:
+    if isinstance(overrides, str) or not all(isinstance(o, str) for o in overrides):
+        raise InputError(f"overrides: expected a list of 'key=value' strings, got {overrides!r}")
+
+
 def train_config(overrides: Sequence[str]) -> DictConfig:
-    """``conf/train.yaml`` composed with Hydra ``overrides`` (as ``lit3d-train`` would, without running)."""
-    cfg = compose_config("train", overrides)
+    """``conf/train.yaml`` composed with Hydra ``overrides`` (as ``lit3d-train`` would, without running),
+    through ``lit3d-train``'s checks: an unknown config option, a key not in the config and a value of the
+    wrong type or out of range (:mod:`lit3d.cli.config_checks`) are one :class:`InputError` line, the
+    CLI's, before any net is built."""
+    _check_overrides(overrides)
+    try:
+        check_group_overrides(overrides)
+        cfg = check_composes(overrides, "train")
+        check_config_values(cfg)
+    except (UserError, ConfigValueError) as exc:
+        raise InputError(str(exc)) from None
+    if cfg is None:  # Hydra's own flags (-m, --cfg): no single config
+        raise InputError(f"overrides: Hydra flags are not overrides: {[o for o in overrides if o.startswith('-')]}")
     with open_dict(cfg):
+        cfg.pop("hydra", None)  # composed with it for the checks; no Hydra run here
         cfg.paths.output_dir = "."  # Hydra's run dir: no run here
     return cfg
 
@@ -79,10 +97,17 @@ def untrained_checkpoint(experiment: str, path: str | Path, overrides: Sequence[
     :func:`lit3d.export` without training. Its predictions are those of random weights.
 
     A quality model needs its features named (``task.features=[...]``): training selects them.
-    Returns ``path``.
+    The overrides go through ``lit3d-train``'s checks (:func:`train_config`); the checkpoint is written
+    through a temp file and a rename. Returns ``path``.
     """
+    if not isinstance(experiment, str):
+        raise InputError(f"experiment: expected a name of conf/experiment/ (a string), got {type(experiment).__name__}")
+    _check_overrides(overrides)
     cfg = train_config([f"experiment={experiment}", *overrides])
-    module = build_task(cfg.task)
+    try:
+        module = build_task(cfg.task)
+    except UserError as exc:  # a net size the constructors refuse: the CLI's task config line
+        raise InputError(str(exc)) from None
     ckpt = {"pytorch-lightning_version": pl.__version__, "epoch": 0, "global_step": 0,
             "state_dict": module.state_dict(), "hyper_parameters": dict(module.hparams)}
     module.on_save_checkpoint(ckpt)

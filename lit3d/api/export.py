@@ -14,6 +14,10 @@ What is exported (eval mode; the trace fixes the image / grid size, not the batc
 - canonical: ``(B, 1, S, S) float32`` normalised depth and mask -> ``(depth, mask)``, both
   ``(B, 1, S, S) float32``: canonical depth in [0, 1] and mask probability.
 
+The output is checked before anything is traced (:func:`check_export_path`): it must not be the
+model's own checkpoint, nor any other checkpoint (a ``torch.save`` archive), nor a folder; the file is
+written through a temp file and a rename, so it is whole or not there.
+
 ONNX is not offered: the ``onnx`` package is not a dependency.
 """
 from __future__ import annotations
@@ -29,7 +33,8 @@ from lit3d.api.checkpoints import Model
 from lit3d.reconstruct.canonical import CanonicalMapper
 from lit3d.reconstruct.depth_io import InputError
 from lit3d.reconstruct.pipeline import Completer
-from lit3d.utils.io import atomic_write_bytes, output_error
+from lit3d.utils.checkpoints import is_checkpoint
+from lit3d.utils.io import OutputError, atomic_write_bytes, check_targets, output_error
 
 
 class CompletionProbabilities(nn.Module):
@@ -72,10 +77,26 @@ def exportable(model: Model, batch: int = 1, seed: int = 0) -> tuple[nn.Module, 
     raise InputError(f"export: needs a completion or canonical model (lit3d.load), got {type(model).__name__}")
 
 
+def check_export_path(path: str | Path, checkpoint: str | Path | None = None) -> Path:
+    """Refuse (:class:`lit3d.utils.io.OutputError`, one line naming the file) an export path that is
+    ``checkpoint`` (the model's own, also through a link), any existing checkpoint
+    (:func:`lit3d.utils.checkpoints.is_checkpoint`), or a folder; an earlier TorchScript export may be
+    replaced. Uses the output check of ``lit3d-reconstruct`` (:func:`lit3d.utils.io.check_targets`)."""
+    p = Path(path)
+    check_targets([p], [checkpoint] if checkpoint else [], hint="choose another output file")
+    if is_checkpoint(p):
+        raise OutputError(f"{p}: is a checkpoint (a torch.save archive); export writes TorchScript and never "
+                          "replaces a checkpoint: choose another output file")
+    return p
+
+
 def export(model: Model, path: str | Path) -> Path:
     """Trace the net of ``model`` (:func:`lit3d.load` of a completion or canonical checkpoint) to
-    TorchScript and save it at ``path`` (atomically); load it with ``torch.jit.load``. Returns ``path``."""
+    TorchScript and save it at ``path`` (a temp file, then a rename); load it with ``torch.jit.load``.
+    Returns ``path``. Refused before tracing (:func:`check_export_path`): ``path`` is the model's own
+    checkpoint or another checkpoint, or a folder."""
     module, inputs = exportable(model)
+    check_export_path(path, getattr(model, "path", None))
     with torch.no_grad(), warnings.catch_warnings():
         # the canonical net compares image sizes (lit3d.canonical.nets.resize_to): fixed by the trace
         # by design; outputs on other inputs and batch sizes are checked in tests/test_api.py

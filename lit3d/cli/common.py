@@ -263,8 +263,10 @@ def check_output_paths(cfg: DictConfig | None) -> None:
         raise UserError(str(exc)) from None
 
 
-def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None, config_name: str = "train") -> Any:
-    """Console-script wrapper of a ``@hydra.main`` function (whose config is ``config_name``).
+def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None, config_name: str = "train",
+             command: str | None = None) -> Any:
+    """Console-script wrapper of a ``@hydra.main`` function (whose config is ``config_name``;
+    ``command``: ``train``, ``eval``, ``data`` or ``summary``, default the config's name).
 
     ``--version`` prints the version; ``--help`` shows the command's page (:mod:`lit3d.cli.about`).
     ``--debug`` is taken off the command line and turns on ``HYDRA_FULL_ERROR=1``
@@ -283,7 +285,7 @@ def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None, c
             composed = check_composes(args, config_name)
             check_config_values(composed)  # types and ranges (lit3d.cli.config_checks)
             check_output_paths(composed)
-            args, run_dir_lock = claim_run_dir(composed, args)  # one process per run dir (lit3d.cli.rundir)
+            args, run_dir_lock = claim_run_dir(composed, args, command or config_name)  # one process per run dir
         except (UserError, ConfigValueError, OutputError) as exc:
             if _debug_requested():
                 raise

@@ -66,7 +66,7 @@ def main() -> None:
 
         argv = [a for a in argv if a != "--rebuild"]
         request_rebuild()
-    cli_main(_hydra_main, _argv_show_to_override(argv))
+    cli_main(_hydra_main, _argv_show_to_override(argv), command="data")
 
 
 if __name__ == "__main__":

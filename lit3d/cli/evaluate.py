@@ -4,6 +4,10 @@
     lit3d-eval task=completion ckpt_path=... data=recgan data.root=../shared/data/recgan_sample
     lit3d-eval task=canonical ckpt_path=... evaluation.mesh_baselines=[]    # other evaluation settings
 
+Without ``data=NAME`` the checkpoint's own data config is used; ``data.KEY=VALUE`` overrides
+(``data.num_workers=1``, ``data.sizes.test=4``) then change that config (:func:`data_overrides`):
+each key must be one of the checkpoint's data config, and its value passes ``lit3d-train``'s checks.
+
 Evaluates with the evaluation settings the checkpoint was trained with (saved by lit3d-train), except
 those the command line sets (``evaluation.*``; with ``task=NAME``, whose config brings the node):
 :mod:`lit3d.cli.eval_settings`.
@@ -16,6 +20,7 @@ when the task picks a threshold there (completion), then test. Ctrl-C or SIGTERM
 """
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import hydra
@@ -23,17 +28,20 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from lit3d.cli import eval_settings
+from lit3d.cli.about import EXIT_USER
 from lit3d.cli.common import (
     CONF_DIR,
     UserError,
     build_datamodule,
     cli_main,
+    fail,
     import_object,
     read_checkpoint,
     run_cli,
     run_evaluation,
     to_plain,
 )
+from lit3d.cli.config_checks import ConfigValueError, check_config_values
 from lit3d.cli.resume_checks import check_eval_data
 from lit3d.cli.stops import evaluating
 from lit3d.utils.provenance import provenance
@@ -75,6 +83,7 @@ def _evaluate(cfg: DictConfig, out_dir: Path) -> dict[str, float]:
     settings = eval_settings.resolve(cfg, ckpt, meta, task_cls)  # the checkpoint's; the command line's win
     del ckpt
     data_cfg = to_plain(cfg.data) if cfg.get("data") is not None else dict(meta["data"])
+    data_cfg = with_data_overrides(data_cfg, to_plain(cfg.get(DATA_OVERRIDES)), cfg.ckpt_path)
     if hasattr(task, "adapt_data_config"):
         data_cfg = task.adapt_data_config(data_cfg)
     datamodule = build_datamodule(data_cfg)
@@ -91,6 +100,61 @@ def _evaluate(cfg: DictConfig, out_dir: Path) -> dict[str, float]:
                           extra=record, files={"config.yaml": config}, settings=settings)
 
 
+DATA_OVERRIDES = "data_overrides"  # where data.KEY=VALUE goes without data=NAME (no data node to override)
+
+
+def data_overrides(args: list[str]) -> list[str]:
+    """The command line with ``data.KEY=VALUE`` (also ``+data.KEY`` / ``++data.KEY``) turned into
+    ``+data_overrides.KEY=VALUE`` when no ``data=NAME`` is given: Hydra's config has no data node then,
+    and refused them with its hint to add ``+data...``; :func:`with_data_overrides` applies them to the
+    checkpoint's data config. Their values are checked here, before Hydra creates the run dir
+    (:func:`lit3d.cli.config_checks.check_config_values`)."""
+    if any(a.split("=", 1)[0].lstrip("+~") == "data" for a in args if "=" in a):
+        return args  # data=NAME: Hydra overrides its node itself
+    out, moved = [], []
+    for a in args:
+        key, sep, value = a.partition("=")
+        if sep and not a.startswith("-") and key.lstrip("+").startswith("data.") and not key.startswith("~"):
+            moved.append(f"{key.lstrip('+')}={value}")
+            out.append(f"+{DATA_OVERRIDES}.{key.lstrip('+')[len('data.'):]}={value}")
+        else:
+            out.append(a)
+    if moved:
+        try:
+            check_config_values(OmegaConf.from_dotlist(moved))
+        except ConfigValueError as exc:
+            fail(exc, EXIT_USER)
+        except Exception:  # a value only Hydra parses (a list, an interpolation): Hydra and the merge check it
+            pass
+    return out
+
+
+def _dict_keys(node: dict, prefix: tuple = ()) -> list[tuple]:
+    """The key paths of the leaves of nested dicts (a list value is one leaf)."""
+    out = []
+    for k, v in node.items():
+        out += _dict_keys(v, (*prefix, str(k))) if isinstance(v, dict) and v else [(*prefix, str(k))]
+    return out
+
+
+def with_data_overrides(data_cfg: dict, overrides: dict, ckpt_path) -> dict:
+    """``data_cfg`` (the checkpoint's) with ``overrides`` (:func:`data_overrides`) merged in; a key the
+    checkpoint's data config does not have, or a value of the wrong type, is one :class:`UserError` line."""
+    if not overrides:
+        return data_cfg
+    for parts in _dict_keys(overrides):
+        node = data_cfg
+        for i, part in enumerate(parts):
+            if not isinstance(node, dict) or part not in node:
+                known = ", ".join(sorted(node)) if isinstance(node, dict) else "(not a group)"
+                raise UserError(f"data.{'.'.join(parts[:i + 1])}: not a key of the checkpoint's data config "
+                                f"({ckpt_path}); known: {known}")
+            node = node[part]
+    merged = to_plain(OmegaConf.merge(OmegaConf.create(data_cfg), OmegaConf.create(overrides)))
+    check_config_values(OmegaConf.create({"data": merged}))
+    return merged
+
+
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="eval")
 def hydra_main(cfg: DictConfig) -> None:
     run_cli(evaluate, cfg)
@@ -98,7 +162,7 @@ def hydra_main(cfg: DictConfig) -> None:
 
 def main() -> None:
     """Console script ``lit3d-eval`` (``--debug``: tracebacks instead of one-line errors)."""
-    cli_main(hydra_main, config_name="eval")
+    cli_main(hydra_main, data_overrides(sys.argv[1:]), config_name="eval")
 
 
 if __name__ == "__main__":

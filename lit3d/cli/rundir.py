@@ -10,6 +10,12 @@ Before Hydra writes anything into the run dir (``.hydra/``, ``train.log``), :fun
   time), or waits for it with ``wait_for_run_dir=true``. The system frees the lock when the
   holder exits, SIGKILL included.
 
+A run that waited never replaces the results the run it waited for left in the dir
+(:func:`check_waited`): ``metrics.json``, ``results.md``, ``config.yaml``, ``curves.png`` or a
+checkpoint there stop it with one line naming the dir and those files, before Hydra writes
+anything; a training that continues that run (``ckpt_path=last``, or a checkpoint of that dir)
+goes on.
+
 :func:`hold_output_dir` takes the same lock inside a Hydra job (the jobs of a multirun, where
 the command line names no single run dir); it is a no-op where :func:`claim_run_dir` holds it.
 The other processes of one distributed run (ranks > 0, which Lightning starts with the run
@@ -25,6 +31,7 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
+from lit3d.utils.io import OutputError
 from lit3d.utils.locks import HeldLock, hold
 
 LOCK_FILE = ".lit3d.lock"
@@ -54,10 +61,61 @@ def _say_waiting(run_dir: Path):
 
 def lock_run_dir(run_dir: str | os.PathLike, wait: bool = False) -> HeldLock:
     """Create ``run_dir`` and take its lock (see the module doc); raises
-    :class:`~lit3d.utils.locks.LockBusy` (one line naming the holder) unless ``wait``."""
+    :class:`~lit3d.utils.locks.LockBusy` (one line naming the holder) unless ``wait``. The lock's
+    ``waited`` is True when another process held it first (this one waited for it)."""
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
-    return hold(run_dir / LOCK_FILE, _busy(run_dir), wait=wait, on_wait=_say_waiting(run_dir))
+    waited: list[str] = []
+    say = _say_waiting(run_dir)
+
+    def on_wait(holder: str) -> None:
+        waited.append(holder)
+        say(holder)
+
+    lock = hold(run_dir / LOCK_FILE, _busy(run_dir), wait=wait, on_wait=on_wait)
+    lock.waited = bool(waited)
+    return lock
+
+
+RESULT_FILES = ("metrics.json", "results.md", "config.yaml", "curves.png")
+
+
+def run_results(run_dir: str | os.PathLike) -> list[str]:
+    """The results a run left in ``run_dir``: :data:`RESULT_FILES` and ``checkpoints/*.ckpt`` there."""
+    run_dir = Path(run_dir)
+    found = [name for name in RESULT_FILES if (run_dir / name).is_file()]
+    ckpts = run_dir / "checkpoints"
+    if ckpts.is_dir():
+        found += [f"checkpoints/{p.name}" for p in sorted(ckpts.glob("*.ckpt"))]
+    return found
+
+
+def _continues(run_dir: Path, ckpt_path) -> bool:
+    """A training resumed from ``run_dir``'s own checkpoint (``ckpt_path=last`` or a file under it)."""
+    if ckpt_path in (None, "", "null"):
+        return False
+    if ckpt_path == "last":
+        return True
+    try:
+        return Path(str(ckpt_path)).resolve().is_relative_to(run_dir.resolve())
+    except OSError:
+        return False
+
+
+def check_waited(run_dir: str | os.PathLike, command: str, ckpt_path=None) -> None:
+    """Raise :class:`~lit3d.utils.io.OutputError` when a ``command`` (``train``, ``eval``) that waited
+    for ``run_dir`` would replace the results the run it waited for left there (:func:`run_results`);
+    a training continuing that run (:func:`_continues`) and the commands that write no results
+    (``data``, ``summary``) pass."""
+    run_dir = Path(run_dir)
+    found = run_results(run_dir)
+    if command not in ("train", "eval") or not found or (command == "train" and _continues(run_dir, ckpt_path)):
+        return
+    shown = ", ".join(found[:5]) + (", ..." if len(found) > 5 else "")
+    resume = (f"continue it with the same overrides plus hydra.run.dir={_override_value(run_dir)} ckpt_path=last, or "
+              if command == "train" and (run_dir / "checkpoints" / "last.ckpt").is_file() else "")
+    raise OutputError(f"{run_dir}: the run this one waited for left its results here ({shown}); a run started with "
+                      f"{WAIT_KEY}=true never replaces them: {resume}choose another hydra.run.dir")
 
 
 def new_dir(path: Path) -> Path:
@@ -81,11 +139,13 @@ def _override_value(path: Path) -> str:
     return "'" + text.replace("\\", "\\\\").replace("'", "\\'") + "'"
 
 
-def claim_run_dir(cfg: DictConfig | None, args: list[str]) -> tuple[list[str], contextlib.AbstractContextManager]:
+def claim_run_dir(cfg: DictConfig | None, args: list[str],
+                  command: str = "train") -> tuple[list[str], contextlib.AbstractContextManager]:
     """``(args, lock)``: the command line to hand to Hydra (plus ``hydra.run.dir=<claimed dir>``
     where the run dir is a fresh timestamped one) and the held lock of the run dir (release it by
     leaving ``with lock:``). ``cfg``: the composed config with its ``hydra`` node, or None
-    (multirun, ``--cfg`` ...: nothing claimed here; :func:`hold_output_dir` locks each job's dir)."""
+    (multirun, ``--cfg`` ...: nothing claimed here; :func:`hold_output_dir` locks each job's dir).
+    ``command`` (``train``, ``eval``, ``data``, ``summary``): after a wait, :func:`check_waited`."""
     if cfg is None or _other_rank():
         return args, contextlib.nullcontext()
     try:
@@ -97,7 +157,14 @@ def claim_run_dir(cfg: DictConfig | None, args: list[str]) -> tuple[list[str], c
     if "${now:" in raw and not given:
         run_dir = new_dir(run_dir)
         args = [*args, f"{RUN_DIR_KEY}={_override_value(run_dir)}"]
-    return args, lock_run_dir(run_dir, wait=bool(cfg.get(WAIT_KEY, False)))
+    lock = lock_run_dir(run_dir, wait=bool(cfg.get(WAIT_KEY, False)))
+    if lock.waited:
+        try:
+            check_waited(run_dir, command, cfg.get("ckpt_path"))
+        except BaseException:
+            lock.release()
+            raise
+    return args, lock
 
 
 def hold_output_dir(cfg: DictConfig) -> contextlib.AbstractContextManager:

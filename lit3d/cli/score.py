@@ -195,6 +195,7 @@ def _run_pairs(args) -> int:
     """``--pairs``: every pair in this one process (one start-up, one renderer), one table on stdout
     (``--json``: ``{"config", "notes", "pairs": [one document per pair]}``), a line per pair on stderr."""
     from lit3d.cli.score_pairs import pairs_table, read_pairs
+    from lit3d.utils.files import shown
 
     if args.ref or args.dist:
         raise ValueError("--pairs names the pairs itself: give no REF DIST with it")
@@ -205,8 +206,9 @@ def _run_pairs(args) -> int:
         print(f"note: {note}", file=sys.stderr)
     cfg, predictor, model_notes = _feature_setup(args)
     docs = []
-    for i, (ref_path, dist_path) in enumerate(pairs, 1):
-        table, seconds, prediction = _score(args, cfg, predictor, *_load_pair(ref_path, dist_path))
+    for i, (ref_file, dist_file) in enumerate(pairs, 1):
+        table, seconds, prediction = _score(args, cfg, predictor, *_load_pair(ref_file, dist_file))
+        ref_path, dist_path = shown(ref_file), shown(dist_file)  # a Latin-1 name printed as \xNN escapes
         docs.append(_doc(ref_path, dist_path, table, seconds, prediction))
         if predictor is not None and prediction is None:
             model_notes.append(f"{ref_path} vs {dist_path}: {_shipped_unusable(predictor, table)}")

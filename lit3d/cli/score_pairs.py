@@ -4,20 +4,23 @@ Two ways to name the pairs:
 
 - ``--pairs FILE.tsv``: one pair a line, ``reference<TAB>distorted`` (two fields separated by white
   space also do when neither path holds a space). Empty lines, lines starting with ``#`` and a
-  first line ``ref<TAB>dist`` / ``reference<TAB>distorted`` (a header) are skipped. Relative paths
-  are relative to the TSV file's folder.
+  first line ``ref<TAB>dist`` / ``reference<TAB>distorted`` (a header) are skipped, also after a
+  UTF-8 byte-order mark. Relative paths are relative to the TSV file's folder. A file name that is
+  not UTF-8 (Latin-1 bytes) is kept byte for byte (``surrogateescape``), as the file system has it.
 - ``--pairs REF_DIR DIST_DIR``: every file of ``DIST_DIR`` with a file of the same name stem in
   ``REF_DIR`` (``targets/chair_01.obj`` with ``predictions/chair_01.npz``), in name order; files
   without a partner are named in a note.
 
-Every path is checked before anything is loaded or rendered: a missing file, a bad line or a
-folder with no pair is one ``ValueError`` naming the file (and line).
+Every path is checked before anything is loaded or rendered: a missing file, a folder, a FIFO (never
+opened), a bad line or a folder with no pair is one ``ValueError`` naming the file (and line), in the
+wording of every command (:func:`lit3d.utils.files.path_problem`).
 """
 from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
 
+from lit3d.utils.files import path_problem, shown
 from lit3d.utils.tables import markdown_table
 
 HEADERS = ({"ref", "dist"}, {"reference", "distorted"})
@@ -38,14 +41,11 @@ def read_pairs(spec: Sequence[str]) -> tuple[list[tuple[Path, Path]], list[str]]
 
 def pairs_from_tsv(path: Path) -> list[tuple[Path, Path]]:
     """The pairs of a TSV file (see the module doc); paths resolved against the file's folder."""
-    if not path.is_file():
-        raise ValueError(f"{path}: no such file (--pairs)")
-    try:
-        lines = path.read_text().splitlines()
-    except UnicodeDecodeError as exc:
-        raise ValueError(f"{path}: not a text file of pairs ({exc.reason})") from None
+    problem = path_problem(path)
+    if problem is not None:  # a FIFO is never opened
+        raise ValueError(f"{path}: {problem} (--pairs)")
     pairs = []
-    for number, line in enumerate(lines, 1):
+    for number, line in _text_lines(path):
         if not line.strip() or line.lstrip().startswith("#"):
             continue
         fields = [f.strip() for f in line.split("\t")] if "\t" in line else line.split()
@@ -57,12 +57,28 @@ def pairs_from_tsv(path: Path) -> list[tuple[Path, Path]]:
             continue
         ref, dist = ((path.parent / f) for f in fields)
         for shape in (ref, dist):
-            if not shape.is_file():
-                raise ValueError(f"{path} line {number}: {shape}: no such file")
+            problem = path_problem(shape)
+            if problem is not None:
+                raise ValueError(f"{path} line {number}: {shown(shape)}: {problem}")
         pairs.append((ref, dist))
     if not pairs:
         raise ValueError(f"{path}: no pairs (one 'reference<TAB>distorted' a line)")
     return pairs
+
+
+def _text_lines(path: Path) -> list[tuple[int, str]]:
+    """``(number, line)`` of a pairs file: a UTF-8 byte-order mark is dropped; a line that is not
+    UTF-8 (a Latin-1 file name) is read with its bytes kept (``surrogateescape``), so the file it
+    names is found as it is on disk; a file with NUL bytes is not a text file (the first such line named)."""
+    data = path.read_bytes()
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]
+    out = []
+    for number, raw in enumerate(data.splitlines(), 1):
+        if b"\0" in raw:
+            raise ValueError(f"{path} line {number}: not a text file of pairs (a NUL byte)")
+        out.append((number, raw.decode("utf-8", "surrogateescape")))
+    return out
 
 
 def pairs_from_folders(ref_dir: Path, dist_dir: Path) -> tuple[list[tuple[Path, Path]], list[str]]:

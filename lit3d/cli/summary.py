@@ -42,7 +42,7 @@ def hydra_main(cfg: DictConfig) -> None:
 
 def main() -> None:
     """Console script ``lit3d-summary`` (``--debug``: tracebacks instead of one-line errors)."""
-    cli_main(hydra_main)
+    cli_main(hydra_main, command="summary")
 
 
 if __name__ == "__main__":

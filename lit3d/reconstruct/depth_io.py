@@ -22,13 +22,13 @@ from __future__ import annotations
 
 import os
 import re
-import stat
 import zipfile
 from pathlib import Path
 
 import numpy as np
 
 from lit3d.utils.errors import Lit3dError
+from lit3d.utils.files import path_problem
 
 DEPTH_SUFFIXES = (".png", ".tif", ".tiff", ".npy", ".npz", ".exr")
 MASK_SUFFIXES = (".png", ".tif", ".tiff", ".npy", ".npz", ".bmp", ".jpg")
@@ -39,25 +39,15 @@ class InputError(Lit3dError, ValueError):
     """A bad input file or option: the message is one line naming the file and the problem."""
 
 
-_NOT_REGULAR = ((stat.S_ISFIFO, "a named pipe (FIFO)"), (stat.S_ISSOCK, "a socket"),
-                (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"))
-
-
 def regular_file(p: Path, what: str = "file") -> None:
     """Raise :class:`InputError` unless ``p`` is a regular file (or a link to one): missing, a
-    broken link, a folder, a FIFO or device (not read: it could block) are each named as such."""
-    try:
-        mode = p.stat().st_mode
-    except FileNotFoundError:
-        problem = f"broken symbolic link (to {os.readlink(p)})" if p.is_symlink() else f"no such {what}"
-        raise InputError(f"{p}: {problem}") from None
-    except OSError as exc:
-        raise InputError(f"{p}: cannot read it ({exc.strerror or type(exc).__name__})") from None
-    if stat.S_ISDIR(mode):
-        raise InputError(f"{p}: a folder, not a {what}")
-    kind = next((name for test, name in _NOT_REGULAR if test(mode)), None if stat.S_ISREG(mode) else "not a file")
-    if kind:
-        raise InputError(f"{p}: {kind}, not a regular {what}; give an image or array file")
+    broken link, a folder, a FIFO or device (not read: it could block) are each named as such, in
+    the wording every command uses (:func:`lit3d.utils.files.path_problem`)."""
+    problem = path_problem(p, what)
+    if problem is None:
+        return
+    hint = "; give an image or array file" if problem.endswith(f"not a regular {what}") else ""
+    raise InputError(f"{p}: {problem}{hint}")
 
 
 def _image(path: Path) -> np.ndarray:
@@ -150,6 +140,23 @@ def read_depth_info(path: str | os.PathLike, depth_scale: float = 0.001) -> tupl
             raw = raw[..., 0]
         if raw.ndim != 2 or raw.dtype.kind not in "fiu" or raw.dtype == np.bool_:
             raise InputError(f"{p}: expected a 2-D numeric depth array, got {raw.dtype} {tuple(raw.shape)}")
+    return depth_from_array(raw, p, depth_scale)
+
+
+def depth_from_array(raw: np.ndarray, label: str | os.PathLike,
+                     depth_scale: float = 0.001) -> tuple[np.ndarray, dict]:
+    """A 2-D depth array -> ``(H, W) float32`` metres by its type, the one rule of the files and the
+    Python API: integer = units times ``depth_scale`` metres (millimetres by default), the type's
+    maximum = "no reading" (background); float = metres; bool (a mask?) and other types refused.
+    Then :func:`check_depth` (NaN/inf, negative, all background). Returns ``(depth, info)``, the
+    ``info`` of :func:`read_depth_info`."""
+    raw = np.asarray(raw)
+    if raw.dtype == np.bool_ or raw.dtype.kind not in "fiu":
+        what = "a bool array (a mask?)" if raw.dtype == np.bool_ else f"a {raw.dtype} array"
+        raise InputError(f"{label}: {what} is not depth: expected float metres, or integer units of depth_scale "
+                         f"metres ({depth_scale:g}: millimetres by default)")
+    if not depth_scale > 0 or not np.isfinite(depth_scale):
+        raise InputError(f"depth_scale {depth_scale}: expected a positive number of metres per unit")
     info = {"dtype": str(raw.dtype), "no_reading_pixels": 0}
     if raw.dtype.kind in "iu":
         no_reading = raw == np.iinfo(raw.dtype).max  # a sensor's "no reading" (65535 for 16 bits)
@@ -160,9 +167,9 @@ def read_depth_info(path: str | os.PathLike, depth_scale: float = 0.001) -> tupl
         depth = raw.astype(np.float64)
         info.update(units="metres (float)", depth_scale_applied=None)
     if info["no_reading_pixels"] and not (depth > 0).any():
-        raise InputError(f"{p}: all background (every depth pixel is 0 or {np.iinfo(raw.dtype).max}, "
+        raise InputError(f"{label}: all background (every depth pixel is 0 or {np.iinfo(raw.dtype).max}, "
                          "the sensor's 'no reading')")
-    return check_depth(depth, p), info
+    return check_depth(depth, label), info
 
 
 def check_depth(depth: np.ndarray, label: str | os.PathLike) -> np.ndarray:

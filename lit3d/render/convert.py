@@ -28,6 +28,7 @@ import numpy as np
 
 from lit3d.geometry.normalise import normalise_vertices
 from lit3d.utils.errors import Lit3dError
+from lit3d.utils.files import path_problem
 
 MESH_SUFFIXES = {".obj", ".off", ".ply", ".stl", ".glb", ".gltf"}
 POINT_SUFFIXES = {".xyz", ".pts", ".txt"}
@@ -115,11 +116,11 @@ def mesh_hash(mesh) -> str:
 
 # ------------------------------------------------------------------ loaders
 def check_shape_file(path: Path, label: str) -> None:
-    """Raise :class:`ShapeError` naming ``label`` when ``path`` is missing, a folder or empty."""
-    if not path.exists():
-        raise ShapeError(f"{label}: file not found")
-    if path.is_dir():
-        raise ShapeError(f"{label}: is a directory, expected a shape file")
+    """Raise :class:`ShapeError` naming ``label`` when ``path`` is missing, a folder, a FIFO or device
+    (never opened), in the wording of every command (:func:`lit3d.utils.files.path_problem`), or empty."""
+    problem = path_problem(path)
+    if problem is not None:
+        raise ShapeError(f"{label}: {problem}")
     if path.stat().st_size == 0:
         raise ShapeError(f"{label}: empty file")
 

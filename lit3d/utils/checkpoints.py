@@ -11,6 +11,8 @@ import pickle
 import zipfile
 from pathlib import Path
 
+from lit3d.utils.files import path_problem
+
 # where lit3d-train stores what evaluation needs (task, data config, W&B id) in every checkpoint
 META_KEY = "lit3d"
 
@@ -23,13 +25,14 @@ def first_line(exc: BaseException, default: str = "") -> str:
 
 def load_checkpoint(path: str | Path, error: type[Exception] = ValueError) -> dict:
     """``torch.load(path, weights_only=True, mmap=True)`` on CPU; every failure is one ``error``
-    naming the file: missing, not a ``torch.save`` zip archive, pickled objects refused, corrupt.
+    naming the file: missing, a folder or FIFO (:func:`lit3d.utils.files.path_problem`), not a ``torch.save`` zip archive, pickled objects refused, corrupt.
     """
     import torch
 
     path = Path(path)
-    if not path.is_file():
-        raise error(f"{path}: checkpoint not found")
+    problem = path_problem(path, "checkpoint")  # a folder, a FIFO (never opened): named as such
+    if problem is not None:
+        raise error(f"{path}: {'checkpoint not found' if problem == 'no such checkpoint' else problem}")
     if not zipfile.is_zipfile(path):  # torch.save writes a zip archive; torch.load's own error here is about mmap
         raise error(f"{path}: not a readable checkpoint (not a torch.save zip archive)")
     try:
@@ -40,3 +43,19 @@ def load_checkpoint(path: str | Path, error: type[Exception] = ValueError) -> di
         raise error(f"{path}: not a readable checkpoint: refused to load pickled Python objects ({detail})") from exc
     except Exception as exc:  # corrupt archive, not a torch file
         raise error(f"{path}: not a readable checkpoint ({type(exc).__name__}: {first_line(exc)})") from exc
+
+
+def is_checkpoint(path: str | Path) -> bool:
+    """True when ``path`` is a file written by ``torch.save`` (a Lightning or torch checkpoint: a zip
+    archive with ``<name>/data.pkl``), not a TorchScript archive (``torch.jit.save`` adds ``code/``
+    and ``constants.pkl``); a file that cannot be read as a zip archive, a folder or a FIFO (never
+    opened: it could block) is not one."""
+    if not Path(path).is_file():
+        return False
+    try:
+        with zipfile.ZipFile(path) as z:
+            names = z.namelist()
+    except (OSError, zipfile.BadZipFile, ValueError):
+        return False
+    parts = [n.split("/", 1)[-1] for n in names]
+    return "data.pkl" in parts and "constants.pkl" not in parts and not any(n.startswith("code/") for n in parts)

@@ -217,14 +217,16 @@ def unique_names(inputs: Sequence[str | os.PathLike]) -> tuple[list[str], list[s
     return names, notes
 
 
-def check_targets(targets: Iterable[str | os.PathLike], protected: Iterable[str | os.PathLike] = ()) -> None:
+def check_targets(targets: Iterable[str | os.PathLike], protected: Iterable[str | os.PathLike] = (),
+                  hint: str = "choose another output folder") -> None:
     """Raise :class:`OutputError` when an output path is, or would replace, a ``protected`` file
-    (an input), or exists as a folder; all before anything is written."""
+    (an input: the same path, a link to it or a hard link of it), or exists as a folder; all before
+    anything is written. ``hint``: what the line tells the user to do instead."""
     prot = [Path(p) for p in protected if p]
     for t in map(Path, targets):
         for q in prot:
             if _same_file(t, q):
-                raise OutputError(f"{t}: the output would replace the input {q} (choose another output folder)")
+                raise OutputError(f"{t}: the output would replace the input {q} ({hint})")
         if t.is_dir():
             raise OutputError(f"{t}: an output file of this name exists as a folder")
 

@@ -45,6 +45,7 @@ class HeldLock:
 
     def __init__(self, path: Path, file: IO | None, owner: bool):
         self.path, self._file, self.owner = path, file, owner
+        self.waited = False  # set by the caller that waited for it (lit3d.cli.rundir.lock_run_dir)
 
     def release(self) -> None:
         if not self.owner or self._file is None:
