@@ -94,8 +94,8 @@ def test_anchored_fusion_alone_keeps_the_anchors_order_across_folds():
     pred = out_of_group(fm, lambda: AnchoredFusion("anchor", -1.0, ["extra"], [1.0], strength=float("inf")))
     np.testing.assert_allclose(pred, fm.columns(["anchor"])[:, 0], atol=1e-12)  # -score = the raw anchor
     model = AnchoredFusion("anchor", -1.0, ["extra"], [1.0], strength=float("inf")).fit(fm)
+    q = model.quality(fm.columns(model.inputs))  # the opinion map is fitted here, at its first use
     assert model.corrections.tolist() == [0.0] and model.opinion["kind"] in ("logistic", "linear")
-    q = model.quality(fm.columns(model.inputs))
     assert scipy.stats.pearsonr(q, 1.0 - fm.target)[0] > 0.99
 
 

@@ -60,6 +60,13 @@ def _table(path: Path) -> list[dict]:
     return out
 
 
+def stimulus_family(stimulus: str) -> str:
+    """Distortion family of a CPCD2 stimulus name: ``phil_G_01`` -> ``G`` (``<cloud>_<family>_<n>``; a name
+    of two parts gives the first letter of the second: ``phil_N35`` -> ``N``)."""
+    parts = stimulus.split("_")
+    return parts[1] if len(parts) > 2 else parts[-1][:1]
+
+
 def _find(root: Path, stem: str, folder: str | None = None) -> Path | None:
     base = root / folder if folder else root
     if not base.is_dir():

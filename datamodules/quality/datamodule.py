@@ -22,8 +22,11 @@ the dataset's published range (:class:`lit3d.features.matrix.TargetScaling`).
 every item file): the distorted meshes (synth only), one feature table per pair
 (``features/<shape>__<name>.json``: ``name -> float``, :mod:`datamodules.quality.features`,
 computed by ``lit3d.features.table`` in ``feature_workers`` processes), then ``matrix.npz`` (the
-:class:`FeatureMatrix`) and ``pairs.json``. ``setup()`` reads it and splits by shape:
-``test_shapes`` / ``val_shapes`` are held out, the rest trains.
+:class:`FeatureMatrix`) and ``pairs.json``. ``setup()`` reads it and splits by group:
+``test_shapes`` / ``val_shapes`` are held out, the rest trains (``[]``: none held out; ``None``: the
+last group, and for validation the one before it). The groups (``groups``) are the reference
+shapes, or with ``groups="family"`` the distortion families of CPCD2-style stimulus names
+(``<cloud>_<family>_<n>``: :func:`datamodules.quality.cpcd2.stimulus_family`).
 
 Batches (:mod:`datamodules.quality.batches`): ``{"x": (B, F) float32 all features, "y": (B,)
 float32 in [0, 1], "shape_id": (B,) int64 into ``shape_names``, "shape": list[str], "item":
@@ -53,7 +56,7 @@ from datamodules.cache import (
 )
 from datamodules.loaders import evaluation_loader
 from datamodules.quality.batches import QualityPairDataset, ShuffledBatches
-from datamodules.quality.cpcd2 import read_cpcd2
+from datamodules.quality.cpcd2 import read_cpcd2, stimulus_family
 from datamodules.quality.features import (  # noqa: F401  (re-exported)
     FeatureFn,
     feature_file,
@@ -109,6 +112,7 @@ class QualityDataModule(pl.LightningDataModule):
         # splits
         test_shapes: Sequence[str] | None = None,
         val_shapes: Sequence[str] | None = None,
+        groups: str = "shape",
         name: str | None = None,
     ):
         super().__init__()
@@ -267,9 +271,14 @@ class QualityDataModule(pl.LightningDataModule):
         if self.matrix is not None:
             return
         fm = self.load_matrix()
+        if self.hparams.groups == "family":
+            fm = FeatureMatrix(fm.X, fm.names, np.array([stimulus_family(i.split("/")[-1]) for i in fm.items]),
+                               fm.target, fm.items, fm.dataset, fm.target_name)
+        elif self.hparams.groups != "shape":
+            raise DataError(f"data.groups must be 'shape' or 'family', got {self.hparams.groups!r}")
         self.matrix = fm
         names = fm.shape_names
-        test = list(self.hparams.test_shapes) if self.hparams.test_shapes else names[-1:]
+        test = list(self.hparams.test_shapes) if self.hparams.test_shapes is not None else names[-1:]
         val = list(self.hparams.val_shapes) if self.hparams.val_shapes is not None else (
             [s for s in names if s not in test][-1:] if len(names) > 2 else [])
         for s in test + val:

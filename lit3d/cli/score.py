@@ -66,6 +66,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--save-views", metavar="DIR", help="write contact sheets (views, styles, SSIM maps) here")
     p.add_argument("--ckpt", metavar="PATH",
                    help="quality model checkpoint (lit3d-train task=quality): print its predicted score")
+    p.add_argument("--model", metavar="JSON",
+                   help="a quality model file instead of the shipped one (quality_model.json of lit3d-train "
+                        "experiment=quality_cpcd2_fusion)")
     p.add_argument("--unlearned", action="store_true",
                    help="print the unlearned score (mean Mask-SSIM) instead of the shipped model's opinion score")
     p.add_argument("--no-cache", action="store_true", help="do not read or write the feature cache")
@@ -238,13 +241,19 @@ def _feature_setup(args):
 
     cfg = FeatureConfig.rendered(args.size or DEFAULT_SIZE, args.styles)
     if args.ckpt:
-        if args.unlearned:
-            raise ValueError("--unlearned prints the unlearned score: give it without --ckpt")
+        if args.unlearned or args.model:
+            raise ValueError(f"{'--unlearned' if args.unlearned else '--model'} and --ckpt are two scores: give one")
         predictor, cfg, notes = _model_features(args, cfg)
         return cfg, predictor, notes
     if args.unlearned:
+        if args.model:
+            raise ValueError("--unlearned prints the unlearned score: give it without --model")
         return cfg, None, []
-    from lit3d.quality.shipped import load_shipped
+    from lit3d.quality.shipped import load_model_file, load_shipped
+
+    if args.model:
+        model = load_model_file(args.model)
+        return model.feature_config(), model, []
 
     if args.size is not None or args.styles is not None:  # the shipped model scores its own renders only
         return cfg, None, []
@@ -290,7 +299,8 @@ def _score(args, cfg, predictor, ref, dist):
         prediction = {"score": out.pop("score"), "source": {"model": str(args.ckpt), **out}}
     elif predictor is not None and not predictor.missing(table.features):  # the shipped model
         out = predictor.predict(table.features)
-        prediction = {"score": out.pop("score"), "source": {**out, "model": f"shipped {out['model']}"}}
+        name = f"{out['model']} from {args.model}" if args.model else f"shipped {out['model']}"
+        prediction = {"score": out.pop("score"), "source": {**out, "model": name}}
     return table, seconds, prediction
 
 

@@ -98,6 +98,8 @@ class LinearFusion:
         """Every feature the model reads, in the order :meth:`quality` takes them."""
         return list(self.features)
 
+    units = None  # :meth:`predict` is on the opinion scale of its own fit: no units shared between fits
+
     def _oriented(self, fm: FeatureMatrix) -> np.ndarray:
         return fm.columns(list(self.features)) * np.asarray(self.signs, dtype=np.float64)
 
@@ -189,6 +191,7 @@ class AnchoredFusion:
     opinion: dict | None = None
     inner: dict[str, float] = field(default_factory=dict)
     kind: str = "anchored"
+    _scored: tuple | None = field(default=None, repr=False, compare=False)  # (scores, quality) of the fit
 
     @property
     def inputs(self) -> list[str]:
@@ -227,7 +230,7 @@ class AnchoredFusion:
         x = cols[:, 1:] * np.asarray(self.signs, dtype=np.float64)
         q = 1.0 - train.target
         self.corrections = self._corrections_at(a, x, q, strength)
-        self.opinion = fit_opinion_map(self._score(cols), q)
+        self.opinion, self._scored = None, (self._score(cols), q)  # the map is fitted when first needed
         self.strength = strength
         return self
 
@@ -235,7 +238,19 @@ class AnchoredFusion:
         """Predicted quality ``1 - target`` (the [0, 1] opinion scale) of raw ``(N, 1 + F)`` rows of :attr:`inputs`."""
         if self.corrections is None:
             raise RuntimeError("AnchoredFusion used before fit")
-        return apply_opinion_map(self.opinion, self._score(x))
+        return apply_opinion_map(self._opinion(), self._score(x))
+
+    def _opinion(self) -> dict:
+        """The opinion map, fitted on the training scores at the first call (ranking needs none: the nested
+        protocol's thousands of inner fits never pay for it)."""
+        if self.opinion is None and self._scored is not None:
+            self.opinion = fit_opinion_map(*self._scored)
+        return self.opinion
+
+    @property
+    def units(self) -> str:
+        """The units of :meth:`predict`: the anchor's, shared by every fit of this anchor."""
+        return f"anchor:{self.anchor}"
 
     def predict(self, test: FeatureMatrix) -> np.ndarray:
         """``(N,)`` minus the score of every row of ``test`` (the target's orientation, on the anchor's scale)."""
@@ -256,7 +271,7 @@ class AnchoredFusion:
         return {"kind": self.kind, "anchor": self.anchor, "anchor_sign": float(self.anchor_sign),
                 "strength": None if math.isinf(self.strength) else self.strength, "features": list(self.features),
                 "signs": [float(s) for s in self.signs], "corrections": self.corrections.tolist(),
-                "opinion": self.opinion}
+                "opinion": self._opinion()}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> AnchoredFusion:
@@ -319,12 +334,22 @@ class ChosenFusion:
 def nested_group_out(fm: FeatureMatrix, candidates: Mapping[str, Callable[[], Any]]) -> tuple[np.ndarray, dict]:
     """Outer leave-one-group-out; in each outer fold the candidate (and each linear model's strength) is
     chosen by leave-one-group-out inside the other groups. Returns the ``(N,)`` out-of-fold predictions
-    (target orientation) and ``{group: {"chosen", "scores"}}``."""
-    pred = np.zeros(len(fm))
-    choices = {}
+    (target orientation) and ``{group: {"chosen", "scores", "described", "units"}}``.
+
+    The pooled predictions must share units: when every fold chose a model of the same ``units`` (an
+    anchored fusion's anchor) they are the models' :meth:`predict` (on that anchor's scale); otherwise each fold's
+    predicted opinion (``1 - model.quality``, its own opinion map), the one scale every kind has."""
+    raw, opinion = np.zeros(len(fm)), np.zeros(len(fm))
+    choices, scales = {}, set()
     for g in fm.shape_names:
         rows = fm.shapes == g
         chosen = ChosenFusion(candidates).fit(fm.without_shape(g))
-        pred[rows] = chosen.predict(fm.rows(rows))
-        choices[g] = {"chosen": chosen.chosen, "scores": chosen.scores, "described": chosen.model.describe()}
-    return pred, choices
+        test, model = fm.rows(rows), chosen.model
+        raw[rows] = chosen.predict(test)
+        opinion[rows] = 1.0 - model.quality(test.columns(model.inputs)) if hasattr(model, "quality") else raw[rows]
+        units = getattr(model, "units", None)
+        scales.add(units)
+        choices[g] = {"chosen": chosen.chosen, "scores": chosen.scores, "units": units or "opinion",
+                      "described": model.describe() if hasattr(model, "describe") else {}}
+    shared = len(scales) == 1 and None not in scales
+    return (raw if shared else opinion), choices

@@ -73,6 +73,22 @@ class ShippedQualityModel:
                 "description": f"{s.name} {s.lo:g}..{s.hi:g}, {better}; trained on {self.trained_on}"}
 
 
+def model_document(name: str, trained_on: str, scaling: TargetScaling, feature_options: Mapping, chosen,
+                   cross_validated: Mapping, command: str) -> dict:
+    """The JSON document of a quality model (this module's format) from a fitted
+    :class:`lit3d.quality.fusion.ChosenFusion` ``chosen``; ``cross_validated``: ``{row: {metric: value or
+    (value, lo, hi)}}`` (intervals rounded to 4 digits)."""
+    cv = {row: {k: [round(float(x), 4) for x in v] if isinstance(v, (tuple, list)) else v for k, v in m.items()}
+          for row, m in cross_validated.items()}
+    return {"name": name, "trained_on": trained_on,
+            "target": {"name": scaling.name, "lo": scaling.lo, "hi": scaling.hi,
+                       "higher_is_better": scaling.higher_is_better},
+            "feature_options": dict(feature_options), "fusion": chosen.model.to_dict(), "chosen": chosen.chosen,
+            "described": chosen.model.describe(),
+            "inner_scores": {k: round(v, 4) for k, v in chosen.scores.items()},
+            "cross_validated": cv, "command": command}
+
+
 def model_names() -> list[str]:
     """Names of the shipped quality models."""
     return sorted(p.stem for p in MODELS_DIR.glob("*.json"))
@@ -83,6 +99,15 @@ def load_shipped(name: str = DEFAULT_MODEL) -> ShippedQualityModel:
     path = MODELS_DIR / f"{name}.json"
     if not path.is_file():
         raise ShippedModelError(f"no shipped quality model '{name}' (have: {', '.join(model_names()) or 'none'})")
+    return _load(str(path))
+
+
+def load_model_file(path: str | Path) -> ShippedQualityModel:
+    """Read a quality model written in this module's format (e.g. ``quality_model.json`` of a
+    ``lit3d-train experiment=quality_cpcd2_fusion`` run)."""
+    path = Path(path).expanduser().resolve()
+    if not path.is_file():
+        raise ShippedModelError(f"{path}: no such quality model file")
     return _load(str(path))
 
 

@@ -26,33 +26,26 @@ from pathlib import Path
 import numpy as np
 
 from datamodules.quality import QualityDataModule
-from datamodules.quality.cpcd2 import read_cpcd2
-from lit3d.features.matrix import FeatureMatrix
+from datamodules.quality.cpcd2 import read_cpcd2, stimulus_family
+from lit3d.features.matrix import FeatureMatrix, TargetScaling
 from lit3d.features.table import FeatureConfig, default_cache_dir, feature_config, feature_table, overall_score
 from lit3d.quality.correlation import correlation_ci, pearson, spearman
-from lit3d.quality.fusion import KINDS, AnchoredFusion, ChosenFusion, LinearFusion, nested_group_out, out_of_group
+from lit3d.quality.fusion import ChosenFusion, nested_group_out, out_of_group
+from lit3d.quality.fusion_candidates import FEATURE_SETS, fusion_candidates, orientation
 from lit3d.quality.protocol import LearnedScore
+from lit3d.quality.shipped import model_document
 from lit3d.quality.trainer import TrainConfig
 from lit3d.utils.tables import markdown_table
 from studies.quality.figure import write_figure
 
-LOWER_IS_BETTER = ("mse", "rmse", "canny", "hausdorff", "chamfer", "d1_mse", "d2_mse", "y_mse", "pcqm", "ciede2000",
-                   "gmsd", "mdsi")
 BASELINES = ("d1_psnr", "d2_psnr", "y_psnr", "pointssim_geometry", "pointssim_normal", "pointssim_curvature",
              "pointssim_colour", "pcqm", "hausdorff", "chamfer")
 FAMILIES = {"G": "G-PCC", "V": "V-PCC", "N": "noise"}
 
 
-def orientation(name: str) -> float:
-    """+1 when a larger value of feature ``name`` means better quality, -1 otherwise (a priori)."""
-    head = name.split("/")[0]
-    return -1.0 if head in LOWER_IS_BETTER or head.startswith("pcqm_") else 1.0
-
-
 def family(stimulus: str) -> str:
     """Distortion family of a CPCD2 stimulus name: ``phil_G_01`` -> ``G``."""
-    parts = stimulus.split("_")
-    return parts[1] if len(parts) > 2 else parts[-1][:1]
+    return stimulus_family(stimulus)
 
 
 def study_tables(root: str | Path, cfg: FeatureConfig | None = None, cache_dir=None, log=print):
@@ -162,34 +155,9 @@ def synth_matrix(feature_options: dict, data_dir: str | Path, n_levels: int | No
 
 
 # --------------------------------------------------------------------------- rows with intervals
-# the feature sets the fusion may use, fixed before looking at any correlation (a priori: what the field
-# measures on coloured clouds); nested leave-one-family-out chooses among them, never the test family
-FUSION_SETS = {
-    "points": ("y_psnr", "d1_psnr", "d2_psnr", "pointssim_colour", "pointssim_geometry", "pcqm"),
-    "renders": ("ciede2000/matcap_rgb/flat", "ciede2000/albedo_rgb/flat", "mask_ssim_window/matcap_rgb/flat",
-                "mask_ssim_window/albedo_rgb/flat", "fsimc/matcap_rgb/flat", "gmsd/matcap_rgb/flat",
-                "mdsi/matcap_rgb/flat", "vsi/matcap_rgb/flat", "haarpsi/matcap_rgb/flat", "vif/matcap_rgb/flat"),
-}
-FUSION_SETS["points+renders"] = FUSION_SETS["points"] + FUSION_SETS["renders"]
-ANCHOR = "pcqm"  # the anchored fusion's scale: the field's published colour-aware measure (a priori)
-
-
-def fusion_candidates(names) -> dict:
-    """The fusion's candidates of the nested protocol: each linear kind on each feature set of
-    :data:`FUSION_SETS` (the features the table holds), strength chosen inside the training families."""
-    out = {}
-    for set_name, feats in FUSION_SETS.items():
-        have = [f for f in feats if f in names]
-        if have:
-            signs = [orientation(f) for f in have]
-            for kind in KINDS:
-                out[f"{kind}:{set_name}"] = lambda have=have, signs=signs, kind=kind: LinearFusion(have, signs, kind)
-    if ANCHOR in names:
-        for set_name, feats in FUSION_SETS.items():
-            have = [f for f in feats if f in names and f != ANCHOR]
-            out[f"anchored:{ANCHOR}+{set_name}"] = lambda have=have: AnchoredFusion(
-                ANCHOR, orientation(ANCHOR), have, [orientation(f) for f in have])
-    return out
+# the fusion's candidates (feature sets, anchor) are lit3d.quality.fusion_candidates': fixed before looking at any
+# correlation; nested leave-one-family-out chooses among them, never the test family
+FUSION_SETS = FEATURE_SETS  # the name the study's log uses
 
 
 class PredictedOpinion:
@@ -276,19 +244,13 @@ def interval_markdown(rows) -> str:
 
 
 def shipped_model(items, tables, feature_options: dict, cv_rows: list[dict], command: str) -> dict:
-    """The shipped model's JSON (:mod:`lit3d.quality.shipped`): the fusion candidate chosen by
+    """The shipped model's JSON (:func:`lit3d.quality.shipped.model_document`): the fusion candidate chosen by
     leave-one-family-out on every stimulus, fitted on all of them, with its cross-validated rows."""
     fm = study_matrix(items, tables)
     chosen = ChosenFusion(fusion_candidates(fm.names)).fit(fm)
-    cv = {r["score"]: {k: [round(x, 4) for x in v] if isinstance(v, tuple) else v for k, v in r.items()
-                       if k not in ("score", "kind")} for r in cv_rows}
-    return {"name": "cpcd2-phil-fusion",
-            "trained_on": f"CPCD2.0 phil ({len(items)} coloured point clouds, MOS 1..5)",
-            "target": {"name": "MOS", "lo": 1.0, "hi": 5.0, "higher_is_better": True},
-            "feature_options": dict(feature_options), "fusion": chosen.model.to_dict(), "chosen": chosen.chosen,
-            "described": chosen.model.describe(),
-            "inner_scores": {k: round(v, 4) for k, v in chosen.scores.items()},
-            "cross_validated": cv, "command": command}
+    cv = {r["score"]: {k: v for k, v in r.items() if k not in ("score", "kind")} for r in cv_rows}
+    return model_document("cpcd2-phil-fusion", f"CPCD2.0 phil ({len(items)} coloured point clouds, MOS 1..5)",
+                          TargetScaling(1.0, 5.0, True, "MOS"), feature_options, chosen, cv, command)
 
 
 def markdown(rows) -> str:
