@@ -36,9 +36,11 @@ lint: $(STAMP)
 bench: $(STAMP) $(EXTRAS)
 	$(BIN)/python -m benchmarks.run
 
-# On a CUDA machine: only the GPU rows, into benchmarks/gpu_rows.json (the next `make bench` shows them)
+# On a CUDA machine: only the GPU rows, into benchmarks/gpu_rows.json (the next `make bench` shows them),
+# then a torch.profiler table of one paper-scale step at batch 3 and 12 into benchmarks/gpu_profile.md
 bench-gpu: $(STAMP) $(EXTRAS)
 	$(BIN)/python -m benchmarks.run --gpu
+	$(BIN)/python -m benchmarks.profile_step --out benchmarks/gpu_profile.md
 
 clean:
 	rm -rf logs outputs multirun .pytest_cache

@@ -24,6 +24,7 @@ from pathlib import Path
 import torch
 
 import benchmarks
+from benchmarks.bench_step_cost import gpu_row_fraction, paper_tflop_per_sample
 from benchmarks.common import GPU_CMD, cpu_model, default_threads, load_avg
 from lit3d.utils.tables import markdown_table
 
@@ -90,11 +91,30 @@ def run_gpu(selected: list[str], out: Path = GPU_ROWS) -> dict:
     return data
 
 
-def gpu_section(path: Path = GPU_ROWS) -> str:
-    """BENCHMARKS.md's section of GPU rows measured earlier by ``--gpu`` ('' when there are none)."""
+def _with_peak_fraction(rows: list[dict], gpu: str, tflop_per_sample: float | None) -> list[dict]:
+    """The paper-scale completion step rows with their fraction of the GPU's dense peak added to the note
+    (measured samples/s x the step's FLOPs per sample, :mod:`benchmarks.bench_step_cost`)."""
+    if tflop_per_sample is None:
+        try:
+            tflop_per_sample = paper_tflop_per_sample()
+        except Exception as exc:  # the section still shows the measured rows
+            print(f"[bench] no FLOP count for the GPU rows: {type(exc).__name__}: {exc}", flush=True)
+            return rows
+    out = []
+    for r in rows:
+        frac = gpu_row_fraction(r, gpu, tflop_per_sample)
+        out.append({**r, "note": r["note"] + f"; at {tflop_per_sample:.2f} TFLOP/sample: {frac}"} if frac else r)
+    return out
+
+
+def gpu_section(path: Path = GPU_ROWS, tflop_per_sample: float | None = None) -> str:
+    """BENCHMARKS.md's section of GPU rows measured earlier by ``--gpu`` ('' when there are none); the
+    completion step rows gain their fraction of the GPU's peak (``tflop_per_sample``: the paper step's
+    FLOPs per sample, counted when None)."""
     if not path.exists():
         return ""
     data = json.loads(path.read_text())
+    data["rows"] = _with_peak_fraction(data["rows"], data["gpu"], tflop_per_sample)
     text = (f"\n## GPU rows\n\nMeasured by `make bench-gpu` (`python -m benchmarks.run --gpu`) on {data['date']} in "
             f"{data['minutes']:.1f} min on an {data['gpu']} (CPU {data['cpu']}, {data['cores']} cores), torch "
             f"{data['torch']}; each baseline in the same run on that machine. Copied from `benchmarks/gpu_rows.json`, "

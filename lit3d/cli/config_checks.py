@@ -113,6 +113,7 @@ RULES: tuple[Rule, ...] = (
     Rule("task.mask_threshold",                "number",  "[0, 1]"),
     Rule("task.flow_power",                    "number",  "> 0"),
     Rule("task.critic_steps",                  "int",     ">= 1"),
+    Rule("task.gp_every",                      "int",     ">= 1"),
     Rule("task.adversarial_start_epoch",       "int",     ">= 0"),
     Rule("task.prior_samples",                 "int",     ">= 1"),
     Rule("task.image_every_n_epochs",          "int",     ">= 0"),
@@ -121,6 +122,7 @@ RULES: tuple[Rule, ...] = (
     Rule("task.n_panel",                       "int",     ">= 0"),
     Rule("task.seed",                          "int",     ">= 0"),
     Rule("task.adversarial",                   "bool"),
+    Rule("task.critic_concat",                 "bool"),
     Rule("task.use_*",                         "bool"),
     # task: net sizes (completion: task.nets, canonical and quality: task.net)
     Rule("task.nets.*_channels.*",             "int",     ">= 1"),

@@ -5,6 +5,7 @@ All completion losses compute in fp32 (autocast off, inputs cast up), so they ar
 """
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
 
 import torch
@@ -12,6 +13,8 @@ import torch.nn.functional as F
 
 
 def _autocast_off(t: torch.Tensor):
+    if t.device.type == "meta":  # the cost model's device (lit3d.completion.step_cost): no autocast there
+        return contextlib.nullcontext()
     return torch.autocast(device_type=t.device.type, enabled=False)
 
 

@@ -7,7 +7,11 @@ Batches are dicts from ``datamodules.completion``:
     category list[str]                     category name (seen or unseen)
 
 One training step = ``critic_steps`` critic updates, then one generator update
-(generator + auxiliary classifier share the generator optimiser).
+(generator + auxiliary classifier share the generator optimiser). The critic's gradient penalty
+runs on every ``gp_every``-th critic update, weighted ``gp_every`` times (1 = every update);
+``critic_concat`` scores real and fake shapes in one critic pass. The parts of the step
+(:meth:`CompletionTask.critic_objective`, :meth:`CompletionTask.generator_objective`) are what
+:mod:`lit3d.completion.step_cost` counts.
 
 Buffers saved in checkpoints (what evaluation needs, so a loaded checkpoint evaluates as it was):
     threshold, prior_threshold  () float32   IoU thresholds chosen on validation (model, prior)
@@ -28,8 +32,8 @@ import lightning.pytorch as pl
 import torch
 import torch.nn.functional as F
 
-from lit3d.completion.losses import (critic_loss, generator_adv_loss, gradient_penalty, resolve_loss_scale,
-                                     weighted_bce_with_logits)
+from lit3d.completion.losses import resolve_loss_scale
+from lit3d.completion.objectives import CompletionObjectives
 from lit3d.metrics.voxel import VoxelSweepMetrics, best_threshold, default_thresholds
 from lit3d.completion.nets import build_completion_nets, validate_net_config
 from lit3d.completion.paired import PairedSamples, extrude_silhouette
@@ -60,7 +64,7 @@ def split_key(name: str) -> str:
     return name.removeprefix("test_")
 
 
-class CompletionTask(pl.LightningModule):
+class CompletionTask(CompletionObjectives, pl.LightningModule):
     """Cascade generator + critic (+ classifier) trained with WGAN-GP and weighted BCE."""
 
     evaluation_legacy = EVALUATION_LEGACY  # read by lit3d-eval for checkpoints saved before the evaluation node
@@ -81,6 +85,8 @@ class CompletionTask(pl.LightningModule):
         gamma: float = 0.8,
         zeta: float = 0.01,
         gp_lambda: float = 10.0,
+        gp_every: int = 1,
+        critic_concat: bool = False,
         stage_weight: float = 0.0,
         adversarial: bool = True,
         adversarial_start_epoch: int = 0,
@@ -100,6 +106,8 @@ class CompletionTask(pl.LightningModule):
         legacy_settings(type(self).__name__, legacy_evaluation, EVALUATION_LEGACY)
         self.save_hyperparameters(ignore=list(legacy_evaluation))
         validate_mode(on_nonfinite)
+        if int(gp_every) < 1:
+            raise ValueError(f"task.gp_every={gp_every}: the gradient penalty runs every N >= 1 critic updates")
         self.automatic_optimization = False
         nets = dict(nets)
         if nets.pop("preset", None) is not None:  # checkpoints written before issue 12 name one beside every size
@@ -131,6 +139,7 @@ class CompletionTask(pl.LightningModule):
         self.test_samples = PairedSamples()
         self.test_surface: SurfaceTestMetrics | None = None  # set before the test: use_surface_metrics
         self.generator_steps = 0
+        self.critic_updates = 0  # counts the critic updates (the lazy gradient penalty's schedule)
         self.skipped_steps = 0
         self.loss_scale = resolve_loss_scale(loss_scale, res)
 
@@ -211,29 +220,15 @@ class CompletionTask(pl.LightningModule):
         if opt_d is not None:
             for _ in range(hp.critic_steps):
                 with self.toggled_optimizer(opt_d):
-                    with torch.no_grad():
-                        fake = torch.sigmoid(self.generator(x).logits)
-                    d_real, d_fake = self.critic(x, y), self.critic(x, fake)
-                    gp, grad_norm = gradient_penalty(self.critic, x, y, fake)
-                    loss_d = critic_loss(d_fake, d_real, gp, hp.gp_lambda)
+                    loss_d, critic_logs = self.critic_objective(x, y, self.critic_updates % hp.gp_every == 0)
                     if self._check_finite(critic=loss_d):
                         opt_d.zero_grad(set_to_none=True)
                         self.manual_backward(loss_d)
                         opt_d.step()
-            logs.update({"loss_d": loss_d, "gp": gp, "grad_norm": grad_norm,
-                         "wasserstein": (d_real - d_fake).mean()})
+                self.critic_updates += 1
+                logs.update(critic_logs)
         with self.toggled_optimizer(opt_g):
-            out = self.generator(x)
-            probs = torch.sigmoid(out.logits)
-            loss_g, terms = self.reconstruction_loss(out, y, hp.gamma if opt_d is not None else 1.0)
-            if opt_d is not None:
-                terms["adv"] = generator_adv_loss(self.critic(x, probs))
-                loss_g = loss_g + (1 - hp.gamma) * terms["adv"]
-            if self.classifier is not None:
-                seen = batch["label"] >= 0
-                if bool(seen.any()):
-                    terms["cls"] = F.cross_entropy(self.classifier(probs[seen]).float(), batch["label"][seen])
-                    loss_g = loss_g + hp.zeta * terms["cls"]
+            loss_g, terms, out = self.generator_objective(x, y, batch["label"], opt_d is not None)
             if self._check_finite(generator=loss_g, **terms):
                 opt_g.zero_grad(set_to_none=True)
                 self.manual_backward(loss_g)
@@ -244,30 +239,6 @@ class CompletionTask(pl.LightningModule):
         self.log_dict({f"train/{k}": v.detach().float() for k, v in logs.items()},
                       prog_bar=False, on_step=True, on_epoch=True, batch_size=x.shape[0])
         self.log("train/generator_steps", float(self.generator_steps), on_step=True, on_epoch=False)
-
-    def reconstruction_loss(self, out, target: torch.Tensor, weight: float = 1.0) -> tuple[torch.Tensor, dict]:
-        """``weight * BCE(final) + stage_weight * BCE(intermediate stages)`` and its terms.
-
-        Args:
-            out: :class:`lit3d.completion.generator.GeneratorOutput` of the partial inputs.
-            target: ``(B, 1, R, R, R)`` float32 in {0, 1}.
-            weight: factor of the final-stage BCE (``gamma`` with the critic on, else 1).
-        Returns:
-            (scalar fp32 loss, ``{"bce": ..., ["bce_stages": ...]}``).
-        """
-        hp = self.hparams
-        bce = weighted_bce_with_logits(out.logits, target, hp.alpha)
-        loss, terms = weight * bce, {"bce": bce}
-        if hp.stage_weight > 0 and len(out.stage_logits) > 1:
-            terms["bce_stages"] = self._stage_bce(out.stage_logits[:-1], target)
-            loss = loss + hp.stage_weight * terms["bce_stages"]
-        return loss, terms
-
-    def _stage_bce(self, stage_logits: list[torch.Tensor], target: torch.Tensor) -> torch.Tensor:
-        """Mean weighted BCE of the intermediate stages' (B, 1, r, r, r) logits against the
-        target max-pooled to r^3 (a voxel of the coarse grid is occupied if any of its cell is)."""
-        small = F.adaptive_max_pool3d(target.float(), stage_logits[0].shape[-3:])
-        return torch.stack([weighted_bce_with_logits(lg, small, self.hparams.alpha) for lg in stage_logits]).mean()
 
     # ------------------------------------------------------------------ prior
     def configure_callbacks(self):
@@ -352,6 +323,7 @@ class CompletionTask(pl.LightningModule):
     # ------------------------------------------------------------------ state
     def on_save_checkpoint(self, checkpoint: dict) -> None:
         checkpoint["generator_steps"] = self.generator_steps
+        checkpoint["critic_updates"] = self.critic_updates
         checkpoint["skipped_steps"] = self.skipped_steps
 
     def on_load_checkpoint(self, checkpoint: dict) -> None:
@@ -362,6 +334,7 @@ class CompletionTask(pl.LightningModule):
             state["prior"] = torch.full_like(self.prior, 0.5)
             state["prior_items"] = torch.zeros_like(self.prior_items)
         self.generator_steps = int(checkpoint.get("generator_steps", 0))
+        self.critic_updates = int(checkpoint.get("critic_updates", 0))
         self.skipped_steps = int(checkpoint.get("skipped_steps", 0))
 
     def adapt_data_config(self, data_cfg: dict) -> dict:
