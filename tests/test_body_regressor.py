@@ -1,4 +1,4 @@
-"""The body regressor (lit3d.body.regressor, lit3d.body.train_regressor, --body-init): its parts
+"""The body regressor (lit3d.body.regressor, studies.body.train_regressor, --body-init): its parts
 without Anny, then a few Anny people (Anny loads once, ~15 s) for a tiny training run that must read
 the height off the image better than the mean does, and for the fit from a given start."""
 from __future__ import annotations
@@ -16,7 +16,7 @@ from lit3d.body.regressor import (BodyRegressor, Preprocess, Regressor, checkpoi
                                   load_regressor, refine_config, rotmat_6d)
 from lit3d.body.synthetic import Camera, sensed_depth
 from lit3d.body.poses import pose_params
-from lit3d.body.train_regressor import Buffer, draw, render_people, shape_distribution, step
+from studies.body.train_regressor import Buffer, draw, render_people, shape_distribution, step
 from lit3d.cli.reconstruct import main
 from lit3d.sensing.camera import backproject
 

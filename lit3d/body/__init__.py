@@ -7,9 +7,11 @@
     results.py  what a fit gives: posed and rest-pose meshes, the canonical depth image (rendered
                 as the canonical task renders its targets), fit quality, the parameters as JSON
     regressor.py  a small CNN: depth image -> the fit's parameters, the fit's start (--body-init)
-    train_regressor.py  its training on Anny people drawn and rendered on the fly
+    poses.py      the pose mixes of the regressor's training people
     synthetic.py  the evaluation's camera, rendering and sensor noise (evaluation and training)
-    evaluate.py   held-out Anny people and FAUST
+
+The programs that train the regressor and evaluate the fit (held-out Anny people, FAUST) are a study
+beside the package: ``studies/body/``.
 
 A task room beside :mod:`lit3d.canonical` (it imports datamodules and the shared rooms only);
 ``lit3d-reconstruct --body`` (:mod:`lit3d.reconstruct.body`) is its user.

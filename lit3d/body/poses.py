@@ -1,4 +1,4 @@
-"""Poses of the regressor's training people (:mod:`lit3d.body.train_regressor`), drawn from a mix of
+"""Poses of the regressor's training people (:mod:`studies.body.train_regressor`), drawn from a mix of
 pose families.
 
 The Anny data source (:func:`datamodules.canonical.bodies.sample_pose`) draws upright people: each

@@ -1,6 +1,6 @@
 """Train :mod:`lit3d.body.regressor` on Anny people drawn and rendered on the fly.
 
-    python -m lit3d.body.train_regressor --out CKPT [--minutes 40] [--steps 20000] [--size 64] ...
+    python -m studies.body.train_regressor --out CKPT [--minutes 40] [--steps 20000] [--size 64] ...
 
 Each person: a phenotype from Anny's adult shape distribution (as the evaluation's held-out people,
 ``sample_phenotype(..., "adult")``: ``SimpleShapeDistribution`` at morphological ages
@@ -151,7 +151,7 @@ def _save(path: Path, ck: dict) -> None:
 
 
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m lit3d.body.train_regressor", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m studies.body.train_regressor", description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, required=True, help="checkpoint file to write")
     ap.add_argument("--steps", type=int, default=20000, help="training steps at most")
     ap.add_argument("--minutes", type=float, default=40.0, help="wall-clock minutes at most")
