@@ -10,13 +10,13 @@ import torch
 from omegaconf import OmegaConf
 from PIL import Image
 
-from datamodules.canonical import bodies
 from datamodules.canonical.rendering import PairRenderer
 from lit3d.body.errors import BodyFitError
 from lit3d.body.model import DOFS
 from lit3d.body.points import backproject, observe
 from lit3d.body.results import canonical_depth
 from lit3d.body.surface import silhouette_excess
+from lit3d.body_model import bodies
 from lit3d.cli.reconstruct import main
 from lit3d.reconstruct import backproject as recon_bp
 from lit3d.reconstruct.backproject import RECGAN_FOV_DEG, Intrinsics

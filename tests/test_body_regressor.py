@@ -121,7 +121,7 @@ def test_drawn_people_follow_the_pose_draw_and_the_adult_shapes(anny):
     body, cam, prep, _, _ = anny
     got = draw(body, shape_distribution(body), 11, 0, 3, cam, prep, image=(W, H))
     assert got["image"].shape == (3, 2, 16, 16) and got["extras"].shape == (3, 3)
-    from datamodules.canonical.bodies import sample_pose
+    from lit3d.body_model.bodies import sample_pose
 
     theta, rot = pose_params(sample_pose(11, 2, subject=2))
     assert torch.allclose(got["theta"][2], torch.tensor(theta, dtype=torch.float32))
@@ -162,7 +162,7 @@ def test_tiny_training_lowers_the_loss_and_beats_the_mean_height(anny):
 
 
 def test_fit_from_a_given_start_runs_the_requested_steps(anny):
-    from datamodules.canonical.bodies import sample_pose
+    from lit3d.body_model.bodies import sample_pose
     from lit3d.body.model import Params
 
     body, cam, prep, _, _ = anny

@@ -1,4 +1,4 @@
-"""Fit the Anny body model (:mod:`datamodules.canonical.bodies`) to one depth image of a person.
+"""Fit the Anny body model (:mod:`lit3d.body_model.bodies`) to one depth image of a person.
 
     points.py   depth + intrinsics -> camera-frame foreground points, silhouette distance map
     model.py    differentiable Anny: phenotype, joint-limited bone rotations, global similarity
@@ -13,6 +13,7 @@
 The programs that train the regressor and evaluate the fit (held-out Anny people, FAUST) are a study
 beside the package: ``studies/body/``.
 
-A task room beside :mod:`lit3d.canonical` (it imports datamodules and the shared rooms only);
-``lit3d-reconstruct --body`` (:mod:`lit3d.reconstruct.body`) is its user.
+A task room beside :mod:`lit3d.canonical` that imports the shared rooms only (the body model:
+:mod:`lit3d.body_model`), neither a DataModule nor Lightning; ``lit3d-reconstruct --body``
+(:mod:`lit3d.reconstruct.body`) is its user.
 """

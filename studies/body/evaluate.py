@@ -7,7 +7,7 @@ sides of a 320x240 image, centred), the person 3.2 m in front of it, facing it.
 
 - **Held-out Anny people** (``--anny N``): subject ``i`` = phenotype ``i`` of draw ``--body-seed``
   (Anny's adult shape distribution, as ``conf/data/anny.yaml``) in its own pose ``i`` of draw
-  ``--pose-seed`` (:func:`datamodules.canonical.bodies.sample_pose`, yaw included; ``--poses varied``:
+  ``--pose-seed`` (:func:`lit3d.body_model.bodies.sample_pose`, yaw included; ``--poses varied``:
   :func:`lit3d.body.poses.draw_pose`'s mix, people also lying, folded and upside down); training
   draws use seed 0 (the regressor's 7), these 1000+. The depth image gets the ``recgan`` sensor's noise
   (:data:`lit3d.sensing.sensor.SENSORS`), whose figures are in voxels of a 256 grid: one voxel
@@ -47,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
-from datamodules.canonical.bodies import sample_phenotype, sample_pose
+from lit3d.body_model.bodies import sample_phenotype, sample_pose
 from datamodules.canonical.posesets import index_faust
 from lit3d.body.fit import FitConfig, fit_best, fit_body
 from lit3d.body.model import PHENOTYPES, Body, Params

@@ -4,9 +4,9 @@
 
 Each person: a phenotype from Anny's adult shape distribution (as the evaluation's held-out people,
 ``sample_phenotype(..., "adult")``: ``SimpleShapeDistribution`` at morphological ages
-:data:`~datamodules.canonical.bodies.ADULT_AGES`, drawn a batch at a time), a pose of the mix
+:data:`~lit3d.body_model.bodies.ADULT_AGES`, drawn a batch at a time), a pose of the mix
 ``--poses`` (:func:`lit3d.body.poses.draw_pose`; ``upright``: the Anny data source's
-:func:`~datamodules.canonical.bodies.sample_pose`, its ``root`` yaw the global rotation; ``varied``
+:func:`~lit3d.body_model.bodies.sample_pose`, its ``root`` yaw the global rotation; ``varied``
 adds people turned any way, folded and in any rotation), placed ``--distance`` metres in front of
 the camera (uniform in the range) and up to ``--lateral`` metres off the axis, rendered through the
 evaluation's camera and ``--sensor`` noise (:func:`lit3d.body.synthetic.sensed_depth`). Seeds:
@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from datamodules.canonical.bodies import adult_shape_distribution
+from lit3d.body_model.bodies import adult_shape_distribution
 from lit3d.body.fit import start_centre
 from lit3d.body.model import PHENOTYPES, Body
 from lit3d.body.points import MIN_POINTS
