@@ -2,14 +2,14 @@
 
 Used as a Hydra callback by every multirun (``hydra.callbacks.collect`` in ``conf/hydra/``;
 the configs in ``sweeps/`` set its metrics and title; written when the multirun ends) and by
-hand:  ``python -m lit3d.sweeps SWEEP_DIR [METRIC ...]``. :class:`StudyStorage` makes a kept Optuna
-study (``hydra.sweeper.storage=sqlite:///optuna.db``) work and resume without replacing earlier trial dirs.
+hand: :func:`collect` (from the checkout: ``python -m studies.sweeps.collect SWEEP_DIR [METRIC ...]``).
+:class:`StudyStorage` makes a kept Optuna study (``hydra.sweeper.storage=sqlite:///optuna.db``) work and
+resume without replacing earlier trial dirs.
 """
 from __future__ import annotations
 
 import json
 import logging
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -148,7 +148,7 @@ class CollectResults(Callback):
         try:
             print(collect(sweep_dir, self.metrics, self.thesis, self.title))
         except Exception as exc:  # the jobs ran: a summary problem must not fail the multirun
-            log.warning("%s: no sweep_results.md (%s: %s); re-collect with python -m lit3d.sweeps %s",
+            log.warning("%s: no sweep_results.md (%s: %s); re-collect with lit3d.sweeps.collect('%s')",
                         sweep_dir, type(exc).__name__, exc, sweep_dir)
 
 
@@ -210,7 +210,3 @@ class StudyStorage(Callback):
                   "to its default (a new timestamped folder) or choose another one", file=sys.stderr, flush=True)
             sys.exit(2)
         prepare_study_storage(str(storage))
-
-
-if __name__ == "__main__":
-    print(collect(sys.argv[1], sys.argv[2:] or None))

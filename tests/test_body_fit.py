@@ -10,13 +10,13 @@ import torch
 from omegaconf import OmegaConf
 from PIL import Image
 
-from datamodules.canonical import bodies
 from datamodules.canonical.rendering import PairRenderer
 from lit3d.body.errors import BodyFitError
 from lit3d.body.model import DOFS
 from lit3d.body.points import backproject, observe
 from lit3d.body.results import canonical_depth
 from lit3d.body.surface import silhouette_excess
+from lit3d.body_model import bodies
 from lit3d.cli.reconstruct import main
 from lit3d.reconstruct import backproject as recon_bp
 from lit3d.reconstruct.backproject import RECGAN_FOV_DEG, Intrinsics
@@ -129,7 +129,7 @@ def _person(body, subject=3, pose=2):
 def test_evaluation_people_of_either_pose_mix_agree_on_the_upright_draw(body, monkeypatch):
     """``anny_person``'s two paths (the data source's body model; theta and rotation through
     ``Body.place``) give one body for an upright pose: the pose conventions of lit3d.body.poses hold."""
-    from lit3d.body.evaluate import anny_person
+    from studies.body.evaluate import anny_person
 
     pheno = bodies.sample_phenotype(1000, 4, "adult", body.model.model)
     upright, rest = anny_person(body, pheno, 1000, 4, "upright")

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from datamodules.canonical.bodies import sample_pose
+from lit3d.body_model.bodies import sample_pose
 from lit3d.body.model import DOFS
 from lit3d.body.poses import FAMILIES, KNEE_BENT, POSE_MIXES, draw_pose, pose_params
 

@@ -1,4 +1,4 @@
-"""The body regressor (lit3d.body.regressor, lit3d.body.train_regressor, --body-init): its parts
+"""The body regressor (lit3d.body.regressor, studies.body.train_regressor, --body-init): its parts
 without Anny, then a few Anny people (Anny loads once, ~15 s) for a tiny training run that must read
 the height off the image better than the mean does, and for the fit from a given start."""
 from __future__ import annotations
@@ -16,7 +16,7 @@ from lit3d.body.regressor import (BodyRegressor, Preprocess, Regressor, checkpoi
                                   load_regressor, refine_config, rotmat_6d)
 from lit3d.body.synthetic import Camera, sensed_depth
 from lit3d.body.poses import pose_params
-from lit3d.body.train_regressor import Buffer, draw, render_people, shape_distribution, step
+from studies.body.train_regressor import Buffer, draw, render_people, shape_distribution, step
 from lit3d.cli.reconstruct import main
 from lit3d.sensing.camera import backproject
 
@@ -121,7 +121,7 @@ def test_drawn_people_follow_the_pose_draw_and_the_adult_shapes(anny):
     body, cam, prep, _, _ = anny
     got = draw(body, shape_distribution(body), 11, 0, 3, cam, prep, image=(W, H))
     assert got["image"].shape == (3, 2, 16, 16) and got["extras"].shape == (3, 3)
-    from datamodules.canonical.bodies import sample_pose
+    from lit3d.body_model.bodies import sample_pose
 
     theta, rot = pose_params(sample_pose(11, 2, subject=2))
     assert torch.allclose(got["theta"][2], torch.tensor(theta, dtype=torch.float32))
@@ -162,7 +162,7 @@ def test_tiny_training_lowers_the_loss_and_beats_the_mean_height(anny):
 
 
 def test_fit_from_a_given_start_runs_the_requested_steps(anny):
-    from datamodules.canonical.bodies import sample_pose
+    from lit3d.body_model.bodies import sample_pose
     from lit3d.body.model import Params
 
     body, cam, prep, _, _ = anny

@@ -7,8 +7,9 @@ import pytest
 import trimesh
 
 from datamodules.cache import DataError
-from datamodules.canonical import CanonicalDataModule, bodies, posesets, tosca
+from datamodules.canonical import CanonicalDataModule, posesets, tosca
 from datamodules.canonical.tosca import MeshReadError
+from lit3d.body_model import bodies
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 

@@ -4,7 +4,7 @@ import statistics
 
 import pytest
 
-from lit3d.canonical.over_runs import load, main, markdown, over_runs
+from studies.canonical.over_runs import load, main, markdown, over_runs
 from lit3d.canonical.pooled import SCORES
 
 
@@ -53,7 +53,7 @@ def test_confusion_counts_who_is_taken_for_whom(tmp_path):
     import numpy as np
 
     from lit3d.canonical import heldout
-    from lit3d.canonical.over_runs import confusion, confusion_markdown
+    from studies.canonical.over_runs import confusion, confusion_markdown
 
     left, right = np.zeros((4, 4), np.float16), np.zeros((4, 4), np.float16)
     left[:, :2], right[:, 2:] = 1, 1

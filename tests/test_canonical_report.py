@@ -9,6 +9,7 @@ from PIL import Image
 
 from lit3d.canonical import report
 from lit3d.utils.io import STAGE_PREFIX
+from studies.canonical import report as report_program
 
 SOURCES = ("model", "unet", "input", "target", "cmds", "smacof", "gps", "posed", "chance")
 
@@ -90,7 +91,7 @@ def test_results_dataset_from_run_config_and_missing_values(tmp_path):
 
 def test_report_main_regenerates_from_metrics_json(tmp_path):
     (tmp_path / "metrics.json").write_text(json.dumps(_metrics()))
-    report.main([str(tmp_path), "tosca"])
+    report_program.main([str(tmp_path), "tosca"])
     assert "| lit3d model (ours) |" in _section((tmp_path / "results.md").read_text(), "5.3")
 
 
@@ -106,10 +107,10 @@ def test_report_main_merges_the_rows_of_a_unet_run(tmp_path):
     (tmp_path / "unet").mkdir()
     (tmp_path / "run" / "metrics.json").write_text(json.dumps(ours))
     (tmp_path / "unet" / "metrics.json").write_text(json.dumps(unet))
-    assert report.unet_run_metrics(unet) == {
+    assert report_program.unet_run_metrics(unet) == {
         "test/depth_mse_unet": 0.0234, "test/iou_unet": 0.71,
         **{k: v for k, v in unet.items() if k.startswith("test/retrieval/unet/")}}
-    report.main([str(tmp_path / "run"), "tosca", "--unet", str(tmp_path / "unet")])
+    report_program.main([str(tmp_path / "run"), "tosca", "--unet", str(tmp_path / "unet")])
     text = (tmp_path / "run" / "results.md").read_text()
     assert "| plain U-Net, same data and losses (ours) | 0.0234 | 0.710 |" in text
     t53 = _section(text, "5.3")

@@ -8,7 +8,7 @@ from omegaconf import OmegaConf
 from datamodules.canonical.rendering import PairRenderer
 from datamodules.canonical.sources import SynthSource
 from lit3d.canonical.factory import build_canonical_net
-from lit3d.canonical.warp_breakdown import PICTURE_COLUMNS, ROWS, breakdown, markdown, picture, summarise
+from studies.canonical.warp_breakdown import PICTURE_COLUMNS, ROWS, breakdown, markdown, picture, summarise
 
 HP = dict(image_size=64, azimuths=[0.0], view_mode="fixed", scale_mode="shape", skip_bad=False, flow_targets=True)
 
@@ -62,7 +62,7 @@ def test_breakdown_refuses_a_net_without_a_warp_head(compose_cfg):
 def test_command_refuses_bad_input_and_outputs_over_its_input(tmp_path, capsys):
     """A missing or broken checkpoint and an output that would replace the checkpoint: one line, exit 2,
     the checkpoint untouched."""
-    from lit3d.canonical.warp_breakdown import main
+    from studies.canonical.warp_breakdown import main
 
     bad = tmp_path / "run.ckpt"
     bad.write_text("not a checkpoint\n")

@@ -281,7 +281,7 @@ def test_installed_sweethome3d_catalogues_give_real_furniture():
 
 
 def test_input_statistics_of_real_models(tmp_path):
-    from lit3d.cli.input_stats import STATS, cad_rows, category_table
+    from studies.completion.input_stats import STATS, cad_rows, category_table
 
     write_chairs(tmp_path, 3)
     rows = cad_rows(32, "ortho", "meshes", str(tmp_path), per_category=2, categories=("chair", "table"))

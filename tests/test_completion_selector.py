@@ -3,7 +3,7 @@
 Bound used below: after 3 generator Adam steps on one batch, every stage's selector weight net
 moves by |dw|/|w| >= 0.1 x that stage's encoder convs (measured with the default loss_scale
 "voxels": 0.5-0.85 x; with the literal per-voxel mean, loss_scale=1, the last stage's selector
-moves 1e-4 x its encoder, i.e. it is a fixed random mask; scripts/latent_gradients.py).
+moves 1e-4 x its encoder, i.e. it is a fixed random mask; studies/completion/latent_gradients.py).
 """
 from __future__ import annotations
 
@@ -163,7 +163,7 @@ def _kept_masks(task: CompletionTask, x: torch.Tensor) -> list[torch.Tensor]:
 def test_kept_set_differs_between_inputs(demo_task_kwargs, furniture_batch):
     """Dynamic: at initialisation every pair of the 4 inputs keeps a different set at every stage
     (overlap 0.93-0.94 of K here: the latent is dominated by a part common to all inputs; after
-    the 6-epoch run of scripts/short_completion_run.py stages 2 and 3 share 0.70 / 0.47 of K on
+    the 6-epoch run of studies/completion/short_completion_run.py stages 2 and 3 share 0.70 / 0.47 of K on
     average), and a sample's set depends on that sample alone (not on the rest of the batch)."""
     task = _task(demo_task_kwargs)
     x, _ = furniture_batch

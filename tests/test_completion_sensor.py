@@ -11,7 +11,7 @@ import pytest
 from datamodules.completion import CompletionDataModule, DataConfigError
 from datamodules.completion.depth_voxels import make_sample, max_pool
 from datamodules.completion.furniture import Shape, box
-from lit3d.cli.input_stats import STATS, compare, pair_statistics, recgan_rows, synthetic_rows
+from studies.completion.input_stats import STATS, compare, pair_statistics, recgan_rows, synthetic_rows
 from lit3d.sensing.sensor import Sensor, hole_mask, make_sensor
 
 FIXTURE = Path(__file__).parent / "fixtures" / "recgan_sample_input_stats_64.json"

@@ -23,14 +23,14 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ("docs/design.md", "docs/CONTRIBUTING_TASKS.md")
-TOP = ("lit3d", "datamodules", "tests", "conf", "scripts", "benchmarks", "sweeps", "docs")
+TOP = ("lit3d", "datamodules", "tests", "conf", "scripts", "benchmarks", "sweeps", "docs", "studies")
 EXAMPLE_TASK = "normals"  # CONTRIBUTING_TASKS.md's walkthrough task: named, not built
 
 PATH = re.compile(r"(?<![\w./-])((?:%s)/[\w./<>*{}-]*)" % "|".join(TOP))
 # top-level files named bare (``pyproject.toml``); a bare ``nets.py`` is a file of the task being described
 BACKTICK_FILE = re.compile(r"`((?:[\w-]+\.(?:toml|cfg))|Makefile|LICENSE)`")
 LINK = re.compile(r"\]\(([^)#\s]+)(?:#[^)]*)?\)")
-DOTTED = re.compile(r"`((?:lit3d|datamodules)(?:\.\w+)+)")
+DOTTED = re.compile(r"`((?:lit3d|datamodules|studies)(?:\.\w+)+)")
 
 
 def _placeholder(text: str) -> bool:
@@ -102,3 +102,46 @@ def test_the_scan_sees_paths_and_skips_templates(tmp_path, monkeypatch):
                                         "lit3d/cli/registry.py", "pyproject.toml"]
     assert named_objects("docs/x.md") == ["datamodules.cache.CacheBuilder"]
     assert _resolves("datamodules.cache.CacheBuilder") and not _resolves("datamodules.cache.NoSuchThing")
+
+
+ALL_DOCS = sorted({*DOCS, "README.md", "sweeps/README.md",
+                   *(p.relative_to(ROOT).as_posix() for p in (ROOT / "docs").glob("*.md")),
+                   *(p.relative_to(ROOT).as_posix() for p in (ROOT / "studies").rglob("*.md"))})
+COMMAND = re.compile(r"python -m\s+((?:lit3d|datamodules|studies|benchmarks)\b[\w.<>*{}]*)")
+
+
+def named_programs(text: str) -> list[str]:
+    """The modules of the ``python -m MODULE`` commands in ``text`` (a command may wrap after ``-m``)."""
+    return sorted({m.rstrip(".") for m in COMMAND.findall(text) if not _placeholder(m)})
+
+
+@pytest.mark.parametrize("doc", ALL_DOCS)
+def test_every_doc_names_existing_paths_and_programs(doc):
+    """Every doc, the results pages and the studies' READMEs included: its paths exist, its dotted names
+    resolve, and every ``python -m`` program it names is a module with a ``__main__`` block (or a package
+    ``__main__``): a program that moved (the studies left the package) leaves no stale command behind."""
+    missing = [p for p in named_paths(doc) if not _exists(p)] + [d for d in named_objects(doc) if not _resolves(d)]
+    missing += [m for m in named_programs((ROOT / doc).read_text(encoding="utf-8")) if not _is_program(m)]
+    assert not missing, f"{doc} names what does not exist: {missing}"
+
+
+def test_the_commands_in_the_configs_exist():
+    """The ``python -m`` commands that the configs' comments name (``conf/``, ``sweeps/``) exist."""
+    missing = sorted({f"{p.relative_to(ROOT)}: {m}" for f in ("conf", "sweeps") for p in (ROOT / f).rglob("*.yaml")
+                      for m in named_programs(p.read_text(encoding="utf-8")) if not _is_program(m)})
+    assert not missing, f"configs name programs that do not exist: {missing}"
+
+
+def _is_program(module: str) -> bool:
+    parts = module.split(".")
+    for candidate in (ROOT.joinpath(*parts).with_suffix(".py"), ROOT.joinpath(*parts, "__main__.py")):
+        if candidate.is_file():
+            return candidate.name == "__main__.py" or "__name__ == \"__main__\"" in candidate.read_text(encoding="utf-8")
+    return False
+
+
+def test_a_moved_program_is_caught():
+    assert named_programs("run `python -m\nstudies.canonical.pooled DIR` or python -m lit3d.<task>.x") == [
+        "studies.canonical.pooled"]
+    assert _is_program("studies.canonical.pooled") and _is_program("lit3d.api")
+    assert not _is_program("lit3d.canonical.pooled") and not _is_program("lit3d.no_such_module")

@@ -1,28 +1,18 @@
-"""scripts/faust_chain.py (issue 37's chain row): a person-sized mesh goes through lit3d.complete and is
+"""studies/body/faust_chain.py (the completion chain row): a person-sized mesh goes through lit3d.complete and is
 scored with the body fit's measures; the table has one row with the median and quartiles."""
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
 import lit3d
-from lit3d.body.evaluate import DISTANCE, FAUST_HEIGHT, camera_frame
 from lit3d.body.synthetic import Camera
-
-SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
-
-
-def _script(name: str):
-    """``scripts/<name>.py`` as a module."""
-    spec = importlib.util.spec_from_file_location(name, SCRIPTS / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+from studies.body import body_fit_rows as rows
+from studies.body import faust_chain as chain
+from studies.body.evaluate import DISTANCE, FAUST_HEIGHT, camera_frame
 
 
 def test_a_standing_box_is_completed_and_scored(tmp_path, one_torch_thread):
-    chain = _script("faust_chain")
     completer = lit3d.load(lit3d.untrained_checkpoint("completion_demo", tmp_path / "c.ckpt"))
     box = trimesh.creation.box((0.4, FAUST_HEIGHT, 0.3))
     verts = np.asarray(box.vertices) + np.array([0.0, 0.0, DISTANCE])  # camera frame: centred, 3.2 m ahead
@@ -34,10 +24,9 @@ def test_a_standing_box_is_completed_and_scored(tmp_path, one_torch_thread):
 
 
 def test_body_fit_rows_place_a_y_up_mesh_in_front_of_the_camera():
-    """lit3d.body.evaluate.camera_frame (FAUST and scripts/body_fit_rows.py): a y-up mesh facing +z becomes
+    """studies.body.evaluate.camera_frame (FAUST and studies/body/body_fit_rows.py): a y-up mesh facing +z becomes
     camera-frame (y down, z forward), centred on its box, its centre 3.2 m ahead, scaled; the script's
     regressor fits go beside its mean-body fits."""
-    rows = _script("body_fit_rows")
     v = np.array([[0.0, 0.0, 0.0], [0.0, 2.0, 0.0], [1.0, 1.0, 0.5]])  # head up at y = 2, nose towards +z
     cam = camera_frame(v, 0.5)
     assert np.allclose((cam.min(0) + cam.max(0)) / 2, [0.0, 0.0, DISTANCE])

@@ -207,8 +207,30 @@ def test_no_python_file_over_400_lines():
 
 
 def test_the_package_never_imports_the_studies():
-    """``studies/`` sits beside the package (research programs and their logs): the product does not depend on it."""
-    pattern = re.compile(r"^\s*(?:from|import)\s+studies\b", re.MULTILINE)
+    """``studies/`` sits beside the package (research programs and their logs): the product does not depend on it.
+    Neither an import statement nor a name the package resolves at run time: ``importlib.import_module("studies...")``
+    or a Hydra ``_target_: studies...`` in the configs (``conf/``, ``sweeps/``) the wheel ships. (The import
+    statements are also an import-linter contract in ``pyproject.toml``.)"""
+    statement = re.compile(r"^\s*(?:from|import)\s+studies\b", re.MULTILINE)
+    by_name = re.compile(r"""(?:import_module|__import__|import_object)\(\s*["']studies\b""")
+    target = re.compile(r"_target_:\s*studies\.")
     found = [str(p.relative_to(ROOT)) for f in ("lit3d", "datamodules") for p in (ROOT / f).rglob("*.py")
-             if pattern.search(p.read_text(encoding="utf-8"))]
+             if statement.search(text := p.read_text(encoding="utf-8")) or by_name.search(text)]
+    found += [str(p.relative_to(ROOT)) for f in ("conf", "sweeps") for p in (ROOT / f).rglob("*.yaml")
+              if target.search(p.read_text(encoding="utf-8"))]
     assert not found, f"the package imports studies: {found}"
+
+
+def test_no_program_in_the_package():
+    """The package's only programs are its console scripts (``lit3d/cli/``) and ``python -m lit3d.api``;
+    ``python -m lit3d.quality.demo`` is the quality demo's driver (``scripts/demo_quality.sh``). Study
+    programs live in ``studies/``."""
+    pyproject = (ROOT / "pyproject.toml").read_text(encoding="utf-8")  # [project.scripts]: name = "module:function"
+    section = pyproject.split("[project.scripts]", 1)[1].split("\n[", 1)[0]
+    allowed = {m.replace(".", "/") + ".py" for m in re.findall(r'^[\w-]+\s*=\s*"([\w.]+):\w+"', section, re.MULTILINE)}
+    assert "lit3d/cli/train.py" in allowed, section
+    allowed |= {"lit3d/api/__main__.py", "lit3d/quality/demo.py"}
+    main = re.compile(r"^if __name__ == .__main__.:", re.MULTILINE)
+    found = sorted(rel for f in ("lit3d", "datamodules") for p in (ROOT / f).rglob("*.py")
+                   if (rel := p.relative_to(ROOT).as_posix()) not in allowed and main.search(p.read_text(encoding="utf-8")))
+    assert not found, f"programs inside the package (move them to studies/): {found}"

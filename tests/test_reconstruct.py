@@ -151,7 +151,7 @@ def _chair_mesh():
 
 @pytest.mark.slow  # trains the small checkpoint: 276 s measured here with the 2 cores loaded about 6x
 def test_round_trip_overlays_points_and_beats_partial(tiny_ckpt):
-    from lit3d.reconstruct.check import round_trip
+    from studies.reconstruct.check import round_trip
     from lit3d.reconstruct.pipeline import load_completer
 
     completer = load_completer(tiny_ckpt)

@@ -58,7 +58,6 @@ import numpy as np
 from torch.utils.data import DataLoader
 
 from datamodules.cache import CacheBuilder, DataError
-from datamodules.canonical import bodies
 from datamodules.canonical.batches import SubjectGroupedBatches
 from datamodules.canonical.blends import add_blends
 from datamodules.canonical.dataset import CanonicalPairDataset, mirror_views, subject_balanced_sampler
@@ -71,6 +70,7 @@ from datamodules.canonical.sources import ROOTLESS, CANONICAL_SOURCES, Shrec14So
 from datamodules.canonical.splits import (SPLIT_MODES, CANONICAL_SPLITS, deal, fold_pairs, split_counts, split_pose,
                                           split_subject_pose, thin_training)
 from datamodules.loaders import evaluation_loader
+from lit3d.body_model import bodies
 from lit3d.geometry.views import VIEW_MODES
 
 log = logging.getLogger("lit3d")

@@ -6,7 +6,7 @@ poses and loading meshes ``(V, 3) float, (F, 3) int`` unnormalised with y up.
     tosca    TOSCA meshes under ``root`` (.mat/.vert+.tri/.off/.ply); canonical = pose 0 (null pose).
     shrec14  SHREC'14 humans under ``root`` with a PSB ``.cla`` (classes = subjects); canonical =
              the pose at ``canonical_pose`` within each class.
-    anny     people from the Anny body model (:mod:`datamodules.canonical.bodies`): ``n_subjects``
+    anny     people from the Anny body model (:mod:`lit3d.body_model.bodies`): ``n_subjects``
              phenotypes x ``n_poses`` joint-limit poses, both seeded; canonical = the rest pose.
     faust    FAUST registrations under ``root`` (:mod:`datamodules.canonical.posesets`); canonical =
              pose ``canonical_pose``, which is also an item (FAUST has no separate rest pose).
@@ -19,10 +19,11 @@ from collections.abc import Sequence
 import numpy as np
 
 from datamodules.cache import DataError
-from datamodules.canonical import bodies, figures, shrec14, tosca
+from datamodules.canonical import figures, shrec14, tosca
 from datamodules.canonical.flow import skinned_canonical
 from datamodules.canonical.posesets import index_faust, index_sumner
 from datamodules.canonical.splits import OWN_POSE_BASE
+from lit3d.body_model import bodies
 
 CANONICAL_SOURCES = ("synth", "tosca", "shrec14", "anny", "faust", "sumner")
 ROOTLESS = ("synth", "anny")  # sources that need no root folder

@@ -1,4 +1,4 @@
-"""Fit the Anny body model (:mod:`datamodules.canonical.bodies`) to one depth image of a person.
+"""Fit the Anny body model (:mod:`lit3d.body_model.bodies`) to one depth image of a person.
 
     points.py   depth + intrinsics -> camera-frame foreground points, silhouette distance map
     model.py    differentiable Anny: phenotype, joint-limited bone rotations, global similarity
@@ -7,10 +7,13 @@
     results.py  what a fit gives: posed and rest-pose meshes, the canonical depth image (rendered
                 as the canonical task renders its targets), fit quality, the parameters as JSON
     regressor.py  a small CNN: depth image -> the fit's parameters, the fit's start (--body-init)
-    train_regressor.py  its training on Anny people drawn and rendered on the fly
+    poses.py      the pose mixes of the regressor's training people
     synthetic.py  the evaluation's camera, rendering and sensor noise (evaluation and training)
-    evaluate.py   held-out Anny people and FAUST
 
-A task room beside :mod:`lit3d.canonical` (it imports datamodules and the shared rooms only);
-``lit3d-reconstruct --body`` (:mod:`lit3d.reconstruct.body`) is its user.
+The programs that train the regressor and evaluate the fit (held-out Anny people, FAUST) are a study
+beside the package: ``studies/body/``.
+
+A task room beside :mod:`lit3d.canonical` that imports the shared rooms only (the body model:
+:mod:`lit3d.body_model`), neither a DataModule nor Lightning; ``lit3d-reconstruct --body``
+(:mod:`lit3d.reconstruct.body`) is its user.
 """

@@ -5,10 +5,10 @@ Parameters (all torch tensors, float32; :class:`Params`):
 - ``phenotype`` ``(6,)``: Anny's default phenotypes (gender, age, muscle, weight, height,
   proportions), each in [0, 1] (clamped in the forward pass; 0.5 = the mean body);
 - ``theta`` ``(D,)``: joint angles in radians, one per degree of freedom of :data:`DOFS`: the
-  bones and limits of the data source (:data:`datamodules.canonical.bodies.JOINT_LIMITS`: spine03,
+  bones and limits of the data source (:data:`lit3d.body_model.bodies.JOINT_LIMITS`: spine03,
   spine01, neck01 with 3 axes, shoulders and hips with 3 axes per side, knees 1 axis, elbows 1 axis
   about ``ELBOW_AXIS``; ``D = 25``). A bone's rotation vector (Anny's rest axes, ``local-ref``) is
-  the sum of its angles times their axes, so a pose of :func:`~datamodules.canonical.bodies.sample_pose`
+  the sum of its angles times their axes, so a pose of :func:`~lit3d.body_model.bodies.sample_pose`
   (without its ``root`` turn) is a point of this space;
 - ``rotation`` ``(3,)``: rotation vector of the body in the camera frame (0: facing the camera,
   upright);
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from datamodules.canonical.bodies import ELBOW, ELBOW_AXIS, JOINT_LIMITS, BodyModel, anny_to_y_up, right_of
+from lit3d.body_model.bodies import ELBOW, ELBOW_AXIS, JOINT_LIMITS, BodyModel, anny_to_y_up, right_of
 from lit3d.body.surface import incidence_matrix
 
 PHENOTYPES = ("gender", "age", "muscle", "weight", "height", "proportions")
@@ -87,7 +87,7 @@ class Params:
 
 class Body:
     """Anny posed by :class:`Params` (see the module doc); ``model``: a loaded
-    :class:`~datamodules.canonical.bodies.BodyModel` (loads anny on first use)."""
+    :class:`~lit3d.body_model.bodies.BodyModel` (loads anny on first use)."""
 
     def __init__(self, model: BodyModel | None = None):
         self.model = model or BodyModel()

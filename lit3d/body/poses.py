@@ -1,8 +1,8 @@
-"""Poses of the regressor's training people (:mod:`lit3d.body.train_regressor`), drawn from a mix of
+"""Poses of the regressor's training people (:mod:`studies.body.train_regressor`), drawn from a mix of
 pose families.
 
-The Anny data source (:func:`datamodules.canonical.bodies.sample_pose`) draws upright people: each
-joint uniform within :data:`~datamodules.canonical.bodies.JOINT_LIMITS`, the body turned by at most
+The Anny data source (:func:`lit3d.body_model.bodies.sample_pose`) draws upright people: each
+joint uniform within :data:`~lit3d.body_model.bodies.JOINT_LIMITS`, the body turned by at most
 15 degrees about the vertical. People lying on their side, kneeling, crawling or upside down are
 outside it, and a regressor trained on it starts their fits far off (TOSCA's humans,
 docs/results_canonical.md). The families (:data:`FAMILIES`):
@@ -26,7 +26,7 @@ import math
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from datamodules.canonical.bodies import sample_pose
+from lit3d.body_model.bodies import sample_pose
 from lit3d.body.model import ANNY_TO_CAMERA, DOFS
 
 FAMILIES = ("upright", "turned", "folded", "any")

@@ -1,7 +1,7 @@
 """A small CNN from a person's depth image to the body fit's parameters: the fit's start (issue 37).
 
-Trained on Anny people drawn and rendered on the fly (:mod:`lit3d.body.train_regressor`); used by
-``lit3d-reconstruct --body --body-init CKPT`` and ``python -m lit3d.body.evaluate --init CKPT``.
+Trained on Anny people drawn and rendered on the fly (:mod:`studies.body.train_regressor`); used by
+``lit3d-reconstruct --body --body-init CKPT`` and ``python -m studies.body.evaluate --init CKPT``.
 
 **Input** (:func:`crop`, the same for training and use): the foreground of the
 :class:`~lit3d.body.points.Observation` (the points the fit sees) cropped to a square around its
@@ -213,7 +213,7 @@ def load_regressor(path: str | Path) -> Regressor:
     if not isinstance(ck, dict) or ck.get("format") != FORMAT:
         found = ck.get("format") if isinstance(ck, dict) else type(ck).__name__
         raise BodyCheckpointError(f"{path}: not a body regressor checkpoint (format {found!r}, expected {FORMAT!r}; "
-                                  "made by python -m lit3d.body.train_regressor)")
+                                  "made by python -m studies.body.train_regressor)")
     try:
         prep = Preprocess(**ck["preprocess"])
         net = BodyRegressor(prep.size, **ck["net"])

@@ -160,7 +160,7 @@ class CanonicalTask(pl.LightningModule):
         super().__init__()
         if unet_baseline:
             raise ValueError("unet_baseline was removed: train the plain U-Net as a run of its own "
-                             "(task.arch=unet) and merge its rows with python -m lit3d.canonical.report RUN_DIR "
+                             "(task.arch=unet) and merge its rows with python -m studies.canonical.report RUN_DIR "
                              "--unet UNET_RUN_DIR")
         legacy_settings(type(self).__name__, legacy_evaluation, EVALUATION_LEGACY)
         # unet_baseline: accepted (false) from older checkpoints only; the evaluation settings are not the module's

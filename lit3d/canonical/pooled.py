@@ -1,9 +1,7 @@
 """Pooled, cross-validated retrieval of the canonical task: every held-out item scored once, every
-row on the same items and the same codebook seeds, mean +- sd over the seeds.
-
-    python -m lit3d.canonical.pooled RUN_DIR... --seeds 0 1 2 3 4 --out DIR
-    python -m lit3d.canonical.pooled --seeds 0 1 2 3 4 --out DIR -- experiment=canonical_tosca \\
-        data.root=../shared/data/tosca8k data.view_mode=broadside        # non-learned rows only
+row on the same items and the same codebook seeds, mean +- sd over the seeds: :func:`run`, and at the
+end of ``+sweep=canonical_cv`` the Hydra callback :class:`PooledResults`. By hand, from the checkout:
+``python -m studies.canonical.pooled`` (``studies/canonical/pooled.py``).
 
 With run dirs (one per fold, each with the ``heldout.npz`` that
 :func:`lit3d.canonical.evaluator.protocol` writes), the folds are merged
@@ -20,7 +18,7 @@ resolution): the non-learned canonical forms ``evaluation.mesh_baselines`` (land
 seeded by the codebook seed). ``--depth-row ROW=DIR``: one more depth row, the canonical depth images
 that ``lit3d-reconstruct --body`` wrote for inputs named ``<subject>_pose<pose>``
 (``DIR/<subject>_pose<pose>_body_canonical_depth.npy``, :func:`folder_depths`), e.g.
-``--depth-row body_fit=OUT/faust_canonical`` (:mod:`lit3d.body.evaluate` writes that folder for FAUST).
+``--depth-row body_fit=OUT/faust_canonical`` (:mod:`studies.body.evaluate` writes that folder for FAUST).
 Writes ``DIR/pooled_results.md`` (thesis table 5.x layout) and ``DIR/pooled.json`` (every seed's scores).
 """
 from __future__ import annotations
@@ -332,40 +330,3 @@ class PooledResults(_HydraCallback):
             return
         path = run(jobs, self.seeds, sweep_dir, rows=self.rows, mesh_baselines=self.mesh_baselines)
         print(path.read_text())
-
-
-def main(argv: list[str] | None = None) -> None:
-    import argparse
-    import sys
-
-    argv = list(sys.argv[1:] if argv is None else argv)
-    overrides = argv[argv.index("--") + 1:] if "--" in argv else []
-    argv = argv[:argv.index("--")] if "--" in argv else argv
-    parser = argparse.ArgumentParser(prog="python -m lit3d.canonical.pooled", description=__doc__.split("\n")[0])
-    parser.add_argument("runs", nargs="*", type=Path, help="run dirs with heldout.npz (one per fold)")
-    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4], help="codebook seeds")
-    parser.add_argument("--out", type=Path, required=True, help="folder for pooled_results.md and pooled.json")
-    parser.add_argument("--rows", nargs="+", default=None, help="only these rows (e.g. input cmds shapedna)")
-    parser.add_argument("--mesh-baselines", nargs="*", default=None,
-                        help="canonical-form rows (cmds smacof nmds gps posed; default: evaluation.mesh_baselines)")
-    parser.add_argument("--allow-partial", action="store_true", help="score folds that do not cover every item")
-    parser.add_argument("--fold-test", action="store_true",
-                        help="without run dirs: only the test split of data.fold (not every fold's held-out items)")
-    parser.add_argument("--depth-row", action="append", default=[], metavar="ROW=DIR",
-                        help="one more depth row: DIR/<subject>_pose<pose>_body_canonical_depth.npy per item")
-    parser.add_argument("--smooth-px", type=float, default=None, metavar="SIGMA",
-                        help="smooth the prediction's depth inside its silhouette first (evaluation.prediction_smooth_px)")
-    args = parser.parse_args(argv)
-    depth_rows = dict(r.split("=", 1) for r in args.depth_row if "=" in r)
-    if len(depth_rows) != len(args.depth_row):
-        parser.error("--depth-row: expected ROW=DIR")
-    if not args.runs and not overrides:
-        parser.error("give run dirs, or Hydra overrides after -- for the non-learned rows")
-    logging.basicConfig(level=logging.INFO, format="%(message)s")
-    print(run(args.runs, args.seeds, args.out, overrides, args.rows, strict=not args.allow_partial,
-              mesh_baselines=args.mesh_baselines, fold_test=args.fold_test, depth_rows=depth_rows,
-              smooth_px=args.smooth_px).read_text())
-
-
-if __name__ == "__main__":
-    main()

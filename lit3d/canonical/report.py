@@ -95,7 +95,7 @@ def write_results(metrics: dict, out_dir: Path, dataset: str | None = None) -> P
              markdown_table(["prediction", "masked depth MSE (lower is better)", "mask IoU"], image_rows)]
     if m.get("test/depth_mse_unet") is not None:
         parts += ["", "The plain U-Net rows come from a run of its own on the same data, loss and alpha/beta "
-                      "phases (`task.arch=unet`), merged by `python -m lit3d.canonical.report RUN_DIR --unet "
+                      "phases (`task.arch=unet`), merged by `python -m studies.canonical.report RUN_DIR --unet "
                       "UNET_RUN_DIR`."]
     ours = retrieval_rows(m)
     for number, (title, rows) in THESIS.items():
@@ -213,39 +213,3 @@ def write_figures(task, datamodule, out_dir: Path, n: int = 4, evaluation=None) 
     if mpath.is_file() and source:
         write_results(json.loads(mpath.read_text()), out_dir, dataset=source)
     return paths
-
-
-def unet_run_metrics(unet_metrics: dict) -> dict:
-    """The metrics of a plain U-Net run (``task.arch=unet``: its metrics.json) under the U-Net
-    rows' keys: ``test/depth_mse|iou`` -> ``test/depth_mse_unet|iou_unet``, its retrieval
-    (``test/retrieval/unet/...``; ``.../model/...`` in runs older than the source name) as is."""
-    out = {f"{k}_unet": unet_metrics[k] for k in ("test/depth_mse", "test/iou") if k in unet_metrics}
-    for key, value in unet_metrics.items():
-        for prefix in ("test/retrieval/unet/", "test/retrieval/model/"):
-            if key.startswith(prefix):
-                out.setdefault("test/retrieval/unet/" + key[len(prefix):], value)
-    return out
-
-
-def main(argv: list[str] | None = None) -> None:
-    """``python -m lit3d.canonical.report RUN_DIR [SOURCE] [--unet UNET_RUN_DIR]``: results.md from a
-    run's metrics.json (e.g. after ``lit3d-train``, which writes metrics.json but no report); with
-    ``--unet``, the U-Net rows from the metrics.json of a plain U-Net run (``task.arch=unet``, same
-    data) are added and RUN_DIR's metrics.json is left as it is."""
-    import argparse
-    import json
-    import sys
-
-    parser = argparse.ArgumentParser(prog="python -m lit3d.canonical.report")
-    parser.add_argument("run", type=Path, help="run dir with metrics.json")
-    parser.add_argument("source", nargs="?", default=None, choices=sorted(TABLE_OF_SOURCE))
-    parser.add_argument("--unet", type=Path, default=None, help="run dir of a plain U-Net run (task.arch=unet)")
-    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
-    metrics = json.loads((args.run / "metrics.json").read_text())
-    if args.unet is not None:
-        metrics.update(unet_run_metrics(json.loads((args.unet / "metrics.json").read_text())))
-    print(write_results(metrics, args.run, args.source))
-
-
-if __name__ == "__main__":
-    main()

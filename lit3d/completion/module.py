@@ -187,7 +187,7 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
 
     def health_groups(self) -> dict[str, list[torch.nn.Parameter]]:
         """Named parameter groups watched by :class:`lit3d.callbacks.health.TrainingHealth` and
-        ``scripts/latent_gradients.py``: per generator stage its encoder convs, latent FCs
+        ``studies/completion/latent_gradients.py``: per generator stage its encoder convs, latent FCs
         (``fc_enc`` + ``fc_dec``), selector weight net and decoder (+ up-sampling, attention);
         then the critic and the classifier. Every trainable parameter is in exactly one group."""
         groups: dict[str, list[torch.nn.Parameter]] = {}

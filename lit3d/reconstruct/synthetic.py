@@ -3,7 +3,8 @@
 The mesh is posed in the camera frame of :mod:`lit3d.reconstruct.backproject` (metres, ``y``
 down, ``z`` forward) and rendered with the project's EGL pyrender path
 (:func:`lit3d.render.camera.render_pinhole_depth`), whose depth buffer pyrender linearises to
-z-depth (exact for perspective cameras).
+z-depth (exact for perspective cameras). A depth PNG of a mesh to try ``lit3d-reconstruct`` on, from the
+checkout: ``python -m studies.reconstruct.synthetic MESH OUT.png``.
 """
 from __future__ import annotations
 
@@ -11,10 +12,8 @@ import numpy as np
 
 from lit3d.reconstruct.backproject import Intrinsics
 from lit3d.geometry.normalise import normalise_vertices
-from lit3d.reconstruct.backproject import RECGAN_FOV_DEG
 from lit3d.render.camera import render_pinhole_depth
 from lit3d.sensing.views import camera_rotation
-from lit3d.utils.io import atomic_write_bytes
 
 
 def pose_in_front(mesh, distance: float = 1.5, size: float = 0.6, azimuth: float = 30.0,
@@ -37,24 +36,3 @@ def render_depth_pinhole(mesh, intr: Intrinsics, width: int, height: int) -> np.
     depth = render_pinhole_depth(verts, np.asarray(mesh.faces), np.eye(4), width, height, intr.fx, intr.fy,
                                  intr.cx + 0.5, intr.cy + 0.5, znear=0.05, zfar=100.0)
     return depth.astype(np.float32)
-
-
-def main(argv: list[str] | None = None) -> None:
-    """``python -m lit3d.reconstruct.synthetic MESH OUT.png``: a 320x240 16-bit depth PNG (mm) of
-    ``MESH`` 1.5 m in front of the 3D-RecGAN++ camera, to try ``lit3d-reconstruct`` on."""
-    import io
-    import sys
-
-    import trimesh
-    from PIL import Image
-
-    src, out = (sys.argv[1:] if argv is None else argv)[:2]
-    depth = render_depth_pinhole(pose_in_front(trimesh.load(src, force="mesh")),
-                                 Intrinsics.from_fov(RECGAN_FOV_DEG, 320, 240), 320, 240)
-    buf = io.BytesIO()
-    Image.fromarray(np.round(depth * 1000).astype(np.uint16)).save(buf, format="PNG")
-    print(atomic_write_bytes(out, buf.getvalue()))
-
-
-if __name__ == "__main__":
-    main()

@@ -24,7 +24,7 @@ Noise, in voxels of a 256 grid (the release's resolution; scaled to the grid bei
 - ``misregistration``: one shift per sample, uniform in ``[-m, m]`` per axis, of the sensed
   points against the target. In the release every 2.5D voxel outside its target lies one
   voxel (at 256^3) from it: a sub-voxel misregistration, not range noise
-  (:mod:`lit3d.cli.input_stats` measures it).
+  (:mod:`studies.completion.input_stats` measures it).
 - ``depth_noise``: standard deviation of independent per-pixel range noise.
 - ``hole_fraction``: share of foreground pixels dropped in blobs of about ``hole_size`` pixels
   (a smoothed random field thresholded at the matching quantile).
@@ -85,7 +85,7 @@ class Sensor:
 
 SENSORS = {
     "ortho": Sensor(),
-    # calibrated at 64^3 on ../shared/data/recgan_sample (python -m lit3d.cli.input_stats;
+    # calibrated at 64^3 on ../shared/data/recgan_sample (python -m studies.completion.input_stats;
     # README "Synthetic data in the 3D-RecGAN++ geometry"): made at 256^3 and pooled, as the release
     "recgan": Sensor(camera="perspective", mirror_x=True, misregistration=0.75, depth_noise=0.25,
                      hole_fraction=0.15, hole_size=8.0, raw_res=RAW_RES, pixels_per_voxel=1.0),

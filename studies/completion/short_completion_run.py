@@ -1,6 +1,6 @@
 """The reduced completion demo of tests/test_completion_training.py, with extra overrides.
 
-    .venv/bin/python scripts/short_completion_run.py TAG [hydra overrides ...]
+    .venv/bin/python -m studies.completion.short_completion_run TAG [hydra overrides ...]
 
 Seed 0, 160 training shapes, 6 reconstruction-only epochs; writes /tmp/lit3d_short/TAG and
 prints the test IoU of the model and of the input-as-prediction baseline per split.

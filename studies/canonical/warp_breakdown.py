@@ -1,7 +1,7 @@
 """Where the warp head's mask IoU goes: the output composed again with the net's flow, visibility and
 fill each replaced by the truth, on the items of a split.
 
-    python -m lit3d.canonical.warp_breakdown CKPT [--split val|test] [--data-dir DIR] [--out FILE.md]
+    python -m studies.canonical.warp_breakdown CKPT [--split val|test] [--data-dir DIR] [--out FILE.md]
                                              [--picture FILE.png]
 
 The data are the checkpoint's own (its data config; ``--data-dir`` reads a cache elsewhere), with flow
@@ -140,7 +140,7 @@ def markdown(means: dict[str, float], n_items: int, source: str) -> str:
 def main(argv: list[str] | None = None) -> int:
     """The command line (module docstring). A bad checkpoint, data cache or output path: one line on
     stderr, exit 2; ``--out`` / ``--picture`` never replace the checkpoint and are written atomically."""
-    ap = argparse.ArgumentParser(prog="python -m lit3d.canonical.warp_breakdown", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m studies.canonical.warp_breakdown", description=__doc__.split("\n\n")[0])
     ap.add_argument("ckpt", help="a canonical checkpoint with the warp head")
     ap.add_argument("--split", choices=("val", "test"), default="test")
     ap.add_argument("--data-dir", help="the data cache (default: the checkpoint's data.data_dir)")

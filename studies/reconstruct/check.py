@@ -1,7 +1,7 @@
 """Round-trip check on a known mesh: render its depth, reconstruct, compare with its voxelisation.
 
     row = round_trip(mesh, completer)      # dict of the measures below
-    python -m lit3d.reconstruct.check CKPT ../shared/data/meshes/*.obj ../shared/data/tosca8k/cat0.ply
+    python -m studies.reconstruct.check CKPT ../shared/data/meshes/*.obj ../shared/data/tosca8k/cat0.ply
 
 Measures (grids in the reconstruction's own placement, so all are at the checkpoint's ``R``):
 

@@ -1,6 +1,6 @@
 """Contact sheet of the real models a completion data folder used in one split, as shaded renders.
 
-    python scripts/catalogue_sheet.py DATA_DIR --split test_unseen --categories plane car firearm --per 4 \\
+    python -m studies.completion.catalogue_sheet DATA_DIR --split test_unseen --categories plane car firearm --per 4 \\
         --out docs/images/unseen_real_models.png
 
 DATA_DIR is a prepared completion folder of a real source (``data.source=installed | sweethome3d |

@@ -1,13 +1,13 @@
 """Measure the Anny body fit (issue 37): held-out Anny people and FAUST, with baselines.
 
-    python -m lit3d.body.evaluate --out DIR [--anny N] [--faust ../shared/data/faust_a] [--multi-start]
+    python -m studies.body.evaluate --out DIR [--anny N] [--faust ../shared/data/faust_a] [--multi-start]
 
 Camera: the ``lit3d-reconstruct`` default, the 3D-RecGAN++ pinhole (fov 49.124 degrees across both
 sides of a 320x240 image, centred), the person 3.2 m in front of it, facing it.
 
 - **Held-out Anny people** (``--anny N``): subject ``i`` = phenotype ``i`` of draw ``--body-seed``
   (Anny's adult shape distribution, as ``conf/data/anny.yaml``) in its own pose ``i`` of draw
-  ``--pose-seed`` (:func:`datamodules.canonical.bodies.sample_pose`, yaw included; ``--poses varied``:
+  ``--pose-seed`` (:func:`lit3d.body_model.bodies.sample_pose`, yaw included; ``--poses varied``:
   :func:`lit3d.body.poses.draw_pose`'s mix, people also lying, folded and upside down); training
   draws use seed 0 (the regressor's 7), these 1000+. The depth image gets the ``recgan`` sensor's noise
   (:data:`lit3d.sensing.sensor.SENSORS`), whose figures are in voxels of a 256 grid: one voxel
@@ -25,7 +25,7 @@ sides of a 320x240 image, centred), the person 3.2 m in front of it, facing it.
   ``--samples`` area-uniform surface samples of each mesh. Beside: the visible input points alone
   (as the predicted set) and the mean body. The canonical depth images (``<stem>_body_canonical_depth.npy``,
   :func:`lit3d.body.results.canonical_depth`) go to ``DIR/faust_canonical`` for the retrieval
-  row (``python -m lit3d.canonical.pooled --depth-row body_fit=DIR/faust_canonical ...``).
+  row (``python -m studies.canonical.pooled --depth-row body_fit=DIR/faust_canonical ...``).
 
 ``--multi-start``: :func:`lit3d.body.fit.fit_best` (four starts probed, the lowest loss goes on) in
 place of the single fit from the mean body; CPU seconds count every start.
@@ -47,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
-from datamodules.canonical.bodies import sample_phenotype, sample_pose
+from lit3d.body_model.bodies import sample_phenotype, sample_pose
 from datamodules.canonical.posesets import index_faust
 from lit3d.body.fit import FitConfig, fit_best, fit_body
 from lit3d.body.model import PHENOTYPES, Body, Params
@@ -332,7 +332,7 @@ def main(argv: list[str] | None = None) -> None:
 
     import torch
 
-    ap = argparse.ArgumentParser(prog="python -m lit3d.body.evaluate", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m studies.body.evaluate", description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, required=True, help="folder for body_eval.json and body_eval.md")
     ap.add_argument("--anny", type=int, default=20, help="held-out Anny people (0: none)")
     ap.add_argument("--body-seed", type=int, default=1000, help="phenotype draw (training uses 0)")
@@ -346,7 +346,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--samples", type=int, default=20000, help="surface samples per mesh for Chamfer/F-score")
     ap.add_argument("--multi-start", action="store_true",
                     help="fit from 4 starts (mean body, yaw -/+0.4 rad, arms lowered; lit3d.body.fit.fit_best)")
-    ap.add_argument("--init", type=Path, default=None, help="body regressor checkpoint (lit3d.body.train_regressor): "
+    ap.add_argument("--init", type=Path, default=None, help="body regressor checkpoint (studies.body.train_regressor): "
                     "adds the rows 'regressor alone' and 'regressor + refinement'")
     ap.add_argument("--refine-global", type=int, default=REFINE_GLOBAL_ITERS, help="rigid steps of the refinement")
     ap.add_argument("--refine-full", type=int, default=REFINE_FULL_ITERS, help="full steps of the refinement")
@@ -364,7 +364,7 @@ def main(argv: list[str] | None = None) -> None:
                                                          poor_extra_iters=args.refine_poor))
     cam, body = Camera.default(), Body()
     args.out.mkdir(parents=True, exist_ok=True)
-    meta = {"command": "python -m lit3d.body.evaluate " + " ".join(argv if argv is not None else sys.argv[1:]),
+    meta = {"command": "python -m studies.body.evaluate " + " ".join(argv if argv is not None else sys.argv[1:]),
             "body_seed": args.body_seed, "pose_seed": args.pose_seed, "poses": args.poses, "sensor": args.sensor,
             "starts": "4 starts, best probe kept" if args.multi_start else "one start: the mean body",
             "camera": {**cam.__dict__, "width": WIDTH, "height": HEIGHT, "distance_m": DISTANCE}, "threads": args.threads}

@@ -1,6 +1,6 @@
 """Per-group gradient RMS and Adam update/weight ratios of the completion generator at initialisation.
 
-    .venv/bin/python scripts/latent_gradients.py [--scale demo|paper] [--batch B] [--steps N] [overrides ...]
+    .venv/bin/python -m studies.completion.latent_gradients [--scale demo|paper] [--batch B] [--steps N] [overrides ...]
 
 Builds ``CompletionTask`` from ``experiment=completion_<scale>`` (plus Hydra overrides, e.g.
 ``task.latent_grad_scale=1``), draws B synthetic furniture samples (``datamodules.completion``), and

@@ -1,9 +1,9 @@
 """The body fit's canonical depth images for the held-out items of a canonical config (issue 37's
 ``body_fit`` row beyond FAUST: held-out Anny people, TOSCA's humans).
 
-    python scripts/body_fit_rows.py --out DIR [--init REGRESSOR_CKPT] [--worker I --workers K] \\
+    python -m studies.body.body_fit_rows --out DIR [--init REGRESSOR_CKPT] [--worker I --workers K] \\
         -- experiment=canonical_humans data.data_dir=... data.pose_draw=per_subject
-    python -m lit3d.canonical.pooled --fold-test --rows input body_fit chance --depth-row body_fit=DIR \\
+    python -m studies.canonical.pooled --fold-test --rows input body_fit chance --depth-row body_fit=DIR \\
         --seeds 0 1 2 3 4 --out POOLED -- experiment=canonical_humans data.data_dir=... data.pose_draw=per_subject
 
 The Hydra overrides after ``--`` compose the canonical data as ``lit3d-train`` would
@@ -11,7 +11,7 @@ The Hydra overrides after ``--`` compose the canonical data as ``lit3d-train`` w
 held-out item of the folds) is taken at full resolution (``raw_mesh``: y up, facing +z), centred on its
 box, scaled so that the subject's rest pose stands ``--height`` m tall when the source is not metric
 (``--metric``: keep its units, e.g. Anny's metres), placed 3.2 m in front of the 3D-RecGAN++ camera and
-rendered as one 320x240 depth image (:mod:`lit3d.body.synthetic`, as ``python -m lit3d.body.evaluate
+rendered as one 320x240 depth image (:mod:`lit3d.body.synthetic`, as ``python -m studies.body.evaluate
 --faust`` does). The body is fitted from the mean body (``DIR``) and, with ``--init``, from the regressor + its
 refinement (``DIR_refined``); each fit's canonical depth image, rendered as the canonical task renders its targets
 (:func:`lit3d.body.results.fit_outputs`), is saved as ``<subject>_pose<pose>_body_canonical_depth.npy`` (and its quality as ``_body.json``),
@@ -29,7 +29,7 @@ import numpy as np
 import torch
 from omegaconf import OmegaConf
 
-from lit3d.body.evaluate import FAUST_HEIGHT, camera_frame, fit
+from studies.body.evaluate import FAUST_HEIGHT, camera_frame, fit
 from lit3d.body.model import Body
 from lit3d.body.regressor import load_regressor, refine_config
 from lit3d.body.results import fit_outputs
@@ -53,7 +53,7 @@ def main(argv: list[str] | None = None) -> None:
     ours, overrides = (argv[:argv.index("--")], argv[argv.index("--") + 1:]) if "--" in argv else (argv, [])
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, required=True, help="folder of the canonical depth images")
-    ap.add_argument("--init", type=Path, default=None, help="body regressor checkpoint (lit3d.body.train_regressor)")
+    ap.add_argument("--init", type=Path, default=None, help="body regressor checkpoint (studies.body.train_regressor)")
     ap.add_argument("--refine-poor", type=int, default=0, help="with --init: full steps more where flagged poor")
     ap.add_argument("--metric", action="store_true", help="the source's units are metres (Anny): no rescaling")
     ap.add_argument("--height", type=float, default=FAUST_HEIGHT, help="rest-pose height in metres otherwise")

@@ -1,6 +1,6 @@
 """Score training checkpoints on their run's validation split, with the task's validation metrics.
 
-    python scripts/validate_checkpoints.py RUN/checkpoints/best-011.ckpt OTHER_RUN/checkpoints/last.ckpt \\
+    python -m studies.canonical.validate_checkpoints RUN/checkpoints/best-011.ckpt OTHER_RUN/checkpoints/last.ckpt \\
         --all-val --out val.json [--heldout DIR]
 
 Each checkpoint's run folder (``RUN/config.yaml``, written by lit3d-train) gives the data; the task is
@@ -13,7 +13,7 @@ existed.
 ``--heldout DIR`` (canonical task): also writes the validation items' predictions as
 ``DIR/<i>/heldout.npz`` (``i``: the checkpoint's place on the command line; the layout
 :mod:`lit3d.canonical.heldout` gives test items, with the checkpoint's evaluation settings), so that
-``python -m lit3d.canonical.pooled DIR/<i> --out ...`` ranks settings on validation people with the
+``python -m studies.canonical.pooled DIR/<i> --out ...`` ranks settings on validation people with the
 thesis descriptor, the measure the test reports, instead of on the test set.
 """
 from __future__ import annotations

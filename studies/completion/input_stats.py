@@ -1,6 +1,6 @@
 """Statistics of completion inputs against their targets: do synthetic inputs look like real ones?
 
-A study (``python -m lit3d.cli.input_stats``), not part of the data pipeline: it calibrated the
+A study (``python -m studies.completion.input_stats``), not part of the data pipeline: it calibrated the
 ``recgan`` sensor of :mod:`lit3d.sensing.sensor` against the released 3D-RecGAN++ sample.
 
 Per pair of a 2.5D surface grid and its complete target (both ``(R, R, R) bool``):
@@ -19,7 +19,7 @@ Per pair of a 2.5D surface grid and its complete target (both ``(R, R, R) bool``
 ``synthetic_rows`` generates seen-category samples with a sensor of
 :mod:`lit3d.sensing.sensor`; ``cad_rows`` does the same with real CAD models
 (``--cad sweethome3d``, ``--cad meshes=DIR``, ``--cad shapenet=DIR``).
-``python -m lit3d.cli.input_stats --real ROOT`` prints them side by side per resolution
+``python -m studies.completion.input_stats --real ROOT`` prints them side by side per resolution
 (the README's calibration table), then per category.
 """
 from __future__ import annotations
@@ -167,7 +167,7 @@ def compare(synthetic: Sequence[dict], real: Sequence[dict], z: float = 2.5,
 
 def main(argv: list[str] | None = None) -> None:
     """Print the real sample's statistics beside those of synthetic sets per resolution."""
-    ap = argparse.ArgumentParser(prog="python -m lit3d.cli.input_stats", description=main.__doc__)
+    ap = argparse.ArgumentParser(prog="python -m studies.completion.input_stats", description=main.__doc__)
     ap.add_argument("--real", required=True, help="3D-RecGAN++ folder (e.g. ../shared/data/recgan_sample)")
     ap.add_argument("--res", type=int, nargs="+", default=[64, 256], help="grid sides to compare at")
     ap.add_argument("--sensor", nargs="+", default=["ortho", "recgan"], help="synthetic sensors (names)")

@@ -1,6 +1,6 @@
 """Mean ± sd over training runs of the pooled canonical results (training noise, not codebook noise).
 
-    python -m lit3d.canonical.over_runs SWEEP_DIR... [--rows model input] [--out FILE.md]
+    python -m studies.canonical.over_runs SWEEP_DIR... [--rows model input] [--out FILE.md]
 
 Each ``SWEEP_DIR`` is one whole cross-validation (``+sweep=canonical_cv``) with the ``pooled.json``
 that :mod:`lit3d.canonical.pooled` wrote; the runs differ by training seed (or anything else the
@@ -35,7 +35,7 @@ def load(sweep_dirs) -> list[dict]:
         path = Path(d) / "pooled.json"
         if not path.is_file():
             raise ValueError(f"{path}: missing (run the sweep with +sweep=canonical_cv, or python -m "
-                             "lit3d.canonical.pooled RUN_DIRS --out DIR)")
+                             "studies.canonical.pooled RUN_DIRS --out DIR)")
         runs.append(json.loads(path.read_text()))
     for d, r in zip(sweep_dirs, runs):
         if (r["n_items"], r["seeds"]) != (runs[0]["n_items"], runs[0]["seeds"]):
@@ -105,7 +105,7 @@ def confusion_markdown(names: list[str], counts: np.ndarray) -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(prog="python -m lit3d.canonical.over_runs", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m studies.canonical.over_runs", description=__doc__.splitlines()[0])
     ap.add_argument("sweeps", nargs="+", help="sweep dirs with pooled.json (one per training run)")
     ap.add_argument("--rows", nargs="+", default=["model", "input"], help="rows of pooled.json")
     ap.add_argument("--out", help="also write the tables to this .md file")

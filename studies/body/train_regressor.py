@@ -1,12 +1,12 @@
 """Train :mod:`lit3d.body.regressor` on Anny people drawn and rendered on the fly.
 
-    python -m lit3d.body.train_regressor --out CKPT [--minutes 40] [--steps 20000] [--size 64] ...
+    python -m studies.body.train_regressor --out CKPT [--minutes 40] [--steps 20000] [--size 64] ...
 
 Each person: a phenotype from Anny's adult shape distribution (as the evaluation's held-out people,
 ``sample_phenotype(..., "adult")``: ``SimpleShapeDistribution`` at morphological ages
-:data:`~datamodules.canonical.bodies.ADULT_AGES`, drawn a batch at a time), a pose of the mix
+:data:`~lit3d.body_model.bodies.ADULT_AGES`, drawn a batch at a time), a pose of the mix
 ``--poses`` (:func:`lit3d.body.poses.draw_pose`; ``upright``: the Anny data source's
-:func:`~datamodules.canonical.bodies.sample_pose`, its ``root`` yaw the global rotation; ``varied``
+:func:`~lit3d.body_model.bodies.sample_pose`, its ``root`` yaw the global rotation; ``varied``
 adds people turned any way, folded and in any rotation), placed ``--distance`` metres in front of
 the camera (uniform in the range) and up to ``--lateral`` metres off the axis, rendered through the
 evaluation's camera and ``--sensor`` noise (:func:`lit3d.body.synthetic.sensed_depth`). Seeds:
@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from datamodules.canonical.bodies import adult_shape_distribution
+from lit3d.body_model.bodies import adult_shape_distribution
 from lit3d.body.fit import start_centre
 from lit3d.body.model import PHENOTYPES, Body
 from lit3d.body.points import MIN_POINTS
@@ -151,7 +151,7 @@ def _save(path: Path, ck: dict) -> None:
 
 
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m lit3d.body.train_regressor", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m studies.body.train_regressor", description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, required=True, help="checkpoint file to write")
     ap.add_argument("--steps", type=int, default=20000, help="training steps at most")
     ap.add_argument("--minutes", type=float, default=40.0, help="wall-clock minutes at most")

@@ -1,0 +1,1 @@
+"""The sweeps' tables by hand: ``collect`` writes a multirun's sweep_results.md again."""
