@@ -1,4 +1,4 @@
-"""The front page and docs/ hold together: every relative link and image resolves, every
+"""The front page, docs/ and the studies' logs hold together: every relative link and image resolves, every
 `#anchor` names a heading, and README.md stays a short front page opening with the two commands."""
 from __future__ import annotations
 
@@ -21,7 +21,10 @@ _HEADING = re.compile(r"^(#{1,6})\s+(.*?)\s*#*\s*$")
 
 
 def doc_files() -> list[Path]:
-    return [README, *sorted((ROOT / "docs").glob("*.md"))]
+    """The front page, docs/, the changelog and the studies' READMEs and logs (the results pages link
+    into the logs, and the logs back into docs/)."""
+    return [README, *sorted(ROOT.glob("CHANGELOG.md")), *sorted((ROOT / "docs").glob("*.md")),
+            *sorted((ROOT / "studies").rglob("*.md"))]
 
 
 def prose(text: str, blank_code: bool = True) -> str:
