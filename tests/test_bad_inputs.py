@@ -1,4 +1,4 @@
-"""Issue 8, reliability: real bad files (and bad options) give one line naming the file and the problem.
+"""Real bad files (and bad options) give one line naming the file and the problem.
 
 One table, :data:`CASES`: ``(id, write, entry, words)``. ``write(tmp_path)`` writes the bad
 file(s) and returns ``(argument, named)``: what the entry point gets and the file (or option)

@@ -1,4 +1,4 @@
-"""Issue 8, reliability, beyond the table of :mod:`test_bad_inputs`: ``--debug`` and
+"""Reliability, beyond the table of :mod:`test_bad_inputs`: ``--debug`` and
 ``HYDRA_FULL_ERROR`` show the traceback, ``skip_bad`` skips and counts a bad file, and a run or data
 folder that cannot be written (a file, under a file, read-only) or a misspelt split is refused with
 one line before any work.

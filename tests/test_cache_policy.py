@@ -1,4 +1,4 @@
-"""Issue 35, faults 2, 4 (and 5): prepared caches are keyed by their config and checked on load.
+"""Prepared caches are keyed by their config and checked on load.
 
 Real ``lit3d-data`` / ``lit3d-eval`` / ``lit3d-train`` processes on a tiny completion set:
 

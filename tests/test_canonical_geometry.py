@@ -1,4 +1,4 @@
-"""Full-resolution canonical-form geometry (issue 14): landmark MDS against full classical MDS,
+"""Full-resolution canonical-form geometry: landmark MDS against full classical MDS,
 ShapeDNA against the sphere's analytic spectrum and under isometric bending, and the broadside
 camera convention."""
 from pathlib import Path

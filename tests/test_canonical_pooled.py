@@ -1,4 +1,4 @@
-"""Pooled cross-validated retrieval (issue 14): held-out items saved per fold, merged with every
+"""Pooled cross-validated retrieval: held-out items saved per fold, merged with every
 item exactly once, every row scored on the same items over several codebook seeds."""
 import json
 from types import SimpleNamespace

@@ -1,4 +1,4 @@
-"""evaluation.prediction_smooth_px (issue 33): the prediction's depth smoothed inside its silhouette before
+"""evaluation.prediction_smooth_px: the prediction's depth smoothed inside its silhouette before
 it is scored, saved (heldout.npz) and pooled; the posed input and the truth are left as they are."""
 from types import SimpleNamespace
 

@@ -203,7 +203,7 @@ def test_interrupted_preparation_resumes_identically(prepared, tmp_path, monkeyp
 
 
 def test_config_change_is_refused_and_rebuild_replaces_without_mixing(prepared, tmp_path):
-    """Issue 35, fault 2: another config's folder is refused with one line naming what differs and
+    """Another config's folder is refused with one line naming what differs and
     nothing is deleted; only request_rebuild() (``lit3d-data --rebuild``) replaces it."""
     dm = small_dm(tmp_path / "m", seed=1)
     dm.prepare_data()

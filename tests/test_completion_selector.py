@@ -1,4 +1,4 @@
-"""The top-K latent selector learns and is dynamic (issue 13), at the demo experiment's sizes.
+"""The top-K latent selector learns and is dynamic, at the demo experiment's sizes.
 
 Bound used below: after 3 generator Adam steps on one batch, every stage's selector weight net
 moves by |dw|/|w| >= 0.1 x that stage's encoder convs (measured with the default loss_scale
@@ -101,7 +101,7 @@ def test_frozen_selector_fails_the_bound(demo_task_kwargs, furniture_batch):
 
 
 def test_per_voxel_mean_without_scale_starves_the_last_selector(demo_task_kwargs, furniture_batch):
-    """The fault of issue 13, kept measurable: loss_scale=1 leaves the gradient below Adam's eps
+    """The selector's old fault, kept measurable: loss_scale=1 leaves the gradient below Adam's eps
     (last stage's selector / encoder measured 0.0015; 0.00012 without selector_norm)."""
     rel = _selector_vs_encoder(_update_ratios(_task(demo_task_kwargs, loss_scale=1.0), furniture_batch), 3)
     assert rel[-1] < 0.1 * BOUND

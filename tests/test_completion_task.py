@@ -161,7 +161,7 @@ def test_checkpoint_without_prior_loads_and_computes_it_once(fitted_checkpoint, 
     path, prior, _ = fitted_checkpoint
     ckpt = torch.load(path, weights_only=True)
     del ckpt["state_dict"]["prior"], ckpt["state_dict"]["prior_items"]
-    ckpt["hyper_parameters"]["nets"] = {**ckpt["hyper_parameters"]["nets"], "preset": "demo"}  # as before issue 12
+    ckpt["hyper_parameters"]["nets"] = {**ckpt["hyper_parameters"]["nets"], "preset": "demo"}  # as before that change
     old = tmp_path / "old.ckpt"
     torch.save(ckpt, old)
     with caplog.at_level("INFO", logger="lit3d.completion"):

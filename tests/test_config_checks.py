@@ -1,4 +1,4 @@
-"""Types and ranges of config values are checked in one place before any work (issue 35, fault 12),
+"""Types and ranges of config values are checked in one place before any work,
 and ``lit3d-summary`` answers a bad net size with the one line ``lit3d-train`` gives (fault 16)."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Issue 35, fault 13: a full disk while a checkpoint, a data item or ``metrics.json`` is written.
+"""A full disk while a checkpoint, a data item or ``metrics.json`` is written.
 
 ``write()`` on a full disk raises ``OSError(ENOSPC)`` naming no file, so the entry points' handler of
 file-system faults (``error: <path>: cannot write here (<problem>)``, exit 2) missed it and the user

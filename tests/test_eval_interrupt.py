@@ -1,4 +1,4 @@
-"""Issue 35, fault 15: Ctrl-C or SIGTERM during ``lit3d-eval`` ends with one line, and a run dir never
+"""Ctrl-C or SIGTERM during ``lit3d-eval`` ends with one line, and a run dir never
 holds half an evaluation.
 
 Before: Ctrl-C in the test loop ended with Lightning's "Detected KeyboardInterrupt" and exit 1 (a

@@ -1,4 +1,4 @@
-"""Evaluation settings have their own config node, saved in the checkpoint (issue 34, item 5).
+"""Evaluation settings have their own config node, saved in the checkpoint.
 
 - ``lit3d-train`` hands ``cfg.evaluation`` to the evaluator and saves it in every checkpoint;
   ``lit3d-eval`` of that checkpoint evaluates with it, the command line's ``evaluation.*`` winning;
@@ -104,7 +104,7 @@ def test_the_command_line_wins_over_the_checkpoint(trained, recorded, tmp_path, 
 def test_a_checkpoint_from_before_the_node_evaluates_with_its_task_hparams(trained, recorded, tmp_path, caplog):
     ckpt, _ = trained
     old = torch.load(ckpt, map_location="cpu", weights_only=True)
-    del old[META_KEY]["evaluation"]  # as lit3d-train wrote checkpoints before issue 34 item 5
+    del old[META_KEY]["evaluation"]  # as lit3d-train wrote checkpoints before that change
     legacy = {"retrieval": None, "chance_trials": 11, "mesh_baselines": ["cmds"], "baseline_max_vertices": 500}
     old["hyper_parameters"].update(legacy)
     old[META_KEY]["task"].update(legacy)

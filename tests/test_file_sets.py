@@ -1,4 +1,4 @@
-"""Issue 35, fault 3: ``lit3d-reconstruct``'s output sets are whole, whatever stops the writer.
+"""``lit3d-reconstruct``'s output sets are whole, whatever stops the writer.
 
 A real process writes a set over an earlier set of the same name (:func:`lit3d.utils.io.write_file_set`)
 and is stopped half way through the renames (the test slows ``os.replace`` down there):

@@ -196,7 +196,7 @@ def test_scanner_sees_nested_and_relative_imports(tmp_path, monkeypatch):
                                         ("lit3d/toy/mod.py", 8, "datamodules.cache")]
 
 
-MAX_LINES = 400  # issue 34: small modules with one job
+MAX_LINES = 400  # small modules with one job
 
 
 def test_no_python_file_over_400_lines():

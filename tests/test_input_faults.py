@@ -1,4 +1,4 @@
-"""Issue 35, faults 6, 8, 17, 18, 19: inputs that were paired, read or reported wrongly.
+"""Inputs that were paired, read or reported wrongly.
 
 Real files written by the tests (multi-page TIFF, FIFO, misnamed numpy files, a 20000x9000 PNG,
 mask folders, symlinks, read-only and full file systems). ``lit3d-reconstruct`` runs in process

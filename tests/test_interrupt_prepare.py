@@ -1,4 +1,4 @@
-"""Issue 35, fault 10: Ctrl-C (SIGINT) or SIGTERM while data is prepared stops at the next item.
+"""Ctrl-C (SIGINT) or SIGTERM while data is prepared stops at the next item.
 
 Real ``lit3d-data`` / ``lit3d-train`` processes on a small synthetic completion set, the signal sent
 once the first item is on disk:

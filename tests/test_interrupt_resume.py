@@ -1,4 +1,4 @@
-"""Issue 8, reliability: training and data preparation survive being stopped, and resume exactly.
+"""Training and data preparation survive being stopped, and resume exactly.
 
 - ``lit3d-train`` stopped by SIGTERM (canonical task, default suite) or SIGKILL (completion GAN,
   ``slow``) after the first epoch: ``ckpt_path=last`` resumes at the saved epoch and step, with
@@ -175,7 +175,7 @@ def test_sigterm_saves_last_and_resume_continues_canonical(tmp_path, canonical_d
 
 # ----------------------------------------------------------------------------- Ctrl-C (SIGINT)
 def test_ctrl_c_saves_last_and_says_how_to_resume(tmp_path, canonical_data):
-    """Ctrl-C takes the SIGTERM path (issue 29): ``last.ckpt`` saved, exit 143, one last line with
+    """Ctrl-C takes the SIGTERM path: ``last.ckpt`` saved, exit 143, one last line with
     the resume command, no Lightning "Detected KeyboardInterrupt"; ``ckpt_path=last`` resumes."""
     run = tmp_path / "run"
     common = [*CANONICAL, "data.batch_size=2", "logger=none", "callbacks.resume_state.every_n_train_batches=1",

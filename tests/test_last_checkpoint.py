@@ -1,4 +1,4 @@
-"""Issue 35, fault 9: ``last.ckpt`` always holds the newest state, also after the run dir moved.
+"""``last.ckpt`` always holds the newest state, also after the run dir moved.
 
 Real ``lit3d-train`` runs (canonical task, tiny nets). The monitored value is the epoch itself
 with ``mode=min``, so the first epoch stays the best: the case where Lightning's

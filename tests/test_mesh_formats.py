@@ -1,4 +1,4 @@
-"""Issue 35, fault 7: one surface scores 1 whatever its file format.
+"""One surface scores 1 whatever its file format.
 
 STL stores every triangle with its own three vertices; read as they are, every vertex normal
 is its face's normal and smooth shading turns flat, so ``lit3d-score cow.obj cow.stl`` gave

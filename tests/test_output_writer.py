@@ -1,4 +1,4 @@
-"""Issue 29: outputs never destroy inputs; every file-system and unit problem is one clear line.
+"""Outputs never destroy inputs; every file-system and unit problem is one clear line.
 
 Real bad files and folders written by the tests (tmp_path); each case checks the exit status,
 the one line, that the user's input is unchanged and that nothing half-written is left. The

@@ -221,7 +221,7 @@ def test_cli_batch_with_bad_files(tiny_ckpt, tmp_path):
 
 @pytest.mark.slow
 def test_cli_units_name_collisions_and_modes(tiny_ckpt, tmp_path):
-    """Issue 29 end to end: an integer .npy is millimetres (--depth-scale) like the PNG, stems that
+    """End to end: an integer .npy is millimetres (--depth-scale) like the PNG, stems that
     collide get names that keep the extension (with a note), a 65535 border is "no reading", the
     input folder is untouched, the outputs get the umask's mode and no temp file is left."""
     import os

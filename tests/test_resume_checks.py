@@ -1,4 +1,4 @@
-"""A checkpoint against the config that resumes or evaluates it (issue 35, faults 11 and 14): the data
+"""A checkpoint against the config that resumes or evaluates it: the data
 and the architecture must be the checkpoint's unless ``+resume.allow_changes=true``, an edited run-dir
 ``config.yaml`` is refused (not taken, not overwritten), and a checkpoint of another task or another
 architecture is one line, exit 2, before any data is prepared.

@@ -1,4 +1,4 @@
-"""Issue 35, fault 1: one process per run dir (``lit3d.cli.rundir``), checked with real processes.
+"""One process per run dir (``lit3d.cli.rundir``), checked with real processes.
 
 - a second ``lit3d-train`` into a busy run dir is refused with one line naming the holder, and
   writes nothing there (``.hydra/config.yaml`` stays the first run's);

@@ -1,4 +1,4 @@
-"""Sizes are written once, in the configs (issue 34 item 4).
+"""Sizes are written once, in the configs.
 
 - No net or DataModule constructor carries a size default: a size-named parameter (grid, image size,
   channels, widths; not the batch size) either has no default or defaults to "off" (None or an empty sequence), so a size

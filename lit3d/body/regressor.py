@@ -1,4 +1,4 @@
-"""A small CNN from a person's depth image to the body fit's parameters: the fit's start (issue 37).
+"""A small CNN from a person's depth image to the body fit's parameters: the fit's start.
 
 Trained on Anny people drawn and rendered on the fly (:mod:`studies.body.train_regressor`); used by
 ``lit3d-reconstruct --body --body-init CKPT`` and ``python -m studies.body.evaluate --init CKPT``.

@@ -1,5 +1,5 @@
 """A contrastive identity term for the canonical task: poses of one subject in a batch pull together,
-other subjects push apart (issue 33's third identity option, beside the subject classifier and the
+other subjects push apart (the third identity option, beside the subject classifier and the
 phenotype head).
 
 :func:`supervised_contrastive` is the supervised contrastive loss (Khosla et al., 2020, the

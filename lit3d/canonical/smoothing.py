@@ -1,5 +1,5 @@
 """The predicted canonical depth smoothed inside its predicted silhouette before it is scored
-(``evaluation.prediction_smooth_px``, issue 33): a retrieval setting, chosen on validation people.
+(``evaluation.prediction_smooth_px``): a retrieval setting, chosen on validation people.
 
 The warp head's depth surface carries ridges and the seams of the moved limbs, which the retrieval
 descriptor (the back-projected surface rendered from 66 views) reads as shape; who the person is shows

@@ -1,4 +1,4 @@
-"""The evaluation settings of a run: the config's top-level ``evaluation`` node (issue 34, item 5).
+"""The evaluation settings of a run: the config's top-level ``evaluation`` node.
 
 Each task's ``conf/task/<task>.yaml`` fills it (canonical: the retrieval descriptor, the chance trials,
 the mesh baselines; completion: the surface metrics; quality: the baselines, leave-one-shape-out and

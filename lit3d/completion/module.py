@@ -110,9 +110,9 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
             raise ValueError(f"task.gp_every={gp_every}: the gradient penalty runs every N >= 1 critic updates")
         self.automatic_optimization = False
         nets = dict(nets)
-        if nets.pop("preset", None) is not None:  # checkpoints written before issue 12 name one beside every size
+        if nets.pop("preset", None) is not None:  # checkpoints written before that change name one beside every size
             log.info("task.nets.preset is ignored: the sizes come from the config alone")
-        nets.setdefault("selector_norm", False)  # checkpoints written before issue 13 have none
+        nets.setdefault("selector_norm", False)  # checkpoints written before that change have none
         self.net_cfg = validate_net_config(nets)
         if self.net_cfg["classifier"] and self.net_cfg["n_classes"] != len(SEEN_CATEGORIES):
             raise ValueError(f"task.nets.n_classes={self.net_cfg['n_classes']}: class labels index the "

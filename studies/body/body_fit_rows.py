@@ -1,4 +1,4 @@
-"""The body fit's canonical depth images for the held-out items of a canonical config (issue 37's
+"""The body fit's canonical depth images for the held-out items of a canonical config (the
 ``body_fit`` row beyond FAUST: held-out Anny people, TOSCA's humans).
 
     python -m studies.body.body_fit_rows --out DIR [--init REGRESSOR_CKPT] [--worker I --workers K] \\

@@ -1,4 +1,4 @@
-"""Measure the Anny body fit (issue 37): held-out Anny people and FAUST, with baselines.
+"""Measure the Anny body fit: held-out Anny people and FAUST, with baselines.
 
     python -m studies.body.evaluate --out DIR [--anny N] [--faust ../shared/data/faust_a] [--multi-start]
 

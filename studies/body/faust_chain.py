@@ -1,4 +1,4 @@
-"""Score lit3d-reconstruct's completion chain on FAUST people as the body fit is scored (issue 37).
+"""Score lit3d-reconstruct's completion chain on FAUST people as the body fit is scored.
 
     python -m studies.body.faust_chain --faust ../shared/data/faust_a --ckpt COMPLETION_CKPT --out DIR
 

@@ -7,7 +7,7 @@ Each checkpoint's run folder (``RUN/config.yaml``, written by lit3d-train) gives
 loaded from the checkpoint. ``--all-val``: every validation item (``data.max_val_items=null``), not the
 training run's subset. Prints one JSON line per checkpoint (``val/...`` metrics, e.g. the canonical
 task's ``val/retrieval_nn``: validation subjects retrieved by mask IoU) and writes them all to ``--out``.
-Use it to compare settings on people never tested (issue 33) with checkpoints trained before a metric
+Use it to compare settings on people never tested with checkpoints trained before a metric
 existed.
 
 ``--heldout DIR`` (canonical task): also writes the validation items' predictions as
