@@ -32,6 +32,7 @@ from lit3d.reconstruct.depth_io import InputError, depth_from_array
 from lit3d.reconstruct.pipeline import Completer, Options, Result, reconstruct
 from lit3d.render.convert import to_mesh
 from lit3d.render.depth import render_depth
+from lit3d.sensing.camera import Intrinsics as SharedIntrinsics
 
 
 def _model(model, kind: type, fn: str, task: str):
@@ -75,9 +76,11 @@ def _camera_depth(x, name: str, depth_scale: float) -> np.ndarray:
 def _intrinsics(intrinsics, w: int, h: int) -> Intrinsics:
     if intrinsics is None:
         return Intrinsics.from_fov(RECGAN_FOV_DEG, w, h)
-    if not isinstance(intrinsics, Intrinsics):
+    if not isinstance(intrinsics, SharedIntrinsics):  # lit3d.Intrinsics or any camera built on the shared one
         raise InputError(f"intrinsics: expected lit3d.Intrinsics(fx, fy, cx, cy) in pixels (or None: the "
                          f"3D-RecGAN++ camera), got {type(intrinsics).__name__}")
+    if not isinstance(intrinsics, Intrinsics):
+        intrinsics = Intrinsics(intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy)
     return intrinsics.check(w, h, "intrinsics")
 
 
