@@ -4,9 +4,10 @@ Two layouts are indexed here (the Sweet Home 3D catalogues: :mod:`datamodules.co
 
 * ``data.source=meshes``: ``<root>/<category>/<model>.<ext>`` (one file = one model) or
   ``<root>/<category>/<model>/**/*.<ext>`` (a folder = one model, its files its parts), with
-  ``ext`` one of ``.obj .off .ply .stl .glb .gltf``. Category folders are the thesis names or
-  their aliases (``sofa``, ``airplane``, ``display``, ``rifle`` ...,
-  :data:`lit3d.utils.shapenet_categories.CATEGORY_ALIASES`); other folders are listed as dropped.
+  ``ext`` one of ``.obj .off .ply .stl .glb .gltf``. Every category folder is read: the thesis
+  names and their aliases (``sofa``, ``airplane``, ``display``, ``rifle`` ...,
+  :data:`lit3d.utils.shapenet_categories.CATEGORY_ALIASES`) are those categories, any other name
+  is a user category of that name (:func:`folder_category`).
 * ``data.source=shapenet``: ShapeNetCore v1 (``<synset>/<id>/model.obj``) or v2
   (``<synset>/<id>/models/model_normalized.obj``), synsets of the ten thesis categories
   (:data:`SHAPENET_SYNSETS`; rifle and pistol both make ``firearm``).
@@ -76,6 +77,20 @@ def category_of(name: str) -> str | None:
     return None
 
 
+def folder_category(name: str) -> str:
+    """A category folder's name -> its category: the thesis category (:func:`category_of`), else the
+    name itself in lower case with spaces as underscores (a user category: ``My Animals`` -> ``my_animals``)."""
+    return category_of(name) or name.strip().lower().replace(" ", "_")
+
+
+def category_folders(root: str | Path) -> dict[str, list[Path]]:
+    """``{category: [its folders]}`` of the category folders under ``root`` (hidden ones left out)."""
+    out: dict[str, list[Path]] = {}
+    for d in sorted(p for p in _folder(root, "mesh").iterdir() if p.is_dir() and not p.name.startswith(".")):
+        out.setdefault(folder_category(d.name), []).append(d)
+    return out
+
+
 def _folder(root: str | Path, what: str) -> Path:
     root = Path(root)
     if not root.is_dir():
@@ -84,14 +99,11 @@ def _folder(root: str | Path, what: str) -> Path:
 
 
 def index_mesh_folder(root: str | Path) -> tuple[list[CadModel], list[dict]]:
-    """Models of a ``<root>/<category>/...`` folder -> (models, dropped entries with reasons)."""
+    """Models of a ``<root>/<category>/...`` folder -> (models, dropped entries with reasons: entries
+    without a mesh file). Every category folder is read (:func:`folder_category`)."""
     root = _folder(root, "mesh")
     models, dropped = [], []
-    for cat_dir in sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")):
-        category = category_of(cat_dir.name)
-        if category is None:
-            dropped.append({"path": str(cat_dir), "reason": f"folder name is not one of {list(ALL_CATEGORIES)} or an alias"})
-            continue
+    for category, cat_dir in ((c, d) for c, ds in category_folders(root).items() for d in ds):
         for entry in sorted(cat_dir.iterdir()):
             if entry.name.startswith("."):
                 continue
@@ -106,8 +118,8 @@ def index_mesh_folder(root: str | Path) -> tuple[list[CadModel], list[dict]]:
             models.append(CadModel(f"{category}/{entry.stem if entry.is_file() else entry.name}", category,
                                    tuple(parts), name=entry.name))
     if not models:
-        raise DataError(f"{root}: no models found; expected <root>/<category>/<model>.obj (categories: "
-                        f"{', '.join(ALL_CATEGORIES)}; .obj .off .ply .stl .glb)")
+        raise DataError(f"{root}: no models found; expected <root>/<category>/<model>.obj (any category name; "
+                        f"{' '.join(MESH_EXTS)})")
     return models, dropped
 
 

@@ -13,7 +13,8 @@ real CAD models the procedural way (:mod:`datamodules.completion.meshes`). All w
 Batches (default collate) are dicts:
     input    (B, 1, r, r, r) float32 {0,1}   r = target_res / input_factor
     target   (B, 1, R, R, R) float32 {0,1}   R = target_res
-    label    (B,) int64  index into SEEN_CATEGORIES (lit3d.utils.shapenet_categories) or -1 (unseen)
+    label    (B,) int64  index into ``label_categories``: SEEN_CATEGORIES (lit3d.utils.shapenet_categories),
+                         then the user categories of a folder of your own; -1 (unseen)
     category, split, name: list[str]
 """
 from __future__ import annotations
@@ -29,7 +30,7 @@ from torch.utils.data import DataLoader
 
 from datamodules.cache import CacheBuilder, DataError, bytes_on_disk
 from datamodules.completion.catalogues import present_packages
-from datamodules.completion.meshes import MESH_SOURCES, MeshSpec, prepare_mesh_items
+from datamodules.completion.meshes import MESH_SOURCES, MeshSpec, folder_plan_categories, prepare_mesh_items
 from datamodules.completion.plan import DEFAULT_SIZES, DataConfigError, ItemSpec, check_sizes
 from datamodules.completion.recgan import RECGAN_RAW_RES
 from datamodules.completion.sources import prepare_recgan_items, prepare_synth_items
@@ -39,6 +40,7 @@ from lit3d.sensing.sensor import SENSORS, make_sensor
 from lit3d.utils.figures import labelled_grid
 from lit3d.utils.shapenet_categories import (
     SEEN_CATEGORIES,
+    UNSEEN_CATEGORIES,
     select_seen_categories,
     select_unseen_categories,
 )
@@ -68,7 +70,9 @@ class CompletionDataModule(pl.LightningDataModule):
             test_unseen_cross = unseen categories from the cross-view set, 0 when absent); splits
             left out keep the demo defaults (240/40/40/40/40); 0 drops a split.
         categories: seen categories used for train/val/test_same/test_cross (None: all of
-            :data:`~lit3d.utils.shapenet_categories.SEEN_CATEGORIES`; labels always index that list).
+            :data:`~lit3d.utils.shapenet_categories.SEEN_CATEGORIES`; with ``source="meshes"`` every
+            category folder of ``root`` but the unseen ones, thesis names or not). Labels index
+            ``label_categories``: that list, then the seen user categories.
         unseen_categories: categories of test_unseen / test_unseen_cross (None: all unseen categories).
         views_per_shape: synthetic views per shape instance.
         unseen_view_set: view set of synthetic test_unseen ("same" or "cross").
@@ -102,16 +106,23 @@ class CompletionDataModule(pl.LightningDataModule):
             raise DataConfigError(f"data.source={source!r}: expected one of {', '.join(DATA_SOURCES)}")
         if target_res % input_factor:
             raise DataConfigError(f"data.target_res={target_res} is not divisible by data.input_factor={input_factor}")
-        try:
-            categories, unseen_categories = select_seen_categories(categories), select_unseen_categories(unseen_categories)
-        except ValueError as exc:
-            raise DataConfigError(f"data.{exc}") from None
         self.source, self.data_dir = source, Path(data_dir)
         self.root = None if root in (None, "") else Path(root)
+        if source == "meshes":  # a folder of your own: its category folders, thesis names or not
+            categories, unseen_categories = folder_plan_categories(self.root, categories, unseen_categories)
+        try:
+            categories, unseen_categories = (tuple(categories), tuple(unseen_categories)) if source == "meshes" else (
+                select_seen_categories(categories), select_unseen_categories(unseen_categories))
+        except ValueError as exc:
+            raise DataConfigError(f"data.{exc}") from None
         self.target_res, self.input_factor = int(target_res), int(input_factor)
         self.input_res = self.target_res // self.input_factor
         self.sizes = {**DEFAULT_SIZES, **check_sizes(sizes)}
         self.categories, self.unseen_categories = tuple(categories), tuple(unseen_categories)
+        # class labels: the thesis's seen categories, then the other seen ones (user categories), in plan order
+        self.label_categories = SEEN_CATEGORIES + tuple(c for c in self.categories if c not in SEEN_CATEGORIES)
+        self.user_categories = tuple(c for c in self.categories + self.unseen_categories
+                                     if c not in SEEN_CATEGORIES + UNSEEN_CATEGORIES)
         self.batch_size, self.num_workers = int(batch_size), int(num_workers)
         self.seed, self.skip_bad, self.pin_memory = int(seed), bool(skip_bad), bool(pin_memory)
         self.views_per_shape, self.unseen_view_set = int(views_per_shape), unseen_view_set
@@ -190,7 +201,7 @@ class CompletionDataModule(pl.LightningDataModule):
         else:
             items, extra = prepare_recgan_items(builder, self.spec, self.root, self.raw_res, self.val_fraction,
                                                 self.skip_bad, self.progress)
-        extra.update(target_res=self.target_res, input_res=self.input_res, seen_categories=list(SEEN_CATEGORIES))
+        extra.update(target_res=self.target_res, input_res=self.input_res, seen_categories=list(self.label_categories))
         return items, extra
 
     # ---------------------------------------------------------------- loading
@@ -204,7 +215,7 @@ class CompletionDataModule(pl.LightningDataModule):
         by_split: dict[str, list[dict]] = defaultdict(list)
         for it in manifest["items"]:
             by_split[it["split"]].append(it)
-        self.datasets = {s: VoxelPairDataset(self.data_dir, by_split.get(s, []), SEEN_CATEGORIES) for s in DATA_SPLITS}
+        self.datasets = {s: VoxelPairDataset(self.data_dir, by_split.get(s, []), self.label_categories) for s in DATA_SPLITS}
         self.test_split_names = [s for s in TEST_SPLITS if len(self.datasets[s])]
 
     def _loader(self, split: str, shuffle: bool) -> DataLoader:
@@ -250,7 +261,10 @@ class CompletionDataModule(pl.LightningDataModule):
             "manifest_hash": m["manifest_hash"], "config_hash": m["config_hash"],
             "skipped_bad_files": len(m.get("skipped", [])),
             "test_split_names": list(self.test_split_names),
-            **{k: m[k] for k in ("models_per_category", "models_used_per_split", "fallback") if k in m},
+            **{k: m[k] for k in ("models_per_category", "models_used_per_split", "fallback", "small_categories") if k in m},
+            **({"user_categories": list(self.user_categories), "label_categories": list(self.label_categories)}
+               if self.user_categories else {}),
+            **({"dropped_entries": len(m["dropped"])} if m.get("dropped") else {}),
         }
 
     def show(self, n: int, path: str | Path, cell: int = 256) -> Path:

@@ -2,7 +2,8 @@
 
 The plan is the procedural one (:func:`datamodules.completion.plan.synth_items`: the same splits,
 view sets, views per shape and names) with a real model behind every item of a category that
-has at least ``min_models`` models; such a category's models are split by model id
+has at least ``min_models`` models (with ``source=meshes``, a folder of your own: at least one model,
+:func:`attach_models` ``keep_small``); such a category's models are split by model id
 (:func:`datamodules.completion.cad_models.split_models`: train / val / test, test shared by
 test_same and test_cross as in 3D-RecGAN++), and unseen categories, never trained on, use all
 of theirs. A category with fewer models keeps procedural shapes, and the manifest says so
@@ -22,14 +23,17 @@ from pathlib import Path
 from tqdm.auto import tqdm
 
 from datamodules.cache import CacheBuilder, DataError, stable_int_seed
-from datamodules.completion.cad_models import CadModel, index_mesh_folder, index_shapenet, split_models
+from datamodules.completion.cad_models import (
+    CadModel, category_folders, index_mesh_folder, index_shapenet, split_models,
+)
 from datamodules.completion.catalogues import index_installed
 from datamodules.completion.mesh_shapes import mesh_shape
-from datamodules.completion.plan import ItemSpec, synth_pair, view_pair
+from datamodules.completion.plan import DataConfigError, ItemSpec, synth_pair, view_pair
 from datamodules.completion.sweethome3d import credits_markdown, index_sweethome3d
 from datamodules.completion.voxel_cache import save_pair
 from datamodules.processes import spawned_results
 from lit3d.sensing.sensor import make_sensor
+from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, UNSEEN_CATEGORIES
 from lit3d.utils.stops import check_stop
 
 log = logging.getLogger("lit3d.data")
@@ -66,16 +70,46 @@ def index_models(source: str, root: str | Path | None) -> tuple[list[CadModel], 
     return (index_mesh_folder if source == "meshes" else index_shapenet)(root)
 
 
+def folder_plan_categories(root: Path | None, categories=None, unseen_categories=None) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(seen, unseen) categories of the plan of a folder of your own (``data.source=meshes``).
+
+    ``categories`` None: every category folder under ``root`` (:func:`~datamodules.completion.cad_models.category_folders`)
+    but the unseen ones; ``unseen_categories`` None: the folders of the thesis's unseen categories. Given
+    names must be thesis categories or folders (a user category made unseen: ``data.unseen_categories=[animal]``).
+
+    Raises:
+        DataConfigError: no root, or a given name that is neither (naming it and the folders).
+    """
+    if root is None:
+        raise DataConfigError("data.source=meshes needs a folder: set data.root=PATH")
+    found = list(category_folders(root))
+    known = set(found) | set(SEEN_CATEGORIES) | set(UNSEEN_CATEGORIES)
+    for key, chosen in (("categories", categories), ("unseen_categories", unseen_categories)):
+        bad = [str(c) for c in chosen or () if str(c) not in known]
+        if bad:
+            raise DataConfigError(f"data.{key}: {bad} are neither thesis categories nor category folders of {root} "
+                                  f"(its folders: {', '.join(found) or 'none'})")
+    chosen = [str(c) for c in categories or ()]
+    unseen = tuple(str(c) for c in unseen_categories) if unseen_categories is not None else tuple(
+        c for c in found if c in UNSEEN_CATEGORIES and c not in chosen)
+    seen = tuple(chosen) if categories is not None else tuple(c for c in found if c not in unseen)
+    return seen, unseen
+
+
 def procedural_draw(item: dict, seed: int) -> float:
     """A number in [0, 1) fixed by the item's file name and the data seed (the mix's draw per item)."""
     return stable_int_seed(seed, "procedural_share", item["file"]) / 2**31
 
 
 def attach_models(items: list[dict], models: list[CadModel], seen: tuple[str, ...], fractions: dict[str, float],
-                  seed: int, min_models: int, procedural_share: float = 0.0) -> tuple[list[dict], dict[str, str]]:
+                  seed: int, min_models: int, procedural_share: float = 0.0,
+                  keep_small: bool = False) -> tuple[list[dict], dict[str, str]]:
     """Give every planned item of a category with enough models a ``model_id`` (training items whose
     :func:`procedural_draw` is below ``procedural_share`` stay procedural).
 
+    ``keep_small`` (a folder of your own, ``data.source=meshes``): a category with at least one but
+    fewer than ``min_models`` models still uses its models; its items of a split that the model split
+    left without a model are left out (:func:`small_category_notes` says which).
     Returns the items (those of fallback categories unchanged: procedural) and
     ``{category: "procedural (N real models < min_models)"}`` for the categories that fell back.
     """
@@ -86,7 +120,7 @@ def attach_models(items: list[dict], models: list[CadModel], seen: tuple[str, ..
     fallback = {}
     for cat in sorted({it["category"] for it in items}):
         n = len(by_cat.get(cat, []))
-        if n < min_models:
+        if n < min_models and not (keep_small and n > 0):
             fallback[cat] = f"procedural ({n} real models < data.min_models={min_models})"
     pools: dict[tuple[str, str], list[str]] = {}
     for cat, ms in by_cat.items():
@@ -102,12 +136,30 @@ def attach_models(items: list[dict], models: list[CadModel], seen: tuple[str, ..
             continue
         group = SPLIT_GROUP.get(it["split"], "unseen")
         pool = pools.get((cat, group))
+        if not pool and keep_small and len(by_cat.get(cat, [])) < min_models:
+            continue  # a small category of your own: no model in this split group
         if not pool:
             raise DataError(f"category {cat}: no {group} models after the model split; "
                             f"raise data.min_models or change data.model_split")
         model_id = pool[it["shape_index"] % len(pool)]
         out.append({**it, "shape_source": "model", "model_id": model_id})
     return out, fallback
+
+
+def small_category_notes(planned: list[dict], kept: list[dict], models: list[CadModel], min_models: int) -> dict[str, str]:
+    """``{category: what happens}`` for the categories with models but fewer than ``min_models`` whose
+    items are real (:func:`attach_models` with ``keep_small``): how many models, and the splits left without one."""
+    counts = Counter(m.category for m in models)
+    real = {it["category"] for it in kept if it.get("shape_source") == "model"}
+    notes = {}
+    for cat in sorted(c for c in real if counts[c] < min_models):
+        lost = Counter(it["split"] for it in planned if it["category"] == cat) - Counter(
+            it["split"] for it in kept if it["category"] == cat)
+        what = f"{counts[cat]} models (fewer than data.min_models={min_models}): its own models are used"
+        if lost:
+            what += (", no model left for " + ", ".join(f"{s} ({n} items left out)" for s, n in sorted(lost.items())))
+        notes[cat] = what
+    return notes
 
 
 def make_pairs(job: dict) -> list[tuple[str, str | None]]:
@@ -170,10 +222,17 @@ def prepare_mesh_items(builder: CacheBuilder, spec: ItemSpec, mesh: MeshSpec, sk
     ``workers``: render in that many spawned processes (0 or 1: in this one).
     """
     models, dropped = index_models(mesh.source, mesh.root)
-    items, fallback = attach_models(spec.items(), models, spec.categories, dict(mesh.model_split), spec.seed,
-                                    mesh.min_models, mesh.procedural_share)
+    planned, own = spec.items(), mesh.source == "meshes"
+    items, fallback = attach_models(planned, models, spec.categories, dict(mesh.model_split), spec.seed,
+                                    mesh.min_models, mesh.procedural_share, keep_small=own)
     for cat, why in fallback.items():
         log.warning("data.source=%s: %s keeps %s", mesh.source, cat, why)
+    small = small_category_notes(planned, items, models, mesh.min_models) if own else {}
+    for cat, what in small.items():
+        log.warning("data.source=%s: category %s has %s", mesh.source, cat, what)
+    if spec.sizes.get("train") and not any(it["split"] == "train" for it in items):
+        raise DataError(f"{mesh.root}: no training item left (categories {', '.join(spec.categories)}); "
+                        "add models or lower data.min_models")
     by_id = {m.model_id: m for m in models}
     todo = sorted((it for it in items if not builder.has(it["file"])), key=lambda it: (it.get("model_id", ""), it["file"]))
     jobs, chunk = [], []
@@ -208,6 +267,6 @@ def prepare_mesh_items(builder: CacheBuilder, spec: ItemSpec, mesh: MeshSpec, sk
     kept = [by_id[i] for i in used]
     if mesh.source in ("sweethome3d", "installed"):
         (builder.root / "CREDITS.md").write_text(credits_markdown(kept))
-    extra = {"skipped": sorted(set(bad.values())), "fallback": fallback, "dropped": dropped,
+    extra = {"skipped": sorted(set(bad.values())), "fallback": fallback, "small_categories": small, "dropped": dropped,
              "models": [m.record() for m in kept], **summary(models, items)}
     return items, extra

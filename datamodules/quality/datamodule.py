@@ -11,6 +11,9 @@ Two sources:
 - ``source="liris_epfl" | "liris_masking" | "guo2016"``: the human-rated datasets, read
   from ``root`` in their published layout (``datamodules.quality.mos``). Target: the
   mean opinion score (MOS).
+- ``source="mos_folder"``: a human-rated set of your own, ``root/<shape>/<stimulus>`` meshes or
+  point clouds plus one score table (``datamodules.quality.mos_folder``); ``score_range`` and
+  ``higher_is_better`` say how its score reads.
 - ``source="cpcd2"``: coloured point clouds in the CPCD2.0 layout (zipped ASCII PLY +
   ``mos.csv``, ``datamodules.quality.cpcd2``); the clouds are rendered as points.
 
@@ -64,6 +67,7 @@ from datamodules.quality.features import (  # noqa: F401  (re-exported)
     write_feature_tables,
 )
 from datamodules.quality.mos import read_mos_dataset
+from datamodules.quality.mos_folder import read_mos_folder
 from datamodules.quality.preview import mesh_pairs_png
 from datamodules.quality.distortions import DISTORTIONS, LEVELS, distort, severity
 from datamodules.quality.quality_shapes import (  # noqa: F401  (re-exported)
@@ -206,11 +210,12 @@ class QualityDataModule(pl.LightningDataModule):
         hp = self.hparams
         if not hp.root:
             raise DataError(f"data source '{self.source}' needs data.root=PATH (the unpacked dataset folder)")
-        read = read_cpcd2 if self.source == "cpcd2" else read_mos_dataset
-        args = () if self.source == "cpcd2" else (self.source,)
-        ds = read(hp.root, *args, spreadsheet=hp.spreadsheet, sheet=hp.sheet,
-                  score_range=tuple(hp.score_range) if hp.score_range else None,
-                  on_error="skip" if hp.skip_bad else "raise")
+        kw = dict(spreadsheet=hp.spreadsheet, sheet=hp.sheet, on_error="skip" if hp.skip_bad else "raise",
+                  score_range=tuple(hp.score_range) if hp.score_range else None)
+        if self.source == "mos_folder":
+            ds = read_mos_folder(hp.root, higher_is_better=hp.higher_is_better, name=self.name, **kw)
+        else:
+            ds = read_cpcd2(hp.root, **kw) if self.source == "cpcd2" else read_mos_dataset(hp.root, self.source, **kw)
         self.skipped += ds.skipped
         for p in ds.unrated:
             warnings.warn(f"{p}: mesh not rated in {ds.spreadsheet.name} (ignored)", stacklevel=2)

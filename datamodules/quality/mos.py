@@ -308,8 +308,10 @@ def read_mos_dataset(root: str | Path, layout: MosLayout | str, spreadsheet: str
         mesh = paths[0]
         shape = _shape_of(row, mesh, layout.shapes, root)
         if shape is None:
-            bad(f"{where}: matches no shape of {layout.name} ({', '.join(layout.shapes)}); "
-                "add a shape column or put the mesh in a folder named after its shape")
+            named = row.get("shape") or (mesh.parent.name if mesh.parent != root else None)
+            bad(f"{where}: matches no shape of {layout.name} ({', '.join(layout.shapes)})"
+                + (f"; '{named}' is not one of its published shapes: for a rated set of your own use data=mos_folder"
+                   if named else "; add a shape column or put the mesh in a folder named after its shape"))
             continue
         raw = row["score"]
         try:

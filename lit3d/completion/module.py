@@ -114,9 +114,9 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
             log.info("task.nets.preset is ignored: the sizes come from the config alone")
         nets.setdefault("selector_norm", False)  # checkpoints written before that change have none
         self.net_cfg = validate_net_config(nets)
-        if self.net_cfg["classifier"] and self.net_cfg["n_classes"] != len(SEEN_CATEGORIES):
+        if self.net_cfg["classifier"] and self.net_cfg["n_classes"] < len(SEEN_CATEGORIES):
             raise ValueError(f"task.nets.n_classes={self.net_cfg['n_classes']}: class labels index the "
-                             f"{len(SEEN_CATEGORIES)} seen categories {list(SEEN_CATEGORIES)}")
+                             f"{len(SEEN_CATEGORIES)} seen categories {list(SEEN_CATEGORIES)} (then any of your own)")
         built = build_completion_nets(self.net_cfg)
         self.generator = built["generator"]
         self.critic = built["critic"] if adversarial else None
@@ -126,16 +126,13 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
         self.cat_index = {c: i for i, c in enumerate(self.eval_categories)}
         thresholds = default_thresholds()
         self.register_buffer("thresholds", thresholds.float(), persistent=False)
+        self._metric_modules()
         # chosen on validation, applied to test; saved in checkpoints
         self.register_buffer("threshold", torch.tensor(0.5))
         self.register_buffer("prior_threshold", torch.tensor(0.5))
         res = int(self.net_cfg["out_res"])
         self.register_buffer("prior", torch.full((1, 1, res, res, res), 0.5))
         self.register_buffer("prior_items", torch.tensor(0))
-        self.val_metrics = torch.nn.ModuleDict({s: VoxelSweepMetrics(self.eval_categories, thresholds) for s in PREDICTION_SOURCES})
-        self.test_metrics = torch.nn.ModuleDict(
-            {f"{sp}_{s}": VoxelSweepMetrics(self.eval_categories, thresholds) for sp in TEST_SPLITS for s in PREDICTION_SOURCES}
-        )
         self.test_samples = PairedSamples()
         self.test_surface: SurfaceTestMetrics | None = None  # set before the test: use_surface_metrics
         self.generator_steps = 0
@@ -143,10 +140,37 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
         self.skipped_steps = 0
         self.loss_scale = resolve_loss_scale(loss_scale, res)
 
+    def _metric_modules(self) -> None:
+        """Validation and test metrics per category of ``eval_categories`` (states not saved in checkpoints)."""
+        thresholds = self.thresholds
+        self.val_metrics = torch.nn.ModuleDict({s: VoxelSweepMetrics(self.eval_categories, thresholds) for s in PREDICTION_SOURCES})
+        self.test_metrics = torch.nn.ModuleDict(
+            {f"{sp}_{s}": VoxelSweepMetrics(self.eval_categories, thresholds) for sp in TEST_SPLITS for s in PREDICTION_SOURCES}
+        )
+
+    def setup(self, stage: str | None = None) -> None:
+        """The data's categories of your own (a mesh folder's user categories, ``user_categories`` and
+        ``label_categories`` of the DataModule) join the metrics; the classifier must have one class per
+        label category (one clear error naming ``task.nets.n_classes`` otherwise)."""
+        dm = getattr(self._trainer, "datamodule", None) if self._trainer is not None else None
+        labels = list(getattr(dm, "label_categories", None) or SEEN_CATEGORIES)
+        if self.classifier is not None and len(labels) != self.net_cfg["n_classes"]:
+            raise ValueError(f"task.nets.n_classes={self.net_cfg['n_classes']}, but the data's class labels are "
+                             f"{len(labels)} categories ({', '.join(labels)}): set task.nets.n_classes={len(labels)} "
+                             "or task.nets.classifier=false")
+        extra = [c for c in getattr(dm, "user_categories", ()) if c not in self.cat_index]
+        if extra:
+            self.eval_categories += extra
+            self.cat_index = {c: i for i, c in enumerate(self.eval_categories)}
+            self._metric_modules()
+            if self.test_surface is not None:
+                self.use_surface_metrics(self._surface_settings)
+
     def use_surface_metrics(self, surface: dict | None) -> None:
         """The test's surface metrics with sizes ``surface`` (``points``, ``fscore_at``, ``seed``: the
         evaluation setting ``evaluation.surface``, set by :func:`lit3d.completion.evaluator.prepare`);
         None = off. Their states are not saved in checkpoints."""
+        self._surface_settings = surface
         self.test_surface = (SurfaceTestMetrics(TEST_SPLITS, PREDICTION_SOURCES, self.eval_categories, **surface)
                              if surface else None)
 
