@@ -12,7 +12,7 @@ from __future__ import annotations
 # the names of lit3d.api (tests/test_api.py checks that they match its __all__)
 API = (
     "RECGAN_FOV_DEG", "CanonicalForm", "InputError", "Intrinsics", "Options", "canonical_form",
-    "canonical_points", "checkpoint_task", "complete", "complete_grid", "export", "load", "score",
+    "canonical_points", "checkpoint_task", "complete", "complete_grid", "export", "load", "models", "score",
     "untrained_checkpoint",
 )
 __all__ = ["__version__", *API]

@@ -91,9 +91,10 @@ def test_cli_body_init_with_a_corrupt_checkpoint_is_one_line(tmp_path, capsys):
     assert not out.exists() or not any(out.iterdir())
     assert main([str(tmp_path / "person.png"), "--ckpt", str(bad), "--body-init", str(bad), "--out", str(out)]) == 2
     assert "--body-init CKPT: needs --body" in capsys.readouterr().err
-    assert main([str(tmp_path / "person.png"), "--body", "--body-refine-poor", "120", "--out", str(out)]) == 2
+    assert main([str(tmp_path / "person.png"), "--body", "--body-init", "none", "--body-refine-poor", "120", "--out",
+                 str(out)]) == 2
     err = capsys.readouterr().err
-    assert "--body-refine-poor N needs --body-init CKPT" in err and len(err.strip().splitlines()) == 1
+    assert "--body-refine-poor N needs a regressor, not none" in err and len(err.strip().splitlines()) == 1
     assert not out.exists() or not any(out.iterdir())
 
 

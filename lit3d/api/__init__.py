@@ -2,6 +2,7 @@
 
     import lit3d
     model = lit3d.load("best.ckpt")                     # the task is read from the checkpoint
+    lit3d.models()                                      # the zoo: trained models in the package, lit3d.load(name)
     result = lit3d.complete(depth, model)               # completion: depth image -> mesh, occupancy
     form = lit3d.canonical_form(mesh, model)            # canonical: posed mesh or depth -> canonical depth
     out = lit3d.score("ref.obj", "dist.ply")            # quality: mean Mask-SSIM, or a model's score
@@ -14,7 +15,7 @@ CLI's config composition (:func:`lit3d.cli.common.build_task`) and nothing impor
 """
 from __future__ import annotations
 
-from lit3d.api.checkpoints import checkpoint_task, load, untrained_checkpoint
+from lit3d.api.checkpoints import checkpoint_task, load, models, untrained_checkpoint
 from lit3d.api.export import export
 from lit3d.api.infer import CanonicalForm, canonical_form, canonical_points, complete, complete_grid, score
 from lit3d.reconstruct.backproject import RECGAN_FOV_DEG, Intrinsics
@@ -23,6 +24,6 @@ from lit3d.reconstruct.pipeline import Options
 
 __all__ = [
     "RECGAN_FOV_DEG", "CanonicalForm", "InputError", "Intrinsics", "Options", "canonical_form",
-    "canonical_points", "checkpoint_task", "complete", "complete_grid", "export", "load", "score",
+    "canonical_points", "checkpoint_task", "complete", "complete_grid", "export", "load", "models", "score",
     "untrained_checkpoint",
 ]

@@ -18,15 +18,19 @@ import lightning.pytorch as pl
 import torch
 from omegaconf import DictConfig, open_dict
 
+from lit3d.body.regressor import load_regressor
 from lit3d.callbacks.metadata import MetadataCallback
 from lit3d.cli.common import UserError, build_task, check_composes, check_group_overrides, task_meta, to_plain
 from lit3d.cli.config_checks import ConfigValueError, check_config_values
 from lit3d.quality.predict import QualityPredictor, load_predictor
+from lit3d.quality.shipped import load_model_file
 from lit3d.reconstruct.canonical import CanonicalMapper, load_canonical
 from lit3d.reconstruct.depth_io import InputError
 from lit3d.reconstruct.pipeline import Completer, load_completer, task_name
 from lit3d.utils.checkpoints import META_KEY, load_checkpoint
 from lit3d.utils.io import atomic_write_bytes, output_error
+from lit3d.zoo import ZOO, zoo_model
+from lit3d.zoo import models as zoo_models
 
 TASKS = ("completion", "canonical", "quality")
 Model = Completer | CanonicalMapper | QualityPredictor
@@ -55,14 +59,35 @@ def load(path: str | Path, device: str = "cpu") -> Model:
     - quality: :class:`lit3d.quality.predict.QualityPredictor` (CPU; ``device`` is not used), for
       :func:`lit3d.score`.
 
+    ``path`` may also name a model of the zoo (:func:`lit3d.models`, :mod:`lit3d.zoo`) where no such file
+    exists: ``body-regressor`` loads as :class:`lit3d.body.regressor.Regressor`, ``cpcd2-phil-fusion`` as
+    :class:`lit3d.quality.shipped.ShippedQualityModel`.
+
     The completion and canonical nets go to :func:`lit3d.export`.
     """
+    if isinstance(path, str) and path in ZOO and not Path(path).exists():
+        return load_zoo(path)
     task = checkpoint_task(path)
     if task == "completion":
         return load_completer(path, device)
     if task == "canonical":
         return load_canonical(str(path), device)
     return load_predictor(path)
+
+
+def load_zoo(name: str):
+    """The zoo model ``name`` loaded as its task uses it (see :func:`load`); a :class:`lit3d.zoo.ZooError` line
+    for a name that is not there."""
+    model = zoo_model(name)
+    if model.task == "body":
+        return load_regressor(model.path)
+    return load_model_file(model.path)
+
+
+def models() -> list[dict]:
+    """The trained models that ship in the package (:func:`lit3d.zoo.models`): name, task, path, bytes,
+    trained_on, command, card. Each name is accepted by :func:`load`."""
+    return zoo_models()
 
 
 def _check_overrides(overrides) -> None:

@@ -7,7 +7,7 @@ Examples::
     lit3d-reconstruct d.npy --ckpt CKPT --out out/ --far 2.0 --remove-plane --format ply
     lit3d-reconstruct d.png --ckpt CKPT --out out/ --reference chair.obj --quality-ckpt Q.ckpt
     lit3d-reconstruct d.png --ckpt CKPT --out out/ --canonical logs/canonical/.../best.ckpt
-    lit3d-reconstruct person.png --body [--body-init REGRESSOR.ckpt] --out out/     # Anny body fit
+    lit3d-reconstruct person.png --body [--body-init REGRESSOR.ckpt|none] --out out/  # Anny body fit
 
 Inputs: 16-bit PNG/TIFF and integer .npy/.npz (depth units x --depth-scale metres, default
 millimetres), float .npy/.npz metres, .exr metres; 0 and an integer type's maximum (65535:
@@ -43,8 +43,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("depth", nargs="+", help="depth image(s) or folder(s) of them")
     p.add_argument("--ckpt", help="completion checkpoint (lit3d-train task=completion; not with --body)")
     p.add_argument("--body", action="store_true", help="fit the Anny body model instead (a person)")
-    p.add_argument("--body-init", metavar="CKPT", help="with --body: start from this body regressor (lit3d.body.regressor)")
-    p.add_argument("--body-refine-poor", metavar="N", type=int, default=0, help="with --body-init: N more steps if poor")
+    p.add_argument("--body-init", metavar="CKPT", help="with --body: start regressor (default: zoo's; none: mean body)")
+    p.add_argument("--body-refine-poor", metavar="N", type=int, default=0, help="with a regressor: N more steps if poor")
     p.add_argument("--out", required=True, help="output folder")
     cam = p.add_argument_group("camera")
     cam.add_argument("--fov", type=float, default=None, help="field of view in degrees (default 49.124)")
@@ -116,8 +116,8 @@ def _check_args(args) -> None:
         raise InputError(f"--depth-scale {args.depth_scale:g}: expected a positive number of metres per unit")
     if bool(args.ckpt) == bool(args.body) or (args.body and (args.canonical or args.reference)):
         raise InputError("give --ckpt CKPT (completion) or --body (Anny fit; not with --canonical/--reference)")
-    if (args.body_init and not args.body) or (args.body_refine_poor and not args.body_init):
-        raise InputError("--body-init CKPT: needs --body, and --body-refine-poor N needs --body-init CKPT")
+    if (args.body_init and not args.body) or (args.body_refine_poor and str(args.body_init).lower() == "none"):
+        raise InputError("--body-init CKPT: needs --body, and --body-refine-poor N needs a regressor, not none")
     if args.quality_ckpt and not args.reference:
         raise InputError("--quality-ckpt needs --reference (the shape to score against)")
     if not 64 <= args.size <= 2048:
@@ -231,7 +231,7 @@ def _protected(args, inputs: list[Path]) -> list[Path]:
     """Every file the run reads: no output may replace one."""
     out = list(inputs)
     for extra in (args.ckpt, args.canonical, args.reference, args.quality_ckpt, args.body_init):
-        if extra:
+        if extra and extra != "none":
             out.append(Path(extra))
     if args.mask:
         m = Path(args.mask)
@@ -297,13 +297,13 @@ def _run(args) -> int:
         return 0
     from tqdm import tqdm
 
-    from lit3d.reconstruct.body import Body, body_one, load_regressor
+    from lit3d.reconstruct.body import Body, body_one, start_label, start_regressor
     from lit3d.reconstruct.pipeline import load_completer
 
     completer = None if args.body else load_completer(args.ckpt, args.device)
-    regressor = load_regressor(args.body_init) if args.body_init else None  # a bad file: one line, exit 2
+    regressor = start_regressor(args.body_init) if args.body else None  # a bad file: one line, exit 2
     body = functools.cache(Body) if args.body else None  # anny loads at the first image that gets to the fit
-    for note in [] if args.body else completer.notes:
+    for note in [f"start: {start_label(regressor)}"] if args.body else completer.notes:
         _say(f"note: {note}")
     mapper = None
     if args.canonical:

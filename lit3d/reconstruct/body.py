@@ -10,10 +10,10 @@ Per input NAME, DIR gets (written together, as one set: :func:`lit3d.reconstruct
 - ``NAME_body.png``: input points | fit and points (camera view, side view) | canonical body;
 - ``NAME_body.json``: parameters, fit quality (``poor_fit``), timings, camera, request key.
 
-The fit starts from the mean body (:mod:`lit3d.body.fit`), or with ``--body-init CKPT`` from a body
-regressor's prediction (:mod:`lit3d.body.regressor`), refined by fewer steps
+The fit starts from a body regressor's prediction (:mod:`lit3d.body.regressor`; the zoo's
+``body-regressor``, :mod:`lit3d.zoo`, or ``--body-init CKPT``; :func:`start_regressor`), refined by fewer steps
 (:func:`lit3d.body.regressor.fit_from_regressor`; ``--body-refine-poor N``: N more steps where those end
-flagged poor). A poor fit (not a person, a bad cut) is written
+flagged poor), or with ``--body-init none`` from the mean body (:mod:`lit3d.body.fit`). A poor fit (not a person, a bad cut) is written
 with ``poor_fit: true`` and said on one line.
 """
 from __future__ import annotations
@@ -28,7 +28,7 @@ import numpy as np
 from lit3d.body.fit import fit_body
 from lit3d.body.model import Body  # noqa: F401 (re-exported for lit3d.cli.reconstruct)
 from lit3d.body.points import observe
-from lit3d.body.regressor import fit_from_regressor, load_regressor, refine_config  # noqa: F401 (load_regressor: cli)
+from lit3d.body.regressor import Regressor, fit_from_regressor, load_regressor, refine_config
 from lit3d.body.results import BodyOutputs, fit_outputs
 from lit3d.geometry.normalise import bounding_frame
 from lit3d.reconstruct.depth_io import find_mask, read_depth_info, read_mask
@@ -36,6 +36,29 @@ from lit3d.reconstruct.figure import LABEL_PX, mesh_panels, points_panels
 from lit3d.reconstruct.outputs import finished_set, mesh_bytes, output_files, request_key, write_outputs
 from lit3d.reconstruct.pipeline import Options, cut_object
 from lit3d.utils.figures import font
+from lit3d.zoo import ZOO, zoo_model
+
+ZOO_REGRESSOR = "body-regressor"
+
+
+def start_regressor(body_init: str | None) -> Regressor | None:
+    """The fit's start for ``--body-init``: None -> the zoo's ``body-regressor`` (:mod:`lit3d.zoo`), ``none`` ->
+    the mean body (returns None), a path -> that regressor checkpoint. A bad file is one line naming it."""
+    if body_init is not None and str(body_init).lower() == "none":
+        return None
+    if body_init is None:
+        return load_regressor(zoo_model(ZOO_REGRESSOR).path)
+    return load_regressor(body_init)
+
+
+def start_label(regressor: Regressor | None) -> str:
+    """The console's and the summary's name of the fit's start."""
+    if regressor is None:
+        return "mean body (--body-init none)"
+    zoo = ZOO[ZOO_REGRESSOR].path
+    shipped = Path(regressor.path).resolve() == zoo
+    return f"body regressor {'shipped ' + ZOO_REGRESSOR + ' (' + str(zoo) + ')' if shipped else regressor.path}"
+
 
 FLIP = np.array([1.0, -1.0, -1.0])  # camera frame (y down, z forward) <-> GL (y up, z back)
 VIEWS = {"camera view": (0.0, 0.0, 1.0), "side view": (1.0, 0.15, 0.1)}
@@ -158,7 +181,7 @@ def body_one(args, path: Path, name: str, body, protected, intrinsics, camera: s
                "mask": None if mask is None else str(args.mask), "counts": {**info, "points": len(obs.points),
                                                                             "loss_points": len(obs.sample)},
                "quality": q, "poor_fit": q["poor_fit"], "params": out.params, "timings_s": timings,
-               "start": "mean body" if regressor is None else f"body regressor {regressor.path}",
+               "start": start_label(regressor),
                "mesh_frame": "NAME_body: camera (x right, y down, z forward), metres; NAME_body_canonical: "
                              "Anny rest pose, y up, facing +z, metres",
                "canonical_depth": "(128, 128) float32 in [0, 1], 0 = background: the canonical task's Anny "

@@ -1,0 +1,75 @@
+"""lit3d's model zoo: trained weights that ship inside the package (no download), each with a card.
+
+    lit3d.models()                      # [{"name", "task", "path", "bytes", "card", "trained_on", "command"}, ...]
+    lit3d.load("body-regressor")        # a zoo name as well as a checkpoint path
+
+Each entry names its file (package data beside this module, or the quality task's shipped model),
+the data it was trained on (only data whose licence allows shipping the weights: Anny and procedural
+people, CPCD2 phil), the command that remakes it and its card under ``docs/models/``. The CLIs
+use these as defaults: ``lit3d-reconstruct --body`` starts from ``body-regressor`` unless
+``--body-init none``; ``lit3d-score`` scores coloured point clouds with ``cpcd2-phil-fusion``.
+Completion and canonical weights are not in the zoo yet: their commands still need a checkpoint.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from lit3d.utils.errors import Lit3dError
+
+HERE = Path(__file__).resolve().parent
+
+
+class ZooError(Lit3dError, ValueError):
+    """A name that is not in the zoo, or a zoo file missing from this installation."""
+
+
+@dataclass(frozen=True)
+class ZooModel:
+    """One trained model of the zoo (see the module doc); ``file`` is relative to ``lit3d/``."""
+
+    name: str
+    task: str
+    file: str
+    trained_on: str
+    command: str
+    card: str
+
+    @property
+    def path(self) -> Path:
+        return HERE.parent / self.file
+
+    def describe(self) -> dict:
+        path = self.path
+        return {**asdict(self), "path": str(path), "bytes": path.stat().st_size if path.is_file() else None}
+
+
+ZOO: dict[str, ZooModel] = {m.name: m for m in (
+    ZooModel("body-regressor", "body", "zoo/body-regressor.pt",
+             "Anny people drawn and rendered on the fly (adult shape distribution, the 'varied' pose mix: upright, "
+             "turned, folded, lying, upside down), seed 7, one hour on one CPU thread",
+             "python -m studies.body.train_regressor --out CKPT --minutes 60 --steps 20000 --size 64 --width 24 "
+             "--hidden 256 --batch 64 --draw 32 --reuse 16 --seed 7 --poses varied",
+             "docs/models/body_regressor.md"),
+    ZooModel("cpcd2-phil-fusion", "quality", "quality/models/cpcd2-phil-fusion.json",
+             "CPCD2.0 phil (30 coloured point clouds, MOS 1..5)",
+             "lit3d-train experiment=quality_cpcd2_fusion data.root=PATH/cpcd2_phil",
+             "docs/quality_model.md"),
+)}
+
+
+def models() -> list[dict]:
+    """Every zoo model as a dict: name, task, file, path, bytes (None: the file is not installed), trained_on,
+    command, card."""
+    return [m.describe() for m in ZOO.values()]
+
+
+def zoo_model(name: str) -> ZooModel:
+    """The zoo entry ``name`` whose file is installed; a :class:`ZooError` line otherwise."""
+    if name not in ZOO:
+        raise ZooError(f"'{name}' is neither a file nor a zoo model (the zoo has: {', '.join(ZOO)})")
+    model = ZOO[name]
+    if not model.path.is_file():
+        raise ZooError(f"zoo model '{name}': its file {model.path} is not in this installation (remake it: "
+                       f"{model.command})")
+    return model

@@ -1,0 +1,73 @@
+"""The model zoo (lit3d.zoo): its registry, lit3d.models() / lit3d.load(name), the CLIs' defaults, and the
+shipped body regressor on held-out Anny people (a broken or untrained net fails it)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+import lit3d
+from lit3d.zoo import ZOO, ZooError, zoo_model
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_every_zoo_model_is_installed_small_and_has_a_card():
+    listed = {m["name"]: m for m in lit3d.models()}
+    assert set(listed) == set(ZOO) >= {"body-regressor", "cpcd2-phil-fusion"}
+    assert all(m["bytes"] for m in listed.values()), "a zoo file is missing from the package"
+    assert sum(m["bytes"] for m in listed.values()) < 50e6
+    for m in listed.values():
+        assert (ROOT / m["card"]).is_file(), m["card"]
+        assert m["command"] and m["trained_on"]
+    with pytest.raises(ZooError, match="zoo has: body-regressor"):
+        zoo_model("completion-furniture")
+
+
+def test_load_takes_a_zoo_name():
+    from lit3d.body.regressor import Regressor
+    from lit3d.quality.shipped import ShippedQualityModel
+
+    assert isinstance(lit3d.load("body-regressor"), Regressor)
+    assert isinstance(lit3d.load("cpcd2-phil-fusion"), ShippedQualityModel)
+
+
+def test_body_start_defaults_to_the_zoo_regressor_and_none_means_the_mean_body(tmp_path):
+    from lit3d.cli.reconstruct import main
+    from lit3d.reconstruct.body import start_label, start_regressor
+
+    shipped = start_regressor(None)
+    assert Path(shipped.path).resolve() == zoo_model("body-regressor").path
+    assert "shipped body-regressor" in start_label(shipped)
+    assert start_regressor("none") is None and start_label(None).startswith("mean body")
+    img = tmp_path / "d.npy"
+    np.save(img, np.ones((8, 8), np.float32))
+    assert main([str(img), "--body", "--body-init", "none", "--body-refine-poor", "5", "--out", str(tmp_path / "o")]) == 2
+
+
+def test_the_shipped_body_regressor_reads_held_out_people():
+    from lit3d.body.model import Body
+    from lit3d.body.regressor import BodyRegressor, loss
+    from lit3d.body.synthetic import HEIGHT, WIDTH, Camera
+    from studies.body.train_regressor import draw, shape_distribution
+
+    shipped = lit3d.load("body-regressor")
+    body = Body()
+    people = draw(body, shape_distribution(body), 1000, 0, 16, Camera.default(WIDTH, HEIGHT), shipped.prep,
+                  poses="varied")  # the evaluation's held-out seed, never trained on
+    torch.manual_seed(0)
+    untrained = BodyRegressor(shipped.prep.size, **{k: v for k, v in _net_args(shipped).items()}).eval()
+    with torch.no_grad():
+        ours, terms = loss(shipped.net.decode(shipped.net(people["image"], people["extras"])), people)
+        blank, _ = loss(untrained.decode(untrained(people["image"], people["extras"])), people)
+        pred = shipped.net.decode(shipped.net(people["image"], people["extras"]))
+    assert float(ours) < 0.3 * float(blank)
+    assert (pred["phenotype"] - people["phenotype"]).abs().mean() < 0.25
+    assert (pred["translation"] - people["translation"]).norm(dim=1).median() < 0.1  # metres
+
+
+def _net_args(regressor) -> dict:
+    ck = torch.load(regressor.path, weights_only=True)
+    return dict(ck["net"])
