@@ -18,10 +18,11 @@ import statistics
 import subprocess
 import sys
 import time
-import weakref
 from collections.abc import Callable
 
 import torch
+
+from lit3d.utils.step_cost import SavedBytes
 
 GPU_CMD = "make bench-gpu"  # the GPU rows alone (benchmarks.run --gpu), on a CUDA machine
 
@@ -159,54 +160,8 @@ def row(name: str, command: str, ours: float | None, baseline: float | None, uni
             "unit": unit, "ratio": ratio, "note": note, "baseline_name": baseline_name}
 
 
-class SavedTensorMeter:
-    """Peak bytes of tensors autograd holds for backward (the activation memory), while active.
-
-    Each saved tensor's storage is counted once while any graph still references it;
-    :attr:`peak` is the highest total seen. Parameters saved by a layer count too (they are
-    shared, so they do not grow with the batch); the batch-size slope is the per-sample cost.
-    """
-
-    def __init__(self):
-        self.live: dict[int, list] = {}  # storage pointer -> [bytes, references]
-        self.total = 0
-        self.peak = 0
-        self._ctx = None
-
-    def _pack(self, t: torch.Tensor):
-        key = t.untyped_storage().data_ptr()
-        entry = self.live.setdefault(key, [t.untyped_storage().nbytes(), 0])
-        if entry[1] == 0:
-            self.total += entry[0]
-            self.peak = max(self.peak, self.total)
-        entry[1] += 1
-        handle = _SavedHandle(t)
-        weakref.finalize(handle, self._release, key)
-        return handle
-
-    def _release(self, key: int) -> None:
-        entry = self.live.get(key)
-        if entry is None:
-            return
-        entry[1] -= 1
-        if entry[1] == 0:
-            self.total -= entry[0]
-            del self.live[key]
-
-    def __enter__(self):
-        self._ctx = torch.autograd.graph.saved_tensors_hooks(self._pack, lambda h: h.tensor)
-        self._ctx.__enter__()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self._ctx.__exit__(*exc)
-
-
-class _SavedHandle:
-    __slots__ = ("tensor", "__weakref__")
-
-    def __init__(self, tensor: torch.Tensor):
-        self.tensor = tensor
+# peak bytes autograd holds for backward (activations): one meter for the timed rows and the step-cost count
+SavedTensorMeter = SavedBytes
 
 
 def trainer_step_times(task, batches: list, *, accelerator: str = "cpu", precision: str = "32-true",

@@ -20,10 +20,9 @@ from __future__ import annotations
 
 import csv
 import re
-import warnings
 from pathlib import Path
 
-from datamodules.quality.mos import MosDataError, MosDataset, MosItem, MosLayout
+from datamodules.quality.mos import MosDataError, MosDataset, MosItem, MosLayout, row_problem
 
 CLOUD_EXTS = (".zip", ".ply")
 SCORE_RANGE = (1.0, 5.0)
@@ -96,11 +95,7 @@ def read_cpcd2(root: str | Path, spreadsheet: str | Path | None = None, on_error
     rows = _table(sheet)
     items, skipped, refs = [], [], {}
 
-    def bad(msg: str) -> None:
-        if on_error == "raise":
-            raise MosDataError(msg)
-        warnings.warn(msg + " (skipped)", stacklevel=3)
-        skipped.append(msg)
+    bad = row_problem(on_error, skipped)
 
     for row in rows:
         name, where = row["stimulus"], f"{sheet} row {row['row']} ('{row['stimulus']}')"

@@ -110,6 +110,18 @@ class MosDataset:
         return (min(scores) if lo is None else lo, max(scores) if hi is None else hi)
 
 
+def row_problem(on_error: str, skipped: list[str]):
+    """``bad(msg)`` of a reader: raise :class:`MosDataError` (``on_error="raise"``), or warn, append ``msg`` to
+    ``skipped`` and go on (``"skip"``)."""
+    def bad(msg: str) -> None:
+        if on_error == "raise":
+            raise MosDataError(msg)
+        warnings.warn(msg + " (skipped)", stacklevel=3)
+        skipped.append(msg)
+
+    return bad
+
+
 def norm_key(text: object) -> str:
     """Lower-case, drop a mesh extension and anything but letters/digits: 'Armadillo_Noise-0.5.OBJ' -> 'armadillonoise05'."""
     s = str(text).strip()
@@ -292,11 +304,7 @@ def read_mos_dataset(root: str | Path, layout: MosLayout | str, spreadsheet: str
     skipped: list[str] = []
     lo, hi = layout.score_range
 
-    def bad(msg: str) -> None:
-        if on_error == "raise":
-            raise MosDataError(msg)
-        warnings.warn(msg + " (skipped)", stacklevel=3)
-        skipped.append(msg)
+    bad = row_problem(on_error, skipped)
 
     used: set[Path] = set()
     for row in rows:

@@ -30,11 +30,11 @@ is wrong; ``on_error="skip"`` turns bad rows into warnings listed in ``skipped``
 from __future__ import annotations
 
 import re
-import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-from datamodules.quality.mos import SHEET_EXTS, MosDataError, MosDataset, MosItem, MosLayout, read_sheet_rows
+from datamodules.quality.mos import (SHEET_EXTS, MosDataError, MosDataset, MosItem, MosLayout, read_sheet_rows,
+                                     row_problem)
 
 STIMULUS_EXTS = (".obj", ".ply", ".off", ".stl", ".glb", ".gltf", ".xyz", ".pts", ".txt", ".zip")
 COLUMNS = {
@@ -149,11 +149,7 @@ def read_mos_folder(root: str | Path, spreadsheet: str | Path | None = None, she
                            "expected DIR/<shape>/<stimulus> files")
     items, skipped, refs, used = [], [], {}, set()
 
-    def bad(msg: str) -> None:
-        if on_error == "raise":
-            raise MosDataError(msg)
-        warnings.warn(msg + " (skipped)", stacklevel=3)
-        skipped.append(msg)
+    bad = row_problem(on_error, skipped)
 
     for row in rows:
         where = f"{table} row {row['row']} ('{row['stimulus']}')"
