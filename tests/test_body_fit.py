@@ -103,8 +103,8 @@ def test_cli_body_bad_input_gives_one_line_before_anny_loads(tmp_path, capsys):
     assert len(lines) == 2 and "Traceback" not in err
     assert "empty.png: all background" in lines[0] and "speck.png: 50 foreground depth pixels" in lines[1]
     assert not out.exists() or not any(out.iterdir())
-    assert main([str(tmp_path / "empty.png"), "--out", str(out)]) == 2  # neither --ckpt nor --body
-    assert "give --ckpt CKPT (completion) or --body" in capsys.readouterr().err
+    assert main([str(tmp_path / "empty.png"), "--body", "--ckpt", "c.ckpt", "--out", str(out)]) == 2
+    assert "--body (Anny fit) goes without --ckpt" in capsys.readouterr().err
 
 
 # ------------------------------------------------------------------ fits (Anny)

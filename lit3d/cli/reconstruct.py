@@ -1,11 +1,13 @@
-"""``lit3d-reconstruct DEPTH... --ckpt CKPT --out DIR``: depth images -> completed meshes.
+"""``lit3d-reconstruct DEPTH... [--ckpt CKPT] --out DIR``: depth images -> completed meshes.
 
 Examples::
 
+    lit3d-reconstruct scan.png --out out/          # the shipped completion-furniture model (lit3d.models())
     lit3d-reconstruct scan.png --ckpt logs/demo/train/checkpoints/best-009.ckpt --out out/
     lit3d-reconstruct depth_dir/ --ckpt CKPT --out out/ --fx 570.3 --fy 570.3 --cx 320 --cy 240
     lit3d-reconstruct d.npy --ckpt CKPT --out out/ --far 2.0 --remove-plane --format ply
     lit3d-reconstruct d.png --ckpt CKPT --out out/ --reference chair.obj --quality-ckpt Q.ckpt
+    lit3d-reconstruct person.png --canonical --out out/   # the shipped canonical-people model, then completion
     lit3d-reconstruct d.png --ckpt CKPT --out out/ --canonical logs/canonical/.../best.ckpt
     lit3d-reconstruct person.png --body [--body-init REGRESSOR.ckpt|none] --out out/  # Anny body fit
 
@@ -35,13 +37,18 @@ from pathlib import Path
 
 from lit3d.cli.about import report_error, run_argparse_cli, version_line
 
+# the zoo models used when no checkpoint is given (lit3d.zoo)
+ZOO_COMPLETION = "completion-furniture"
+ZOO_CANONICAL = "canonical-people"
+
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="lit3d-reconstruct", description=__doc__.split("\n\n")[0],
                                 epilog="\n\n".join(__doc__.split("\n\n")[1:]).replace("``", "'"),
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("depth", nargs="+", help="depth image(s) or folder(s) of them")
-    p.add_argument("--ckpt", help="completion checkpoint (lit3d-train task=completion; not with --body)")
+    p.add_argument("--ckpt", help="completion checkpoint (lit3d-train task=completion) or zoo name; default: the "
+                                  "shipped completion-furniture (lit3d.models()); not with --body")
     p.add_argument("--body", action="store_true", help="fit the Anny body model instead (a person)")
     p.add_argument("--body-init", metavar="CKPT", help="with --body: start regressor (default: zoo's; none: mean body)")
     p.add_argument("--body-refine-poor", metavar="N", type=int, default=0, help="with a regressor: N more steps if poor")
@@ -63,7 +70,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--no-fuse", action="store_true",
                    help="do not add the visible surface voxels to the completed grid (network output only)")
     p.add_argument("--format", choices=("obj", "ply", "glb"), default="obj", help="mesh format (default obj)")
-    p.add_argument("--canonical", metavar="CKPT", help="canonical-task checkpoint: complete the canonical pose")
+    p.add_argument("--canonical", metavar="CKPT", nargs="?", const=ZOO_CANONICAL,
+                   help="complete the canonical pose: a canonical-task checkpoint or zoo name (no value: the "
+                        f"shipped {ZOO_CANONICAL})")
     p.add_argument("--reference", metavar="REF", help="reference shape (camera frame) to score the result against")
     p.add_argument("--quality-ckpt", metavar="Q", help="quality model checkpoint for the score (with --reference)")
     p.add_argument("--size", type=int, default=256, help="picture panel size in pixels (default 256)")
@@ -114,8 +123,8 @@ def _check_args(args) -> None:
         raise InputError(f"--fov {args.fov:g}: expected a field of view in (0, 180) degrees")
     if not args.depth_scale > 0 or args.depth_scale != args.depth_scale or args.depth_scale == float("inf"):
         raise InputError(f"--depth-scale {args.depth_scale:g}: expected a positive number of metres per unit")
-    if bool(args.ckpt) == bool(args.body) or (args.body and (args.canonical or args.reference)):
-        raise InputError("give --ckpt CKPT (completion) or --body (Anny fit; not with --canonical/--reference)")
+    if args.body and (args.ckpt or args.canonical or args.reference):
+        raise InputError("--body (Anny fit) goes without --ckpt, --canonical and --reference")
     if (args.body_init and not args.body) or (args.body_refine_poor and str(args.body_init).lower() == "none"):
         raise InputError("--body-init CKPT: needs --body, and --body-refine-poor N needs a regressor, not none")
     if args.quality_ckpt and not args.reference:
@@ -284,10 +293,25 @@ def _dedupe(inputs: list[Path]) -> list[Path]:
     return out
 
 
+def _resolve_models(args) -> None:
+    """Zoo names (and the defaults: no ``--ckpt`` -> ``completion-furniture``) become files; says which."""
+    from lit3d.zoo import resolve
+
+    if not args.body:
+        path, label = resolve(args.ckpt or ZOO_COMPLETION)
+        args.ckpt = str(path)
+        _say(f"completion model: {label}")
+    if args.canonical:
+        path, label = resolve(args.canonical)
+        args.canonical = str(path)
+        _say(f"canonical model: {label}")
+
+
 def _run(args) -> int:
     from lit3d.reconstruct.depth_io import list_inputs
 
     _check_args(args)
+    _resolve_models(args)
     inputs = _dedupe(list_inputs(args.depth))  # a missing folder or file list is answered before the imports
     names, protected = _plan_outputs(args, inputs)
     todo = _to_do(args, inputs, names)

@@ -25,6 +25,7 @@ from lit3d.reconstruct.grid import GridGeometry, Placement, fit_placement, voxel
 from lit3d.reconstruct.segment import depth_range_mask, largest_depth_cluster, remove_plane
 from lit3d.render.convert import ShapeError, voxels_to_mesh
 from lit3d.utils.checkpoints import META_KEY, load_checkpoint
+from lit3d.zoo.slim import load_state
 
 
 @dataclass
@@ -70,7 +71,7 @@ def load_task(path: str | Path, device: str, want: str):
         from lit3d.canonical.module import CanonicalTask as cls
     task = cls(**ckpt["hyper_parameters"])
     task.on_load_checkpoint(ckpt)
-    task.load_state_dict(ckpt["state_dict"])
+    load_state(task, ckpt)  # a zoo file may be slim: fp16, training-only parts left out (lit3d.zoo.slim)
     try:
         task = task.to(torch.device(device)).eval()
     except (RuntimeError, AssertionError) as exc:

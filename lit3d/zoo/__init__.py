@@ -8,7 +8,8 @@ the data it was trained on (only data whose licence allows shipping the weights:
 people, CPCD2 phil), the command that remakes it and its card under ``docs/models/``. The CLIs
 use these as defaults: ``lit3d-reconstruct --body`` starts from ``body-regressor`` unless
 ``--body-init none``; ``lit3d-score`` scores coloured point clouds with ``cpcd2-phil-fusion``.
-Completion and canonical weights are not in the zoo yet: their commands still need a checkpoint.
+``lit3d-reconstruct IMAGE`` completes with ``completion-furniture`` when no ``--ckpt`` is given, and
+``--canonical`` with no path uses ``canonical-people`` (each only where its file is installed).
 """
 from __future__ import annotations
 
@@ -62,6 +63,17 @@ def models() -> list[dict]:
     """Every zoo model as a dict: name, task, file, path, bytes (None: the file is not installed), trained_on,
     command, card."""
     return [m.describe() for m in ZOO.values()]
+
+
+def resolve(value: str | Path) -> tuple[Path, str]:
+    """``(path, label)`` of a checkpoint argument that may be a file or a zoo name: a file that exists wins
+    over a zoo entry of the same name; a zoo name gives its installed file (a :class:`ZooError` line when
+    the file is not installed). ``label`` says which, for the console ("shipped completion-furniture (PATH)")."""
+    path = Path(value)
+    if isinstance(value, str) and value in ZOO and not path.exists():
+        model = zoo_model(value)
+        return model.path, f"shipped {model.name} ({model.path})"
+    return path, str(path)
 
 
 def zoo_model(name: str) -> ZooModel:
