@@ -170,8 +170,10 @@ def test_data_cli_prints_manifest_and_writes_png(data_dir, tmp_path):
     out = tmp_path / "data_run"
     res = _run([bin_path("lit3d-data"), *TINY, f"paths.data_dir={data_dir}", f"hydra.run.dir={out}", "--show", "4"], REPO)
     assert res.returncode == 0, res.stderr[-3000:]
-    assert "manifest" in res.stdout
-    assert (out / "completion_samples.png").is_file()
+    info = json.loads(res.stdout)  # stdout is the JSON alone (log and "wrote" lines on stderr): `> file.json` works
+    assert "manifest_hash" in info
+    assert json.loads((out / "data_summary.json").read_text()) == info  # the same JSON in the run dir
+    assert (out / "completion_samples.png").is_file() and "completion_samples.png" in res.stderr
 
 
 def test_missing_data_root_is_one_line(tmp_path):
