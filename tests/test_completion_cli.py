@@ -13,6 +13,7 @@ import torch
 from lit3d.cli.common import UserError
 from lit3d.cli.evaluate import evaluate
 from lit3d.cli.train import train
+from lit3d.utils.tables import fmt
 
 REPO = Path(__file__).resolve().parents[1]
 TINY = [
@@ -82,12 +83,16 @@ def test_train_then_eval_writes_tables_and_figures(compose_cfg, data_dir, tmp_pa
     # checkpoints load with torch's safe loader, and carry the evaluation settings the test used
     saved = torch.load(best[0], map_location="cpu", weights_only=True)
     assert saved["lit3d"]["evaluation"]["surface"]["points"] == 2000 and "test/same/chamfer_l1" in metrics
+    # the tested (best) weights' validation IoU, as lit3d-eval measures it, in metrics.json and results.md
+    assert metrics["val/iou"] == pytest.approx(metrics["monitored_value"])
+    assert f"(validation IoU {fmt(metrics['val/iou'])})." in (run / "results.md").read_text()
 
     ecfg = compose_cfg([f"ckpt_path={best[0]}", "task=completion"], config_name="eval", data_dir=data_dir)
     emetrics = evaluate(ecfg)
     out = Path(ecfg.paths.output_dir)
     assert (out / "metrics.json").is_file() and "test/same/iou" in emetrics
     assert "test/same/chamfer_l1" in emetrics  # evaluation.surface: the checkpoint's, set up before the test
+    assert emetrics["val/iou"] == pytest.approx(metrics["val/iou"], abs=1e-6)  # the same weights, the same number
     text = (out / "results.md").read_text()
     assert "Tables 3.1 / 3.2" in text and "(thesis 3.2)" in text and "lit3d, multi-category (ours)" in text
     assert list(out.glob("completion_*.png"))

@@ -65,7 +65,8 @@ def staged_outputs(out_dir: Path, last: str = METRICS) -> Iterator[Path]:
 
 def run_evaluation(trainer, task, datamodule, task_name: str, out_dir: Path, *, ckpt_path: str | None = None,
                    validate: bool = False, n_figures: int = 0, extra: dict | Callable[[], dict] | None = None,
-                   files: dict[str, str] | None = None, settings: Mapping | None = None) -> dict[str, float]:
+                   files: dict[str, str] | None = None, settings: Mapping | None = None,
+                   measured: Mapping[str, float] | None = None) -> dict[str, float]:
     """Test ``task`` (after validating it when ``validate``: the completion threshold is chosen there),
     run the task room's evaluator on the result with the evaluation ``settings`` (the config's
     ``evaluation`` node, :mod:`lit3d.cli.eval_settings`), and on rank 0 write ``metrics.json``, ``results.md``,
@@ -73,11 +74,13 @@ def run_evaluation(trainer, task, datamodule, task_name: str, out_dir: Path, *, 
     (:func:`staged_outputs`). Used by ``lit3d-eval`` and, after fitting, by ``lit3d-train``.
     ``extra``: entries written first into ``metrics.json`` (not returned), or a function returning
     them (called after the test: the data's manifest is known then); ``files``: more files of the
-    set (name -> text). Between the steps and after every batch (:mod:`lit3d.utils.stops`) a Ctrl-C
+    set (name -> text); ``measured``: ``val/`` numbers of the tested weights already known (``lit3d-train``:
+    the monitored value of the best checkpoint, :func:`lit3d.cli.train.tested_validation`), kept in the
+    metrics as a validation here would. Between the steps and after every batch (:mod:`lit3d.utils.stops`) a Ctrl-C
     or SIGTERM under :func:`lit3d.utils.stops.on_signals` stops it, before anything is written."""
     evaluator = evaluator_module(task_name)
     settings = dict(settings or {})
-    metrics: dict[str, float] = {}
+    metrics: dict[str, float] = {k: float(v) for k, v in (measured or {}).items() if k.startswith("val/")}
     if validate:
         trainer.validate(task, datamodule=datamodule, ckpt_path=ckpt_path, weights_only=True)
         metrics.update({k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("val/")})
