@@ -69,13 +69,19 @@ def job_label(job_dir: Path, ignore: Sequence[str] = ("hydra.", "+sweep", "exper
     return ", ".join(_normalise_override(o) for o in kept) or "(defaults)"
 
 
+WIDE = 12  # more metrics than this: the per-metric table is laid out one row per metric
+
+
 def collect(sweep_dir: str | Path, metrics: Sequence[str] | None = None,
             thesis: dict[str, Any] | None = None, title: str = "Sweep results") -> str:
-    """Markdown table: one row per job (its overrides), one column per metric.
+    """Markdown tables of a multirun's jobs, written to ``sweep_results.md`` and returned.
 
-    ``metrics`` None -> every ``test/...`` key found in any job. ``thesis`` maps a
-    row label (the override string) to the thesis's figure for that setting.
-    Jobs without metrics.json (failed or running) are listed as such.
+    ``metrics`` given (the ``sweeps/`` configs): one row per job (its overrides), one column per metric.
+    ``metrics`` None: every ``test/...`` key found in any job; the jobs table then holds each job's
+    monitored value (``monitor`` of its metrics.json), and the metrics follow in a second table with one
+    row per metric and one column per job whenever there are more than ``WIDE`` (a completion job has
+    hundreds: a row of them per job is unreadable). ``thesis`` maps a row label (the override string) to
+    the thesis's figure for that setting. Jobs without metrics.json (failed or running) are listed as such.
     """
     sweep_dir = Path(sweep_dir)
     jobs = sorted((p for p in sweep_dir.iterdir() if p.is_dir() and (p / ".hydra").is_dir()),
@@ -84,26 +90,53 @@ def collect(sweep_dir: str | Path, metrics: Sequence[str] | None = None,
     for job in jobs:
         mpath = job / "metrics.json"
         results[job] = json.loads(mpath.read_text()) if mpath.is_file() else None
+    named = metrics is not None
     if metrics is None:
         metrics = sorted({k for r in results.values() if r for k in r if k.startswith("test/")})
-    header = ["job", "setting", *metrics] + (["thesis"] if thesis else [])
+    tall = not named and len(metrics) > WIDE
+    monitors = sorted({str(r["monitor"]) for r in results.values() if r and r.get("monitor")})
+    if tall:  # one column: the monitored value (or whether the job finished)
+        header = ["job", "setting", f"{' / '.join(monitors)} (monitored)" if monitors else "status"]
+    else:
+        header = ["job", "setting", *metrics]
+    header += ["thesis"] if thesis else []
     rows = []
     for job, res in results.items():
         label = job_label(job)
-        cells = [fmt(res.get(m)) if res else "no metrics.json" for m in metrics]
-        extra = [fmt(thesis.get(label)) if isinstance(thesis.get(label), (int, float)) else str(thesis.get(label, "–"))] if thesis else []
-        rows.append([job.name, label, *cells, *extra])
+        if not res:
+            cells = ["no metrics.json"] * (1 if tall else len(metrics))
+        elif tall:
+            cells = [fmt(res.get("monitored_value")) if monitors else "done"]
+        else:
+            cells = [fmt(res.get(m)) for m in metrics]
+        rows.append([job.name, label, *cells, *([_thesis_cell(thesis, label)] if thesis else [])])
     text = f"# {title}\n\nSweep dir: `{sweep_dir}`\n\n" + markdown_table(header, rows) + "\n"
+    if tall:
+        done = [(job, res) for job, res in results.items() if res]
+        text += (f"\n## Test metrics: one row per metric ({len(metrics)}), one column per job\n\n"
+                 + markdown_table(["metric", *[job.name for job, _ in done]],
+                                  [[m, *[fmt(res.get(m)) for _, res in done]] for m in metrics]) + "\n")
     by_setting = over_seeds({job_label(j): r for j, r in results.items()}, metrics)
     if by_setting:
-        head = ["setting", "seeds", *metrics] + (["thesis"] if thesis else [])
-        srows = [[label, str(n), *cells] + ([fmt(thesis.get(label)) if isinstance(thesis.get(label), (int, float))
-                                            else str(thesis.get(label, "–"))] if thesis else [])
-                 for label, (n, cells) in by_setting.items()]
-        text += ("\n## Mean ± sd over seeds (sd of the jobs' values, ddof 1)\n\n"
-                 + markdown_table(head, srows) + "\n")
+        text += "\n## Mean ± sd over seeds (sd of the jobs' values, ddof 1)\n\n"
+        if tall:
+            labels = list(by_setting)
+            text += ("Seeds per setting: " + "; ".join(f"{lb}: {by_setting[lb][0]}" for lb in labels) + "\n\n"
+                     + markdown_table(["metric", *labels],
+                                      [[m, *[by_setting[lb][1][i] for lb in labels]] for i, m in enumerate(metrics)])
+                     + "\n")
+        else:
+            head = ["setting", "seeds", *metrics] + (["thesis"] if thesis else [])
+            srows = [[label, str(n), *cells] + ([_thesis_cell(thesis, label)] if thesis else [])
+                     for label, (n, cells) in by_setting.items()]
+            text += markdown_table(head, srows) + "\n"
     atomic_write_text(sweep_dir / "sweep_results.md", text)
     return text
+
+
+def _thesis_cell(thesis: dict[str, Any], label: str) -> str:
+    value = thesis.get(label)
+    return fmt(value) if isinstance(value, (int, float)) else str(thesis.get(label, "–"))
 
 
 def over_seeds(results: dict[str, dict | None], metrics: Sequence[str]) -> dict[str, tuple[int, list[str]]]:

@@ -45,6 +45,24 @@ def test_collect_groups_seeds_into_mean_and_sd(tmp_path):
     assert (tmp_path / "sweep_results.md").read_text() == text
 
 
+def test_every_metric_table_is_one_row_per_metric_not_one_row_of_hundreds(tmp_path):
+    """A plain multirun (no metrics named) of a task with hundreds of test keys: the jobs table holds the
+    monitored value, and the test metrics follow one row each, one column per job."""
+    keys = [f"test/{split}/{m}/{c}" for split in ("same", "cross") for m in ("iou", "chamfer_l1", "fscore_1pct")
+            for c in ("bench", "chair", "couch", "table")] * 1
+    for n, seed in enumerate((0, 1, 2)):
+        _job(tmp_path, str(n), ["experiment=completion_demo", "task.adversarial=true", f"seed={seed}"],
+             {"monitor": "val/iou", "monitored_value": 0.5 + 0.01 * n, **{k: 0.1 * n for k in keys}})
+    _job(tmp_path, "3", ["experiment=completion_demo", "task.adversarial=true", "seed=3"], None)
+    text = collect(tmp_path)
+    widest = max(line.count("|") for line in text.splitlines())
+    assert widest <= 6, widest  # metric + 3 jobs (or job, setting, monitored), not 24 metric columns
+    assert "| job | setting | val/iou (monitored) |" in text and "| 1 | task.adversarial=true, seed=1 | 0.510 |" in text
+    assert "| 3 | task.adversarial=true, seed=3 | no metrics.json |" in text
+    assert "| test/same/iou/chair | 0.000 | 0.100 | 0.200 |" in text
+    assert "| test/same/iou/chair | 0.100 ± 0.100 |" in text  # over seeds, one row per metric too
+
+
 def test_no_seed_table_without_repeated_settings():
     assert over_seeds({"task.nets.k=50": {"m": 1.0}, "task.nets.k=100": {"m": 2.0}}, ["m"]) == {}
 
