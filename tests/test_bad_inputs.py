@@ -338,7 +338,11 @@ CASES = [
     ("train-tosca-without-data-root", _option("experiment=canonical_tosca", "data.root"), _subprocess("lit3d-train"),
      ["missing value for data.root", "set data.root="]),
     ("train-misspelt-key", _option("trainer.max_epoch=3"), train_cli,
-     ["Could not override 'trainer.max_epoch'", "use +trainer.max_epoch=3"]),
+     ["Could not override 'trainer.max_epoch'", "did you mean trainer.max_epochs=3?"]),
+    # Hydra's own hint for the line above, "+trainer.max_epoch=3": the Trainer refuses it, in one line
+    ("train-plus-misspelt-trainer-argument", _option("experiment=completion_demo +trainer.max_epoch=3",
+                                                     "trainer.max_epoch"), train_overrides,
+     ["not an argument of lightning.pytorch.trainer.trainer.Trainer", "did you mean trainer.max_epochs?"]),
     ("eval-misspelt-key", _option("ckpt_pth=x.ckpt"), eval_cli, ["Could not override 'ckpt_pth'"]),
     ("train-bad-task-option-value", _option("experiment=canonical_demo task.on_nonfinite=bogus", "task config"),
      train_overrides, ["task.on_nonfinite must be one of", "'bogus'"]),
