@@ -169,3 +169,22 @@ def test_what_a_run_that_waited_may_do(tmp_path):
     for command, ckpt in (("train", None), ("train", tmp_path / "elsewhere.ckpt"), ("eval", "last")):
         with pytest.raises(OutputError, match=r"left its results here \(checkpoints/epoch=1.ckpt\).*: choose another"):
             check_waited(run, command, ckpt)
+
+
+def test_an_optuna_search_without_dash_m_claims_no_run_dir(tmp_path):
+    """``lit3d-train hparams_search=...`` sweeps (``hydra.mode: MULTIRUN``): its jobs run in the sweep
+    dir, so no ``runs/<time>`` dir with a lock file is made for it; a plain run still claims its dir."""
+    from lit3d.cli.common import compose_config
+    from lit3d.cli.rundir import claim_run_dir
+
+    common = ["experiment=completion_demo", f"paths.log_dir={tmp_path}/logs"]
+    cfg = compose_config("train", ["hparams_search=completion_optuna", *common], return_hydra_config=True)
+    args, lock = claim_run_dir(cfg, ["hparams_search=completion_optuna", *common])
+    with lock:
+        assert args == ["hparams_search=completion_optuna", *common]
+        assert not (tmp_path / "logs").exists()
+    cfg = compose_config("train", common, return_hydra_config=True)
+    args, lock = claim_run_dir(cfg, common)
+    with lock:
+        runs = list((tmp_path / "logs" / "completion" / "runs").iterdir())
+        assert len(runs) == 1 and (runs[0] / ".lit3d.lock").exists() and args[-1] == f"hydra.run.dir={runs[0]}"

@@ -139,14 +139,24 @@ def _override_value(path: Path) -> str:
     return "'" + text.replace("\\", "\\\\").replace("'", "\\'") + "'"
 
 
+def _multirun(cfg: DictConfig) -> bool:
+    """A config that makes Hydra sweep without ``-m`` (``hydra.mode: MULTIRUN``, as the Optuna
+    ``hparams_search`` configs set): its jobs run in the sweep dir, never in ``hydra.run.dir``."""
+    try:
+        return str(OmegaConf.select(cfg, "hydra.mode", default="") or "").rsplit(".", 1)[-1] == "MULTIRUN"
+    except Exception:  # an interpolation only Hydra's runtime can resolve
+        return False
+
+
 def claim_run_dir(cfg: DictConfig | None, args: list[str],
                   command: str = "train") -> tuple[list[str], contextlib.AbstractContextManager]:
     """``(args, lock)``: the command line to hand to Hydra (plus ``hydra.run.dir=<claimed dir>``
     where the run dir is a fresh timestamped one) and the held lock of the run dir (release it by
     leaving ``with lock:``). ``cfg``: the composed config with its ``hydra`` node, or None
-    (multirun, ``--cfg`` ...: nothing claimed here; :func:`hold_output_dir` locks each job's dir).
+    (multirun, ``--cfg`` ...: nothing claimed here; :func:`hold_output_dir` locks each job's dir); a
+    config with ``hydra.mode: MULTIRUN`` (an Optuna search without ``-m``) claims nothing either.
     ``command`` (``train``, ``eval``, ``data``, ``summary``): after a wait, :func:`check_waited`."""
-    if cfg is None or _other_rank():
+    if cfg is None or _other_rank() or _multirun(cfg):
         return args, contextlib.nullcontext()
     try:
         raw = str(OmegaConf.to_container(cfg.hydra.run, resolve=False).get("dir", ""))
