@@ -84,6 +84,15 @@ def test_step_total_is_the_parts_weighted_by_their_runs_and_each_option_counts(c
     assert plain["flops"] < parts["generator"]["flops"]
 
 
+def test_bf16_penalty_keeps_the_flops_and_saves_fewer_bytes(completion_demo_nets):
+    nets = tiny_nets(completion_demo_nets)
+    base = {p["part"]: p for p in completion_step_cost(_meta_task(nets))["parts"]}
+    bf16 = {p["part"]: p for p in completion_step_cost(_meta_task(nets, gp_precision="bf16"))["parts"]}
+    assert all(bf16[k]["flops"] == base[k]["flops"] for k in base)
+    assert bf16["critic penalty"]["saved_bytes"] < base["critic penalty"]["saved_bytes"]
+    assert all(bf16[k]["saved_bytes"] == base[k]["saved_bytes"] for k in base if k != "critic penalty")
+
+
 def test_step_cost_refuses_a_task_with_real_weights(completion_demo_nets):
     with pytest.raises(ValueError, match="meta device"):
         completion_step_cost(CompletionTask(nets=tiny_nets(completion_demo_nets)))

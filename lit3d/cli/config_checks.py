@@ -98,6 +98,7 @@ RULES: tuple[Rule, ...] = (
     # task: optimisers and losses
     Rule("task.lr",                            "number",  "> 0"),
     Rule("task.lr_schedule",                   "str"),
+    Rule("task.gp_precision",                  "str"),
     Rule("task.lr_*",                          "number",  "> 0"),
     Rule("task.betas.*",                       "number",  "[0, 1)"),
     Rule("task.eps",                           "number",  "> 0"),
@@ -123,6 +124,7 @@ RULES: tuple[Rule, ...] = (
     Rule("task.seed",                          "int",     ">= 0"),
     Rule("task.adversarial",                   "bool"),
     Rule("task.critic_concat",                 "bool"),
+    Rule("task.compile_step",                  "bool"),
     Rule("task.use_*",                         "bool"),
     # task: net sizes (completion: task.nets, canonical and quality: task.net)
     Rule("task.nets.*_channels.*",             "int",     ">= 1"),
