@@ -112,7 +112,7 @@ def _run(args: list[str], kill_at: str | None = None, timeout: float = 300) -> s
     if kill_at:
         env["LIT3D_KILL_AT"] = kill_at
     cmd = [str(BIN / args[0]), *args[1:]] if not args[0].startswith("-") else [sys.executable, *args]
-    return subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=timeout)
+    return subprocess.run(cmd, check=False, cwd=REPO, env=env, capture_output=True, text=True, timeout=timeout)
 
 
 def _killed(res: subprocess.CompletedProcess) -> subprocess.CompletedProcess:

@@ -173,7 +173,7 @@ def check_output_dir(path: str | os.PathLike, option: str = "--out") -> Path:
             break
     try:
         p.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(dir=p, prefix=".lit3d-probe.", suffix=TMP_SUFFIX)
+        fd, probe = tempfile.mkstemp(dir=p, prefix=temp_prefix("lit3d-probe"), suffix=TMP_SUFFIX)
         os.close(fd)
         os.unlink(probe)
     except OSError as exc:
@@ -193,7 +193,7 @@ def check_writable(path: str | os.PathLike, option: str, need_write: bool = True
         raise OutputError(f"{p}: {option} lies under {anc}, which is a file, not a folder")
     if need_write and anc is not None:
         try:  # a real probe (a temp file, removed again): access() ignores sysfs and some mounts
-            fd, probe = tempfile.mkstemp(dir=anc, prefix=".lit3d-probe.", suffix=TMP_SUFFIX)
+            fd, probe = tempfile.mkstemp(dir=anc, prefix=temp_prefix("lit3d-probe"), suffix=TMP_SUFFIX)
             os.close(fd)
             os.unlink(probe)
         except OSError as exc:
