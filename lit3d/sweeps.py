@@ -4,7 +4,8 @@ Used as a Hydra callback by every multirun (``hydra.callbacks.collect`` in ``con
 the configs in ``sweeps/`` set its metrics and title; written when the multirun ends) and by
 hand: :func:`collect` (from the checkout: ``python -m studies.sweeps.collect SWEEP_DIR [METRIC ...]``).
 :class:`StudyStorage` makes a kept Optuna study (``hydra.sweeper.storage=sqlite:///optuna.db``) work and
-resume without replacing earlier trial dirs.
+resume without replacing earlier trial dirs; :class:`KeepEarlierJobs` refuses any multirun into a sweep dir
+that holds an earlier multirun's job dirs.
 """
 from __future__ import annotations
 
@@ -220,6 +221,43 @@ def prepare_study_storage(url: str) -> None:
         engine.dispose()
 
 
+def earlier_job_dirs(sweep_dir: Path) -> list[str]:
+    """The job (trial) dirs an earlier multirun left in ``sweep_dir`` (``0/``, ``1/`` ... with a ``.hydra/``), in order."""
+    if not sweep_dir.is_dir():
+        return []
+    return sorted((p.name for p in sweep_dir.iterdir() if p.is_dir() and (p / ".hydra").is_dir()),
+                  key=lambda n: (len(n), n))
+
+
+def refuse_earlier_jobs(config) -> None:
+    """Stop the multirun (one line, exit 2) when its sweep dir holds the job dirs of an earlier one:
+    Hydra numbers a multirun's job dirs from 0, so the new jobs would train or evaluate afresh in
+    the earlier jobs' dirs and replace their results (a resumed Optuna study too)."""
+    from omegaconf import OmegaConf
+
+    sweep_dir = Path(str(config.hydra.sweep.dir))
+    earlier = earlier_job_dirs(sweep_dir)
+    if not earlier:
+        return
+    shown = ", ".join(earlier[:5]) + (", ..." if len(earlier) > 5 else "")
+    storage = OmegaConf.select(config, "hydra.sweeper.storage", default=None)
+    what = (f"holds the trial dirs of an earlier sweep ({shown}); a resumed study ({storage}) numbers its trial dirs"
+            if storage else f"holds the job dirs of an earlier multirun ({shown}); a new multirun numbers its job dirs")
+    print(f"error: {sweep_dir}: {what} from 0 again and would replace them: leave hydra.sweep.dir to its default "
+          "(a new timestamped folder) or choose another one", file=sys.stderr, flush=True)
+    sys.exit(2)
+
+
+class KeepEarlierJobs(Callback):
+    """Hydra callback, on for every multirun (``conf/hydra/default.yaml``, ``conf/hydra/eval.yaml``:
+    ``hydra.callbacks.earlier_jobs``): a sweep dir that holds the job dirs of an earlier multirun
+    (``hydra.sweep.dir=X`` given again) is refused with one line and exit 2 before any job runs
+    (:func:`refuse_earlier_jobs`); before, the second multirun's jobs replaced the first's results."""
+
+    def on_multirun_start(self, config, **kwargs) -> None:
+        refuse_earlier_jobs(config)
+
+
 class StudyStorage(Callback):
     """Hydra callback, on for every multirun (``conf/hydra/default.yaml``: ``hydra.callbacks.study_storage``);
     does nothing unless the Optuna sweeper keeps its study (``hydra.sweeper.storage=sqlite:///...``). Then,
@@ -234,13 +272,5 @@ class StudyStorage(Callback):
         storage = OmegaConf.select(config, "hydra.sweeper.storage", default=None)
         if not storage:
             return
-        sweep_dir = Path(str(config.hydra.sweep.dir))
-        earlier = sorted((p.name for p in sweep_dir.iterdir() if p.is_dir() and (p / ".hydra").is_dir()),
-                         key=lambda n: (len(n), n)) if sweep_dir.is_dir() else []
-        if earlier:
-            shown = ", ".join(earlier[:5]) + (", ..." if len(earlier) > 5 else "")
-            print(f"error: {sweep_dir}: holds the trial dirs of an earlier sweep ({shown}); a resumed study "
-                  f"({storage}) numbers its trial dirs from 0 again and would replace them: leave hydra.sweep.dir "
-                  "to its default (a new timestamped folder) or choose another one", file=sys.stderr, flush=True)
-            sys.exit(2)
+        refuse_earlier_jobs(config)  # before the database is touched (also where earlier_jobs is turned off)
         prepare_study_storage(str(storage))

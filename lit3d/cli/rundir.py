@@ -5,7 +5,8 @@ Before Hydra writes anything into the run dir (``.hydra/``, ``train.log``), :fun
 - gives a timestamped run dir (the default ``hydra.run.dir``, ``.../runs/<time>``) that another
   run started in the same second already made a suffix: ``<time>_2``, ``<time>_3`` ... (an atomic
   ``mkdir``; the claimed dir is handed to Hydra as ``hydra.run.dir=...``);
-- takes the run dir's lock (``flock`` on ``<run dir>/.lit3d.lock``) for the whole process. A
+- takes the run dir's lock (``flock`` on ``<run dir>/.lit3d.lock``) for the whole process, and
+  clears what killed runs left in it and in the run dirs beside it (:mod:`lit3d.cli.run_leftovers`). A
   second run into a busy dir is refused with one line naming the holder (pid, host, start
   time), or waits for it with ``wait_for_run_dir=true``. The system frees the lock when the
   holder exits, SIGKILL included.
@@ -31,10 +32,10 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
+from lit3d.cli.run_leftovers import LOCK_FILE, clear_run_dirs
 from lit3d.utils.io import OutputError
 from lit3d.utils.locks import HeldLock, hold
 
-LOCK_FILE = ".lit3d.lock"
 RUN_DIR_KEY = "hydra.run.dir"
 WAIT_KEY = "wait_for_run_dir"
 _PLAIN = re.compile(r"[\w./:+@%~-]+")
@@ -74,6 +75,9 @@ def lock_run_dir(run_dir: str | os.PathLike, wait: bool = False) -> HeldLock:
 
     lock = hold(run_dir / LOCK_FILE, _busy(run_dir), wait=wait, on_wait=on_wait)
     lock.waited = bool(waited)
+    if lock.owner:  # what killed runs left here and beside it (lit3d.cli.run_leftovers)
+        for note in clear_run_dirs(run_dir):
+            print(f"note: {note}", file=sys.stderr, flush=True)
     return lock
 
 
