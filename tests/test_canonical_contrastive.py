@@ -1,4 +1,4 @@
-"""The contrastive identity term (task.contrastive_weight) and the batches it needs (data.batch_poses):
+"""The contrastive identity term (task.contrastive_weight) and the batches it needs (data.training.batch_poses):
 the loss against a loop written from the paper's formula, its wiring into the training step and the
 encoder or the output, learning, refused settings; the grouped batches' contents and order."""
 import math

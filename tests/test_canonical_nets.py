@@ -111,7 +111,7 @@ def test_he_init_fits_training_pairs_that_the_default_init_does_not(compose_cfg,
 
     net_cfg = OmegaConf.to_container(compose_cfg(["task=canonical", "task.net.image_size=64", "task.net.head=redraw"]).task.net,
                                      resolve=True)
-    dm = CanonicalDataModule(str(tmp_path / "data"), image_size=64, n_subjects=6, n_poses=4, mesh_resolution=24,
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "data"), image_size=64, n_subjects=6, n_poses=4, mesh_resolution=24,
                              n_folds=2, kinds=["humanoid", "quadruped"], seed=1, split="pose", view_mode="broadside")
     dm.prepare_data()
     dm.setup()

@@ -74,7 +74,7 @@ def test_recall_settings_and_templates_are_checked():
 
 def test_fit_fills_the_templates_from_training_data_and_the_checkpoint_keeps_them(tmp_path):
     pl.seed_everything(0, workers=True)
-    dm = CanonicalDataModule(str(tmp_path / "data"), image_size=SIZE, n_subjects=3, n_poses=6, mesh_resolution=24,
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "data"), image_size=SIZE, n_subjects=3, n_poses=6, mesh_resolution=24,
                              n_folds=3, batch_size=8, kinds=["humanoid"], split="pose", seed=0)
     task = CanonicalTask(net={"image_size": SIZE, "recall_channels": [8, 16]}, arch="recall", identity_classes=3,
                          identity_weight=1.0, use_phases=False, mask_loss="bce")

@@ -45,7 +45,7 @@ def _train(tmp_path, net, epochs, retrieval=None, size=48, n=9, mesh_resolution=
     """Fit and test on synthetic humanoids; returns (task, datamodule, test metrics + evaluator protocol
     with the evaluation settings ``retrieval``, ``mesh_baselines``, ``baseline_max_vertices``)."""
     pl.seed_everything(0, workers=True)
-    dm = CanonicalDataModule(str(tmp_path / "data"), image_size=size, n_subjects=n, n_poses=n,
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "data"), image_size=size, n_subjects=n, n_poses=n,
                              mesh_resolution=mesh_resolution, n_folds=3, batch_size=8, kinds=["humanoid"], seed=0)
     task = CanonicalTask(net=net(size), **task_kw)
     settings = _settings(retrieval, mesh_baselines, baseline_max_vertices)
@@ -111,7 +111,7 @@ def test_config_builds_task_and_data(compose_cfg):
     task = build_task(cfg.task)
     assert isinstance(task, CanonicalTask) and task.hparams.use_lfe and task.hparams.use_phases
     dm = build_datamodule(cfg.data)
-    assert isinstance(dm, CanonicalDataModule) and dm.hparams.image_size == 64 and dm.hparams.val_poses == "own"
+    assert isinstance(dm, CanonicalDataModule) and dm.hparams.image_size == 64 and dm.split.val_poses == "own"
     off = compose_cfg(["experiment=canonical_demo", "task.use_lfe=false", "task.use_phases=false"])
     t2 = build_task(off.task)
     assert t2.net.lfe is None and t2.configure_callbacks() == []
@@ -163,7 +163,7 @@ def test_fine_tuning_starts_from_the_pretrained_net(tmp_path, tiny_net):
     tr = pl.Trainer(max_epochs=1, logger=False, accelerator="cpu", enable_progress_bar=False)
     tr.strategy.connect(pre)
     tr.save_checkpoint(tmp_path / "pre.ckpt")
-    dm = CanonicalDataModule(str(tmp_path / "data"), image_size=48, n_subjects=6, n_poses=6, mesh_resolution=32,
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "data"), image_size=48, n_subjects=6, n_poses=6, mesh_resolution=32,
                              n_folds=3, batch_size=4, kinds=["humanoid"], seed=0)
     tuned = CanonicalTask(net=tiny_net(), init_weights=str(tmp_path / "pre.ckpt"), lr=1e-5, mask_loss="bce")
     fresh = CanonicalTask(net=tiny_net(), lr=1e-5, mask_loss="bce")

@@ -6,24 +6,26 @@ import torch
 from omegaconf import OmegaConf
 
 from datamodules.canonical.rendering import PairRenderer
+from datamodules.canonical.settings import RenderSettings
 from datamodules.canonical.sources import SynthSource
 from lit3d.canonical.factory import build_canonical_net
 from studies.canonical.warp_breakdown import PICTURE_COLUMNS, ROWS, breakdown, markdown, picture, summarise
 
-HP = dict(image_size=64, azimuths=[0.0], view_mode="fixed", scale_mode="shape", skip_bad=False, flow_targets=True)
+SIZE = 64
+RENDER = RenderSettings(azimuths=(0.0,), view_mode="fixed", scale_mode="shape", flow_targets=True)
 
 
 def _batch() -> dict:
     """Every pose of two procedural figures (a humanoid, a quadruped) at 64², with flow targets."""
     src = SynthSource(["humanoid", "quadruped"], 2, 3, 0, 32, 0, 15.0, 1.0)
-    size = HP["image_size"]
+    size = SIZE
 
     def unpack(a):
         return np.unpackbits(a)[: size * size].reshape(size, size).astype(np.float32)
 
     items = []
     for subject in src.subjects():
-        a = PairRenderer(src, OmegaConf.create(HP)).render_subject(subject)
+        a = PairRenderer(src, RENDER, SIZE).render_subject(subject)
         for p in a["poses"]:
             items.append({"depth": a[f"depth_{p}_0"].astype(np.float32)[None], "mask": unpack(a[f"mask_{p}_0"])[None],
                           "canon_depth": a["depth_canonical_0"].astype(np.float32)[None],

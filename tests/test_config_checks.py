@@ -157,8 +157,8 @@ def test_splat_head_without_the_forward_flow_is_one_config_error(compose_cfg):
     """Valid values that do not go together: the splat head with a flow cache lacking the forward flow."""
     from lit3d.cli.config_checks import ConfigValueError, check_config_values
 
-    base = ["experiment=canonical_tiny", "task.net.head=splat", "data.flow_targets=true"]
-    with pytest.raises(ConfigValueError, match=r"task.net.head=splat .*expected data.forward_flow=true"):
+    base = ["experiment=canonical_tiny", "task.net.head=splat", "data.render.flow_targets=true"]
+    with pytest.raises(ConfigValueError, match=r"task.net.head=splat .*expected data.render.forward_flow=true"):
         check_config_values(compose_cfg(base))
-    check_config_values(compose_cfg([*base, "data.forward_flow=true"]))
-    check_config_values(compose_cfg(["experiment=canonical_tiny", "task.net.head=warp", "data.flow_targets=true"]))
+    check_config_values(compose_cfg([*base, "data.render.forward_flow=true"]))
+    check_config_values(compose_cfg(["experiment=canonical_tiny", "task.net.head=warp", "data.render.flow_targets=true"]))

@@ -37,15 +37,15 @@ REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 
 # canonical demo at 32^2 with tiny nets: 6 subjects x 6 poses, 3 folds -> 16 train pairs = 4 batches
-# (the old mixed validation rule, data.val_subjects=null, keeps 4 subjects for training)
+# (the old mixed validation rule, data.split.val_subjects=null, keeps 4 subjects for training)
 CANONICAL = [
-    "experiment=canonical_demo", "data.image_size=32", "data.n_subjects=6", "data.n_poses=6", "data.val_subjects=null",
-    "data.mesh_resolution=20", "data.kinds=[humanoid]", "data.batch_size=4", "task.net.image_size=32",
+    "experiment=canonical_demo", "data.image_size=32", "data.source.n_subjects=6", "data.source.n_poses=6", "data.split.val_subjects=null",
+    "data.source.mesh_resolution=20", "data.source.kinds=[humanoid]", "data.batch_size=4", "task.net.image_size=32",
     "task.net.lfe_channels=[8,12,16]", "task.net.msfe_channels=[6,6,4]", "task.net.msfe_grid=6",
     "task.net.fuser_hidden=64", "task.net.fuser_out=48", "task.net.msfe_dec_channels=[32,16,12,8,8,8]",
     "task.net.rec_channels=[12,16,24]", "evaluation.retrieval=null",
     "evaluation.mesh_baselines=[]", "task.mask_loss=bce", "test_after_fit=false", "callbacks.progress_bar=null",
-    "+trainer.limit_val_batches=0", "data.own_poses=0", "data.val_poses=training", "data.prepare_workers=0",
+    "+trainer.limit_val_batches=0", "data.source.own_poses=0", "data.split.val_poses=training", "data.prepare_workers=0",
 ]
 CANONICAL_STEPS_PER_EPOCH = 4
 PHASES = [{"start": 0, "alpha": 10.0, "beta": 1000.0}, {"start": 1, "alpha": 1000.0, "beta": 1000.0},

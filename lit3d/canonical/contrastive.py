@@ -15,7 +15,7 @@ seen in training (unlike the closed-set classifier).
 - ``on="output"``: the predicted canonical form itself (depth times mask, and the mask; ``(B, 2, S, S)``)
   through a small strided CNN: the image that retrieval reads must tell them apart, whatever the pose.
 
-Batches need several poses of each subject (``data.batch_poses``, see
+Batches need several poses of each subject (``data.training.batch_poses``, see
 :class:`datamodules.canonical.batches.SubjectGroupedBatches`); anchors without a positive in the
 batch do not count, and a batch without any gives 0.
 """

@@ -16,7 +16,7 @@ A NaN/Inf loss term stops training with the step and the term named
 6, ``data.phenotype_targets``) from the MSFE latent and its mean squared error, times that weight: a
 body-shape code that, unlike a closed-set subject classifier, means the same for people never seen
 (``val/phenotype_mae`` on the validation subjects). ``contrastive_weight > 0`` adds the supervised contrastive
-loss across the poses of one subject in the batch (:mod:`lit3d.canonical.contrastive`; ``data.batch_poses``).
+loss across the poses of one subject in the batch (:mod:`lit3d.canonical.contrastive`; ``data.training.batch_poses``).
 
 ``identity_weight > 0`` adds a subject classifier (one linear layer, ``identity_classes`` outputs) on the
 MSFE's fused latent and its cross-entropy, times that weight, to the loss: the latent names the subject too.
@@ -28,7 +28,7 @@ filled from the training data at fit start and saved in the checkpoint; its cros
 ``net.head="warp"`` (:mod:`lit3d.canonical.warp`) moves the posed pixels instead of redrawing them (``"splat"``,
 :mod:`lit3d.canonical.splat`: pushes them by a forward flow); its terms (:data:`WARP_TERMS`,
 :mod:`lit3d.canonical.warp_loss`) times their ``<term>_weight`` join the loss, the flow and visibility where
-the batch has flow targets (``data.flow_targets``), paid where ``flow_on`` and ``vis_on`` say.
+the batch has flow targets (``data.render.flow_targets``), paid where ``flow_on`` and ``vis_on`` say.
 
 Logged: ``train/loss|depth_loss|mask_loss|alpha|beta`` (``identity_loss`` with the classifier, ``contrastive_loss``;
 ``flow_loss|vis_loss|smooth_loss`` and ``val/flow_epe`` in pixels with the warp head); ``val/`` and ``test/`` ``depth_mse``
@@ -53,6 +53,7 @@ import lightning.pytorch as pl
 import torch
 
 from lit3d.callbacks.nonfinite import guard_step, validate_mode
+from lit3d.canonical.checkpoint_upgrade import upgrade_checkpoint
 from lit3d.canonical.contrastive import ContrastiveEmbedder, supervised_contrastive
 from lit3d.canonical.figures import validation_panel
 from lit3d.canonical.loss_phases import THESIS_FRACTIONS, LossPhases
@@ -216,7 +217,7 @@ class CanonicalTask(pl.LightningModule):
         """Start from the net of another canonical checkpoint ``path`` (pretraining, e.g. on Anny
         bodies): its ``net.*`` weights, every one present with the same shape, else one ValueError
         naming the file and the first mismatch. The optimiser starts afresh."""
-        state = load_checkpoint(path).get("state_dict", {})
+        state = upgrade_checkpoint(load_checkpoint(path)).get("state_dict", {})
         net = {k[len("net."):]: v for k, v in state.items() if k.startswith("net.")}
         own = self.net.state_dict()
         for k, v in own.items():
@@ -304,7 +305,7 @@ class CanonicalTask(pl.LightningModule):
         targets ``batch["phenotype"]`` in [0, 1]); ValueError when the batch has none or another width."""
         if "phenotype" not in batch:
             raise ValueError("phenotype_weight > 0 needs phenotype targets in the batch: data.phenotype_targets=true "
-                             "(data.source=anny)")
+                             "(data.source.kind=anny)")
         target = batch["phenotype"].float()
         if target.shape[-1] != self.phenotype_head.out_features:
             raise ValueError(f"the data has {target.shape[-1]} phenotypes, task.phenotype_dims="

@@ -68,33 +68,33 @@ RULES: tuple[Rule, ...] = (
     Rule("data.feature_workers",               "int",     ">= 0"),
     Rule("data.sizes.*",                       "count",   ">= 0"),
     Rule("data.seed",                          "int",     ">= 0"),
-    Rule("data.pose_seed",                     "int",     ">= 0"),
+    Rule("data.source.pose_seed",              "int",     ">= 0"),
     Rule("data.image_size",                    "int",     ">= 8"),
     Rule("data.target_res",                    "int",     ">= 1"),
     Rule("data.input_factor",                  "int",     ">= 1"),
     Rule("data.render_factor",                 "int",     ">= 1"),
     Rule("data.views_per_shape",               "int",     ">= 1"),
-    Rule("data.mesh_resolution",               "int",     ">= 1"),
-    Rule("data.n_subjects",                    "int",     ">= 1"),
-    Rule("data.n_poses",                       "int",     ">= 1"),
-    Rule("data.own_poses",                     "int",     ">= 0"),
-    Rule("data.n_folds",                       "int",     ">= 1"),
-    Rule("data.fold",                          "int",     ">= 0"),
-    Rule("data.max_val_items",                 "int?",    ">= 0"),
+    Rule("data.source.mesh_resolution",        "int",     ">= 1"),
+    Rule("data.source.n_subjects",             "int",     ">= 1"),
+    Rule("data.source.n_poses",                "int",     ">= 1"),
+    Rule("data.source.own_poses",              "int",     ">= 0"),
+    Rule("data.split.n_folds",                 "int",     ">= 1"),
+    Rule("data.split.fold",                    "int",     ">= 0"),
+    Rule("data.split.max_val_items",           "int?",    ">= 0"),
     Rule("data.model_split.*",                 "number",  "[0, 1]"),
-    Rule("data.train_pose_fraction",           "number",  "(0, 1]"),
-    Rule("data.pose_strength",                 "number",  ">= 0"),
-    Rule("data.yaw_range",                     "number",  ">= 0"),
-    Rule("data.roll_deg",                      "number",  ">= 0"),
-    Rule("data.azimuths.*",                    "number"),
+    Rule("data.split.train_pose_fraction",     "number",  "(0, 1]"),
+    Rule("data.source.pose_strength",          "number",  ">= 0"),
+    Rule("data.source.yaw_range",              "number",  ">= 0"),
+    Rule("data.training.roll_deg",             "number",  ">= 0"),
+    Rule("data.render.azimuths.*",             "number"),
     Rule("data.skip_bad",                      "bool"),
     Rule("data.pin_memory",                    "bool"),
     Rule("data.compress",                      "bool"),
     Rule("data.progress",                      "bool"),
-    Rule("data.flip_lr",                       "bool"),
-    Rule("data.flow_targets",                  "bool"),
-    Rule("data.forward_flow",                  "bool"),
-    Rule("data.balance_subjects",              "bool"),
+    Rule("data.training.flip_lr",              "bool"),
+    Rule("data.render.flow_targets",           "bool"),
+    Rule("data.render.forward_flow",           "bool"),
+    Rule("data.training.balance_subjects",     "bool"),
     # task: optimisers and losses
     Rule("task.lr",                            "number",  "> 0"),
     Rule("task.lr_schedule",                   "str"),
@@ -291,11 +291,11 @@ def config_problems(cfg: DictConfig, rules: tuple[Rule, ...] = RULES) -> list[st
 
 def combination_problems(cfg: DictConfig) -> list[str]:
     """Values that are each valid but do not go together: the splat head's flow terms read the forward flow,
-    which a flow cache holds only with ``data.forward_flow=true``."""
+    which a flow cache holds only with ``data.render.forward_flow=true``."""
     head = OmegaConf.select(cfg, "task.net.head", default=None)
-    flows, forward = (OmegaConf.select(cfg, f"data.{k}", default=None) for k in ("flow_targets", "forward_flow"))
+    flows, forward = (OmegaConf.select(cfg, f"data.render.{k}", default=None) for k in ("flow_targets", "forward_flow"))
     if head == "splat" and flows is True and forward is not True:
-        return ["task.net.head=splat with data.flow_targets=true: expected data.forward_flow=true (its flow targets)"]
+        return ["task.net.head=splat with data.render.flow_targets=true: expected data.render.forward_flow=true (its flow targets)"]
     return []
 
 
