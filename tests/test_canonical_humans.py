@@ -126,7 +126,7 @@ def test_anny_datamodule_pairs_share_each_subjects_canonical(tmp_path):
     assert dm2.config_hash() == dm.config_hash()
     dm2.setup()
     assert dm2.splits["test"] == dm.splits["test"]
-    # phenotype targets (task.phenotype_weight) come from the same draw, not from a new cache
+    # phenotype targets (task.phenotype.weight) come from the same draw, not from a new cache
     dm3 = CanonicalDataModule.from_flat(str(tmp_path / "anny"), source="anny", n_subjects=4, n_poses=4, image_size=48,
                               split="subject_pose", n_folds=2, split_seed=0, seed=1, batch_size=4,
                               phenotype_targets=True)

@@ -316,7 +316,7 @@ def test_escape_flow_reads_the_posed_background_where_the_canonical_form_has_non
     moved = _warped_mask(posed, out)
     assert not moved[(canon == 0)].any() and moved[canon > 0].mean() > 0.9
     assert _warped_mask(posed, flow)[(canon == 0) & (posed > 0)].all()  # without it the posed body stays
-    # task.flow_on=image pays it there (a flow already leading off the posed body costs nothing), the other
+    # task.warp.flow_on=image pays it there (a flow already leading off the posed body costs nothing), the other
     # choices do not read the background
     from types import SimpleNamespace
 

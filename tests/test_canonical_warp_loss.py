@@ -5,8 +5,8 @@ import torch
 
 
 def test_flow_and_visibility_are_paid_where_asked():
-    """``task.flow_on``: ``visible`` pays the flow only where the posed view shows the point, ``foreground``
-    on every canonical foreground pixel; neither pays the background. ``task.vis_on``: ``image`` pays the
+    """``task.warp.flow_on``: ``visible`` pays the flow only where the posed view shows the point, ``foreground``
+    on every canonical foreground pixel; neither pays the background. ``task.warp.vis_on``: ``image`` pays the
     visibility on the background too (target 0), ``foreground`` does not."""
     from types import SimpleNamespace
 

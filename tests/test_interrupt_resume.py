@@ -53,7 +53,7 @@ PHASES = [{"start": 0, "alpha": 10.0, "beta": 1000.0}, {"start": 1, "alpha": 100
 
 
 def _phases_override(phases: list[dict]) -> str:
-    return "task.phases=[" + ",".join("{" + ",".join(f"{k}:{v}" for k, v in p.items()) + "}" for p in phases) + "]"
+    return "task.phases.weights=[" + ",".join("{" + ",".join(f"{k}:{v}" for k, v in p.items()) + "}" for p in phases) + "]"
 
 
 # completion demo nets (64^3) on 16 synthetic training items: 4 batches of 4; the critic from step 0,
@@ -117,10 +117,11 @@ def canonical_data(tmp_path_factory) -> Path:
 def test_sigterm_saves_last_and_resume_continues_canonical(tmp_path, canonical_data):
     run = tmp_path / "run"
     per_epoch = 8  # batches of 2: a SIGTERM mostly lands mid-epoch (the case Lightning resumes specially)
-    # task.alpha/beta are the constant weights (used without phases): set apart from every phase's,
+    # task.phases.alpha/beta are the constant weights (used without phases): set apart from every phase's,
     # so a resumed step that missed its phase's weights shows in the logged losses
     # the redraw head: its loss is exactly alpha * depth + beta * mask (the warp head adds flow terms)
-    common = [*CANONICAL, "task.net.head=redraw", "data.batch_size=2", "task.alpha=1.0", "task.beta=1.0", "task.phase_unit=epochs",
+    common = [*CANONICAL, "task.net.head=redraw", "data.batch_size=2", "task.phases.alpha=1.0", "task.phases.beta=1.0",
+              "task.phases.unit=epochs",
               "logger=csv", "trainer.log_every_n_steps=1", "callbacks.resume_state.every_n_train_batches=1",
               f"paths.data_dir={canonical_data}", f"hydra.run.dir={run}"]
     last = run / "checkpoints" / "last.ckpt"
@@ -294,7 +295,7 @@ def test_canonical_cache_hash_is_the_same_in_another_process_and_differs_by_seed
 # ----------------------------------------------------------------------------- NaN / Inf losses
 def _overflowing(compose_cfg, canonical_data, mode: str, *extra: str):
     """Canonical training whose weighted loss overflows to Inf at the first step (alpha = 1e39 in float32)."""
-    return compose_cfg([*CANONICAL, "logger=none", "task.use_phases=false", "task.alpha=1e39",
+    return compose_cfg([*CANONICAL, "logger=none", "task.phases.use=false", "task.phases.alpha=1e39",
                         f"task.on_nonfinite={mode}", "trainer.max_epochs=1", *extra], data_dir=canonical_data)
 
 

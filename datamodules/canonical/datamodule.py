@@ -26,7 +26,7 @@ the validation subjects' own poses (new poses, as the test), not the training on
 ``render.flow_targets``: also cache, for every pose whose mesh corresponds to the canonical one, the warp
 head's backward flow and visibility (:mod:`datamodules.canonical.flow`; ``render.forward_flow``: the splat
 head's forward ones too); items carry them. ``training.batch_poses`` K >= 2: batches of ``batch_size / K``
-subjects x K poses (``task.contrastive_weight``).
+subjects x K poses (``task.contrastive.weight``).
 
 Batches (``B`` samples, ``S = image_size``):
     depth, mask              (B, 1, S, S) float32   posed input; mask in {0, 1}

@@ -18,6 +18,29 @@ from lit3d.utils.checkpoints import META_KEY
 
 TASK_TARGET = "lit3d.canonical.module.CanonicalTask"
 
+# the evaluator's settings (the config's ``evaluation`` node, :func:`lit3d.canonical.evaluator.protocol`) that
+# checkpoints written before that node hold among the task's hyper-parameters, with the defaults the
+# constructor had for them then (what such a checkpoint without the key was evaluated with); they stay in the
+# checkpoint's task config, where ``lit3d-eval`` reads them (:mod:`lit3d.cli.eval_settings`)
+EVALUATION_LEGACY = {"retrieval": None, "retrieval_min_subjects": 2, "chance_trials": 100, "ceiling_jitter_deg": 0.0,
+                     "mesh_baselines": None, "baseline_max_vertices": None, "baseline_smacof_eps": 1e-4,
+                     "baseline_landmarks": 300}
+
+# a flat task key of the old layout -> (its node, its key there); None: the net's config
+FLAT_TASK_KEYS = {
+    "use_lfe": (None, "use_lfe"), "use_msfe": (None, "use_msfe"),
+    "lr": ("optimizer", "lr"), "betas": ("optimizer", "betas"), "lr_schedule": ("optimizer", "schedule"),
+    "use_phases": ("phases", "use"), "phase_unit": ("phases", "unit"), "phases": ("phases", "weights"),
+    "alpha": ("phases", "alpha"), "beta": ("phases", "beta"),
+    "image_every_n_epochs": ("panels", "every_n_epochs"), "n_panel": ("panels", "n"),
+    "identity_weight": ("identity", "weight"), "identity_classes": ("identity", "classes"),
+    "phenotype_weight": ("phenotype", "weight"), "phenotype_dims": ("phenotype", "dims"),
+    **{k: ("warp", k) for k in ("flow_weight", "flow_on", "flow_power", "vis_weight", "vis_on", "smooth_weight",
+                                "offset_smooth_weight", "depth_grad_weight")},
+    "contrastive_on": ("contrastive", "embed"),
+    **{f"contrastive_{k}": ("contrastive", k) for k in ("weight", "temperature", "dim", "channels")},
+}
+
 
 def is_canonical(ckpt: Mapping) -> bool:
     """Whether a checkpoint dict holds the canonical task (by its lit3d metadata)."""
@@ -25,9 +48,33 @@ def is_canonical(ckpt: Mapping) -> bool:
     return task.get("name") == "canonical" or task.get("_target_") == TASK_TARGET
 
 
-def upgrade_hparams(hparams: Mapping) -> dict:
-    """The task's hyper-parameters of a checkpoint in today's layout (unchanged when already so)."""
-    return dict(hparams)
+def upgrade_hparams(hparams: Mapping, keep_evaluation: bool = False) -> dict:
+    """The task's hyper-parameters (or task config) of a checkpoint in today's layout: the flat keys of
+    :data:`FLAT_TASK_KEYS` moved into their nodes, ``use_lfe``/``use_msfe`` into ``net``; the evaluation
+    settings of :data:`EVALUATION_LEGACY` dropped (``keep_evaluation``: kept, for the task config). Today's
+    layout comes back unchanged. ValueError for ``unet_baseline=true`` (removed: the plain U-Net is a run of its
+    own, ``task.arch=unet``)."""
+    out: dict = {}
+    moved: dict[str, dict] = {}
+    for key, value in hparams.items():
+        if key == "unet_baseline":
+            if value:
+                raise ValueError("unet_baseline was removed: train the plain U-Net as a run of its own "
+                                 "(task.arch=unet) and merge its rows with python -m studies.canonical.report RUN_DIR "
+                                 "--unet UNET_RUN_DIR")
+        elif key in EVALUATION_LEGACY:
+            if keep_evaluation:
+                out[key] = value
+        elif key in FLAT_TASK_KEYS and not (key == "phases" and isinstance(value, Mapping)):
+            node, name = FLAT_TASK_KEYS[key]
+            moved.setdefault(node, {})[name] = value
+        else:
+            out[key] = value
+    if None in moved:
+        out["net"] = {**dict(out.get("net") or {}), **moved.pop(None)}
+    for node, values in moved.items():
+        out[node] = {**dict(out.get(node) or {}), **values}
+    return out
 
 
 def upgrade_checkpoint(ckpt: dict) -> dict:
@@ -40,7 +87,8 @@ def upgrade_checkpoint(ckpt: dict) -> dict:
     meta = ckpt[META_KEY]
     if isinstance(meta.get("task"), Mapping):
         keep = {k: v for k, v in meta["task"].items() if k in ("_target_", "name", "monitor", "monitor_mode")}
-        meta["task"] = {**upgrade_hparams({k: v for k, v in meta["task"].items() if k not in keep}), **keep}
+        meta["task"] = {**upgrade_hparams({k: v for k, v in meta["task"].items() if k not in keep},
+                                          keep_evaluation=True), **keep}
     if isinstance(meta.get("data"), Mapping):
         meta["data"] = upgrade_data_config(meta["data"])
     return ckpt

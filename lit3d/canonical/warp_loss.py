@@ -33,10 +33,10 @@ VIS_ON = ("foreground", "image")
 
 
 def check_choices(flow_on: str, vis_on: str) -> None:
-    """ValueError naming ``task.flow_on`` or ``task.vis_on`` when it is not one of its choices."""
+    """ValueError naming ``task.warp.flow_on`` or ``task.warp.vis_on`` when it is not one of its choices."""
     for name, value, choices in (("flow_on", flow_on, FLOW_ON), ("vis_on", vis_on, VIS_ON)):
         if value not in choices:
-            raise ValueError(f"task.{name} must be one of {choices}, got '{value}'")
+            raise ValueError(f"task.warp.{name} must be one of {choices}, got '{value}'")
 
 
 def escape_flow(flow: np.ndarray, canon_mask: np.ndarray, posed_mask: np.ndarray) -> np.ndarray:
