@@ -10,7 +10,7 @@ import torch
 from datamodules.canonical import CanonicalDataModule
 from datamodules.canonical.settings import RenderSettings, SplitSettings, SynthSettings, TrainingSettings
 from lit3d.api.checkpoints import load
-from lit3d.canonical.checkpoint_upgrade import upgrade_checkpoint, upgrade_hparams
+from lit3d.canonical.checkpoint_upgrade import upgrade_checkpoint, upgrade_hparams, upgrade_net
 from lit3d.canonical.factory import build_canonical_net
 from lit3d.canonical.module import CanonicalTask
 from lit3d.cli.common import read_checkpoint
@@ -22,6 +22,19 @@ NET = {"image_size": 48, "init": "he", "lfe_channels": [8, 12, 16], "lfe_out": 4
        "warp_normalise_depth": False, "warp_depth": "affine", "warp_parts": 0, "warp_attend_grid": 0,
        "warp_refine_steps": 1, "warp_affine_cell": 8, "unet_channels": [16, 32, 64, 128],
        "recall_channels": [16, 32, 64, 128]}
+# the same net in today's layout
+NET_NODES = {"image_size": 48, "init": "he", "lfe": {"use": True, "channels": [8, 12, 16], "out": 4},
+             "msfe": {"use": True, "channels": [6, 6, 4], "grid": 6, "fuser_hidden": 64, "fuser_out": 48,
+                      "dec_channels": [32, 16, 12, 8, 8, 8], "out": 4},
+             "reconstruction": {"kind": "downup", "channels": [12, 16, 24]},
+             "head": {"kind": "warp", "hidden": 16, "normalise_depth": False, "depth": "affine", "parts": 0,
+                      "attend_grid": 0, "refine_steps": 1, "affine_cell": 8},
+             "unet_channels": [16, 32, 64, 128], "recall_channels": [16, 32, 64, 128]}
+# what the old code's net (seed 0, :func:`_inputs`) gave: sums of its parameters, of the predicted depth and mask
+# probability (2, 1, 48, 48), and of the identity head's logits (2, 9) (torch.manual_seed(0) before the net, the
+# head built after it)
+OLD_SUMS = {"params": 9.28008754382688, "depth": 1923.2301972154528, "mask": 2700.064585539716,
+            "identity": -2.7650357261300087}
 # CanonicalTask's hyper-parameters as the flat layout saved them
 OLD_HPARAMS = {
     "net": NET, "arch": "canonical", "use_lfe": True, "use_msfe": True, "lr": 0.001, "betas": [0.9, 0.999],
@@ -59,15 +72,19 @@ def _inputs() -> tuple[torch.Tensor, torch.Tensor]:
 @pytest.fixture
 def old_checkpoint(tmp_path):
     """``(path, expected)``: a checkpoint file of the flat layout, and what its net and identity head give
-    for :func:`_inputs` (``depth``, ``mask`` ``(2, 1, 48, 48)``, identity logits ``(2, 9)``)."""
+    for :func:`_inputs` (``depth``, ``mask`` ``(2, 1, 48, 48)``, identity logits ``(2, 9)``), as the old code's
+    (:data:`OLD_SUMS`)."""
     torch.manual_seed(0)
-    net = build_canonical_net({**NET, "kind": "canonical", "use_lfe": True, "use_msfe": True}).eval()
+    net = build_canonical_net({**NET_NODES, "kind": "canonical"}).eval()
     head = torch.nn.Linear(48, 9)
+    assert float(sum(p.detach().double().sum() for p in net.parameters())) == pytest.approx(OLD_SUMS["params"], rel=1e-9)
     state = {**{f"net.{k}": v for k, v in net.state_dict().items()},
              **{f"identity_head.{k}": v for k, v in head.state_dict().items()}}
     with torch.no_grad():
         out = net(*_inputs())
         expected = {"depth": out.depth, "mask": out.mask, "identity": head(out.latent)}
+    for k, v in expected.items():  # the old code's prediction
+        assert float(v.double().sum()) == pytest.approx(OLD_SUMS[k], rel=1e-6), k
     task_cfg = {"name": "canonical", "monitor": "val/depth_mse", "monitor_mode": "min",
                 "_target_": "lit3d.canonical.module.CanonicalTask", **OLD_HPARAMS}
     ckpt = {"state_dict": state, "hyper_parameters": OLD_HPARAMS, "epoch": 1, "global_step": 6,
@@ -93,7 +110,7 @@ def _same(got: dict, expected: dict) -> None:
 def test_flat_hparams_become_the_nodes():
     new = upgrade_hparams(OLD_HPARAMS)
     assert new == {
-        "net": {**NET, "use_lfe": True, "use_msfe": True}, "arch": "canonical", "mask_loss": "bce",
+        "net": NET_NODES, "arch": "canonical", "mask_loss": "bce",
         "mask_threshold": 0.5, "on_nonfinite": "raise", "init_weights": None,
         "optimizer": {"lr": 0.001, "betas": [0.9, 0.999], "schedule": "constant"},
         "phases": {"use": True, "weights": OLD_HPARAMS["phases"], "unit": "fraction", "alpha": 1000.0, "beta": 100.0},
@@ -104,7 +121,7 @@ def test_flat_hparams_become_the_nodes():
         "phenotype": {"weight": 0.0, "dims": 6},
         "contrastive": {"weight": 0.0, "embed": "latent", "temperature": 0.1, "dim": 128,
                         "channels": [16, 32, 64, 128]}}
-    assert upgrade_hparams(new) == new  # today's layout comes back unchanged
+    assert upgrade_hparams(new) == new and upgrade_net(NET_NODES) == NET_NODES  # today's layout: unchanged
     # evaluation settings that older checkpoints hold among the hyper-parameters leave them (lit3d-eval reads
     # them from the task config, where they stay)
     assert "chance_trials" not in upgrade_hparams({**OLD_HPARAMS, "chance_trials": 11})

@@ -113,7 +113,7 @@ def test_config_builds_task_and_data(compose_cfg):
     assert isinstance(task, CanonicalTask) and task.net.lfe is not None and task.phases.use
     dm = build_datamodule(cfg.data)
     assert isinstance(dm, CanonicalDataModule) and dm.hparams.image_size == 64 and dm.split.val_poses == "own"
-    off = compose_cfg(["experiment=canonical_demo", "task.net.use_lfe=false", "task.phases.use=false"])
+    off = compose_cfg(["experiment=canonical_demo", "task.net.lfe.use=false", "task.phases.use=false"])
     t2 = build_task(off.task)
     assert t2.net.lfe is None and t2.configure_callbacks() == []
 
@@ -178,7 +178,8 @@ def test_fine_tuning_starts_from_the_pretrained_net(tmp_path, tiny_net):
         return max(float((a - b).detach().abs().max()) for a, b in zip(task.net.parameters(), pre.net.parameters()))
 
     assert gap(tuned) < 1e-3 < 0.05 < gap(fresh)  # Adam at lr 1e-5: one step moves a weight by about 1e-5
-    other = dict(tiny_net(), lfe_out=tiny_net()["lfe_out"] + 1)
+    net = tiny_net()
+    other = {**net, "lfe": {**net["lfe"], "out": net["lfe"]["out"] + 1}}
     with pytest.raises(ValueError, match=r"pre\.ckpt: not a pretrained net for this one"):
         CanonicalTask(net=other).load_initial_weights(str(tmp_path / "pre.ckpt"))
 
@@ -187,7 +188,8 @@ def test_warp_terms_join_the_loss_with_their_weights(tiny_net):
     """The warp head's terms: flow, visibility and smoothness always, the depth offset's total variation
     only with offset_smooth_weight > 0, the depth's slope only with depth_grad_weight > 0, each times its weight."""
     torch.manual_seed(0)
-    kw = dict(net={**tiny_net(), "head": "warp"}, phases={"use": False, "alpha": 1.0, "beta": 1.0},
+    net = tiny_net()
+    kw = dict(net={**net, "head": {**net["head"], "kind": "warp"}}, phases={"use": False, "alpha": 1.0, "beta": 1.0},
               warp={"flow_weight": 2.0, "vis_weight": 3.0, "smooth_weight": 4.0})
     batch = {"depth": torch.rand(2, 1, 48, 48), "canon_depth": torch.rand(2, 1, 48, 48),
              "flow": torch.randn(2, 2, 48, 48), "has_flow": torch.tensor([True, False])}
@@ -217,7 +219,7 @@ def test_warp_terms_join_the_loss_with_their_weights(tiny_net):
         got = float(task.training_step(batch, 0).detach())
         assert got == pytest.approx(float(expected + weight * term), rel=1e-5), name
         with pytest.raises(ValueError, match=rf"task.warp.{name}={weight:g} needs the warp head"):  # a term with no effect
-            CanonicalTask(**{**kw, "net": {**tiny_net(), "head": "redraw"}, "warp": {**kw["warp"], name: weight}})
+            CanonicalTask(**{**kw, "net": {**tiny_net(), "head": {"kind": "redraw"}}, "warp": {**kw["warp"], name: weight}})
 
 
 def test_validation_retrieval_finds_each_subject_by_its_mask():

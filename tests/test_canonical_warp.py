@@ -60,10 +60,10 @@ def test_zero_flow_reproduces_the_posed_input_exactly():
 @pytest.mark.parametrize("reconstruction,parts,steps,attend", [("downup", 0, 1, 0), ("unet", 0, 1, 0), ("downup", 4, 1, 0),
                                                               ("downup", 0, 3, 0), ("downup", 0, 1, 12)])
 def test_untrained_warp_net_returns_its_input(compose_cfg, reconstruction, parts, steps, attend):
-    net_cfg = OmegaConf.to_container(compose_cfg(["experiment=canonical_tiny", "task.net.head=warp",
-                                                  f"task.net.reconstruction={reconstruction}",
-                                                  f"task.net.warp_parts={parts}", f"task.net.warp_attend_grid={attend}",
-                                                  f"task.net.warp_refine_steps={steps}"]).task.net, resolve=True)
+    net_cfg = OmegaConf.to_container(compose_cfg(["experiment=canonical_tiny", "task.net.head.kind=warp",
+                                                  f"task.net.reconstruction.kind={reconstruction}",
+                                                  f"task.net.head.parts={parts}", f"task.net.head.attend_grid={attend}",
+                                                  f"task.net.head.refine_steps={steps}"]).task.net, resolve=True)
     net = build_canonical_net({"kind": "canonical", **net_cfg})
     assert isinstance(net.head, WarpHead)
     assert isinstance(net.reconstruction, UNetTrunk) == (reconstruction == "unet")

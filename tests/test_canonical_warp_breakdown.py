@@ -35,7 +35,7 @@ def _batch() -> dict:
 
 
 def test_breakdown_of_an_untrained_head_and_its_oracle(compose_cfg):
-    cfg = compose_cfg(["experiment=canonical_tiny", "task.net.head=warp", "data.image_size=64"])
+    cfg = compose_cfg(["experiment=canonical_tiny", "task.net.head.kind=warp", "data.image_size=64"])
     net = build_canonical_net({"kind": "canonical", **OmegaConf.to_container(cfg.task.net, resolve=True)}).eval()
     batch = _batch()
     figures = breakdown(net, batch)
@@ -55,7 +55,7 @@ def test_breakdown_of_an_untrained_head_and_its_oracle(compose_cfg):
 
 
 def test_breakdown_refuses_a_net_without_a_warp_head(compose_cfg):
-    cfg = compose_cfg(["experiment=canonical_tiny", "task.net.head=redraw"])
+    cfg = compose_cfg(["experiment=canonical_tiny", "task.net.head.kind=redraw"])
     net = build_canonical_net({"kind": "canonical", **OmegaConf.to_container(cfg.task.net, resolve=True)})
     with pytest.raises(ValueError, match="warp head"):
         breakdown(net, {})

@@ -41,9 +41,9 @@ BIN = Path(sys.executable).parent
 CANONICAL = [
     "experiment=canonical_demo", "data.image_size=32", "data.source.n_subjects=6", "data.source.n_poses=6", "data.split.val_subjects=null",
     "data.source.mesh_resolution=20", "data.source.kinds=[humanoid]", "data.batch_size=4", "task.net.image_size=32",
-    "task.net.lfe_channels=[8,12,16]", "task.net.msfe_channels=[6,6,4]", "task.net.msfe_grid=6",
-    "task.net.fuser_hidden=64", "task.net.fuser_out=48", "task.net.msfe_dec_channels=[32,16,12,8,8,8]",
-    "task.net.rec_channels=[12,16,24]", "evaluation.retrieval=null",
+    "task.net.lfe.channels=[8,12,16]", "task.net.msfe.channels=[6,6,4]", "task.net.msfe.grid=6",
+    "task.net.msfe.fuser_hidden=64", "task.net.msfe.fuser_out=48", "task.net.msfe.dec_channels=[32,16,12,8,8,8]",
+    "task.net.reconstruction.channels=[12,16,24]", "evaluation.retrieval=null",
     "evaluation.mesh_baselines=[]", "task.mask_loss=bce", "test_after_fit=false", "callbacks.progress_bar=null",
     "+trainer.limit_val_batches=0", "data.source.own_poses=0", "data.split.val_poses=training", "data.prepare_workers=0",
 ]
@@ -120,7 +120,7 @@ def test_sigterm_saves_last_and_resume_continues_canonical(tmp_path, canonical_d
     # task.phases.alpha/beta are the constant weights (used without phases): set apart from every phase's,
     # so a resumed step that missed its phase's weights shows in the logged losses
     # the redraw head: its loss is exactly alpha * depth + beta * mask (the warp head adds flow terms)
-    common = [*CANONICAL, "task.net.head=redraw", "data.batch_size=2", "task.phases.alpha=1.0", "task.phases.beta=1.0",
+    common = [*CANONICAL, "task.net.head.kind=redraw", "data.batch_size=2", "task.phases.alpha=1.0", "task.phases.beta=1.0",
               "task.phases.unit=epochs",
               "logger=csv", "trainer.log_every_n_steps=1", "callbacks.resume_state.every_n_train_batches=1",
               f"paths.data_dir={canonical_data}", f"hydra.run.dir={run}"]

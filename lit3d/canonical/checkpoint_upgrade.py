@@ -47,10 +47,36 @@ def is_canonical(ckpt: Mapping) -> bool:
     task = (ckpt.get(META_KEY) or {}).get("task") or {}
     return task.get("name") == "canonical" or task.get("_target_") == TASK_TARGET
 
+# a flat key of the old net config -> (its node, its key there) (lit3d.canonical.net_settings)
+FLAT_NET_KEYS = {
+    "use_lfe": ("lfe", "use"), "lfe_channels": ("lfe", "channels"), "lfe_out": ("lfe", "out"),
+    "use_msfe": ("msfe", "use"), "msfe_channels": ("msfe", "channels"), "msfe_grid": ("msfe", "grid"),
+    "fuser_hidden": ("msfe", "fuser_hidden"), "fuser_out": ("msfe", "fuser_out"),
+    "msfe_dec_channels": ("msfe", "dec_channels"), "msfe_out": ("msfe", "out"),
+    "reconstruction": ("reconstruction", "kind"), "rec_channels": ("reconstruction", "channels"),
+    "head": ("head", "kind"), "warp_hidden": ("head", "hidden"), "warp_normalise_depth": ("head", "normalise_depth"),
+    "warp_depth": ("head", "depth"), "warp_affine_cell": ("head", "affine_cell"), "warp_parts": ("head", "parts"),
+    "warp_refine_steps": ("head", "refine_steps"), "warp_attend_grid": ("head", "attend_grid"),
+}
+
+
+def upgrade_net(net: Mapping) -> dict:
+    """A net config of the flat layout (``lfe_channels``, ``head: warp``, ``warp_hidden``, ...) with its parts as
+    nodes (``lfe``, ``msfe``, ``reconstruction``, ``head``); today's layout comes back unchanged."""
+    out: dict = {}
+    for key, value in net.items():
+        if key in FLAT_NET_KEYS and not isinstance(value, Mapping):
+            node, name = FLAT_NET_KEYS[key]
+            out.setdefault(node, {})[name] = value
+        else:
+            out[key] = value
+    return out
+
 
 def upgrade_hparams(hparams: Mapping, keep_evaluation: bool = False) -> dict:
     """The task's hyper-parameters (or task config) of a checkpoint in today's layout: the flat keys of
-    :data:`FLAT_TASK_KEYS` moved into their nodes, ``use_lfe``/``use_msfe`` into ``net``; the evaluation
+    :data:`FLAT_TASK_KEYS` moved into their nodes, ``use_lfe``/``use_msfe`` into ``net``, the net's parts
+    into theirs (:func:`upgrade_net`); the evaluation
     settings of :data:`EVALUATION_LEGACY` dropped (``keep_evaluation``: kept, for the task config). Today's
     layout comes back unchanged. ValueError for ``unet_baseline=true`` (removed: the plain U-Net is a run of its
     own, ``task.arch=unet``)."""
@@ -70,8 +96,8 @@ def upgrade_hparams(hparams: Mapping, keep_evaluation: bool = False) -> dict:
             moved.setdefault(node, {})[name] = value
         else:
             out[key] = value
-    if None in moved:
-        out["net"] = {**dict(out.get("net") or {}), **moved.pop(None)}
+    if None in moved or isinstance(out.get("net"), Mapping):
+        out["net"] = upgrade_net({**dict(out.get("net") or {}), **moved.pop(None, {})})
     for node, values in moved.items():
         out[node] = {**dict(out.get(node) or {}), **values}
     return out

@@ -80,7 +80,7 @@ class ContrastiveEmbedder(nn.Module):
         ``depth``, ``mask`` ``(B, 1, S, S)``) -> ``(B, embed_dim)``."""
         if self.on == "latent":
             if out.latent is None:
-                raise ValueError("task.contrastive.embed=latent needs the MSFE latent (task.net.use_msfe=true)")
+                raise ValueError("task.contrastive.embed=latent needs the MSFE latent (task.net.msfe.use=true)")
             return self.body(out.latent.float())
         mask = out.mask.float()
         return self.body(torch.cat([out.depth.float() * mask, mask], dim=1))

@@ -116,7 +116,7 @@ class CanonicalTask(pl.LightningModule):
                  warp: dict | None = None, identity: dict | None = None, phenotype: dict | None = None,
                  contrastive: dict | None = None, panels: dict | None = None, on_nonfinite: str = "raise",
                  init_weights: str | None = None):
-        """``net``: the net's config (sizes, ``use_lfe``/``use_msfe``, head; :func:`build_canonical_net`);
+        """``net``: the net's config (its parts ``lfe``, ``msfe``, ``reconstruction``, ``head``: :func:`build_canonical_net`);
         ``optimizer``, ``phases``, ``warp``, ``identity``, ``phenotype``, ``contrastive``, ``panels``: the nodes of
         :mod:`lit3d.canonical.settings` (None: every default, the objectives off)."""
         super().__init__()
@@ -134,11 +134,12 @@ class CanonicalTask(pl.LightningModule):
         cfg["kind"] = arch
         if arch == "recall":  # closed-set recall row: the net is the subject classifier (lit3d.canonical.recall)
             cfg["n_subjects"] = self.identity.classes
-        use_msfe = bool(cfg.get("use_msfe", True))
+        msfe = dict(cfg.get("msfe") or {})
+        use_msfe = bool(msfe.get("use", True))
         self.net = build_canonical_net(cfg)
         require_warp_head(self.net, offset_smooth_weight=self.warp.offset_smooth_weight,
                           depth_grad_weight=self.warp.depth_grad_weight)
-        latent = int(cfg.get("fuser_out", 500))
+        latent = int(msfe.get("fuser_out", 500))
         self.identity_head = None  # subject classifier on the MSFE latent (identity.weight > 0)
         ident = self.identity
         if ident.weight > 0 and arch != "recall":

@@ -247,7 +247,7 @@ class WarpHead(PixelMover):
                  attend_grid: int = 0):
         super().__init__(latent_dim, coarse, depth_model, affine_cell)
         if parts and not latent_dim:
-            raise ValueError("warp_parts > 0 needs the MSFE's latent (task.net.use_msfe=true)")
+            raise ValueError("task.net.head.parts > 0 needs the MSFE's latent (task.net.msfe.use=true)")
         if refine_steps < 1:
             raise ValueError(f"warp_refine_steps must be >= 1 (got {refine_steps})")
         self.part_flow = PartFlow(hidden, latent_dim, parts) if parts else None
@@ -307,4 +307,4 @@ def require_warp_head(net: nn.Module, **weights: float) -> None:
     on = [k for k, w in weights.items() if w > 0]
     if on and not getattr(getattr(net, "head", None), "moves_pixels", False):
         raise ValueError(f"task.warp.{on[0]}={weights[on[0]]:g} needs the warp head (task.arch=canonical, "
-                         "task.net.head=warp or splat); set it to 0 with this net")
+                         "task.net.head.kind=warp or splat); set it to 0 with this net")

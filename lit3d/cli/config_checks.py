@@ -133,7 +133,7 @@ RULES: tuple[Rule, ...] = (
     Rule("task.adversarial",                   "bool"),
     Rule("task.critic_concat",                 "bool"),
     Rule("task.use_*",                         "bool"),
-    Rule("task.net.use_*",                     "bool"),
+    Rule("task.net.*.use",                     "bool"),
     # task: net sizes (completion: task.nets, canonical and quality: task.net)
     Rule("task.nets.*_channels.*",             "int",     ">= 1"),
     Rule("task.nets.*_res",                    "int",     ">= 1"),
@@ -148,18 +148,20 @@ RULES: tuple[Rule, ...] = (
     Rule("task.nets.classifier",               "bool"),
     Rule("task.nets.critic_sigmoid",           "bool"),
     Rule("task.net.*_channels.*",              "int",     ">= 1"),
+    Rule("task.net.*.channels.*",              "int",     ">= 1"),
+    Rule("task.net.*.out",                     "int",     ">= 1"),
     Rule("task.net.image_size",                "int?",    ">= 8"),  # null: no data in the config (lit3d-eval task=NAME)
     Rule("task.net.dropout",                   "number",  "[0, 1)"),
     Rule("task.net.batch_norm",                "bool"),
-    Rule("task.net.warp_normalise_depth",      "bool"),
+    Rule("task.net.head.normalise_depth",      "bool"),
     Rule("task.net.*_out",                     "int",     ">= 1"),
-    Rule("task.net.fuser_hidden",              "int",     ">= 1"),
-    Rule("task.net.msfe_grid",                 "int",     ">= 1"),
-    Rule("task.net.warp_hidden",               "int",     ">= 1"),
-    Rule("task.net.warp_affine_cell",          "int",     ">= 1"),
-    Rule("task.net.warp_parts",                "int",     ">= 0"),
-    Rule("task.net.warp_refine_steps",         "int",     ">= 1"),
-    Rule("task.net.warp_attend_grid",          "int",     ">= 0"),
+    Rule("task.net.msfe.fuser_hidden",         "int",     ">= 1"),
+    Rule("task.net.msfe.grid",                 "int",     ">= 1"),
+    Rule("task.net.head.hidden",               "int",     ">= 1"),
+    Rule("task.net.head.affine_cell",          "int",     ">= 1"),
+    Rule("task.net.head.parts",                "int",     ">= 0"),
+    Rule("task.net.head.refine_steps",         "int",     ">= 1"),
+    Rule("task.net.head.attend_grid",          "int",     ">= 0"),
     Rule("task.net.hidden",                    "int",     ">= 1"),
     Rule("task.net.blocks",                    "int",     ">= 1"),
     # evaluation settings (the evaluator's, not the module's: lit3d.cli.eval_settings)
@@ -302,10 +304,10 @@ def config_problems(cfg: DictConfig, rules: tuple[Rule, ...] = RULES) -> list[st
 def combination_problems(cfg: DictConfig) -> list[str]:
     """Values that are each valid but do not go together: the splat head's flow terms read the forward flow,
     which a flow cache holds only with ``data.render.forward_flow=true``."""
-    head = OmegaConf.select(cfg, "task.net.head", default=None)
+    head = OmegaConf.select(cfg, "task.net.head.kind", default=None)
     flows, forward = (OmegaConf.select(cfg, f"data.render.{k}", default=None) for k in ("flow_targets", "forward_flow"))
     if head == "splat" and flows is True and forward is not True:
-        return ["task.net.head=splat with data.render.flow_targets=true: expected data.render.forward_flow=true (its flow targets)"]
+        return ["task.net.head.kind=splat with data.render.flow_targets=true: expected data.render.forward_flow=true (its flow targets)"]
     return []
 
 

@@ -56,7 +56,7 @@ def predict(net, batch: dict) -> dict[str, torch.Tensor]:
     ``coeffs``, ``vis_logits``, ``fill_depth``, ``fill_mask``), with ``vis`` (the visibility probability)
     and ``mask`` (the output's mask probability, ``(B, 1, H, W)``). ValueError without a warp head."""
     if not isinstance(getattr(net, "head", None), WarpHead):
-        raise ValueError("the breakdown needs a warp head (task.net.head=warp)")
+        raise ValueError("the breakdown needs a warp head (task.net.head.kind=warp)")
     p = net.head.parts(*net.features(batch["depth"], batch["mask"]))
     p["vis"] = torch.sigmoid(p["vis_logits"])
     p["mask"] = warp_compose(batch["depth"], batch["mask"], p["flow"], p["coeffs"], p["vis"], p["fill_depth"],
