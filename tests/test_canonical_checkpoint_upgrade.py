@@ -8,6 +8,7 @@ import pytest
 import torch
 
 from datamodules.canonical import CanonicalDataModule
+from datamodules.canonical.flat_config import full_data_config, upgrade_data_config
 from datamodules.canonical.settings import RenderSettings, SplitSettings, SynthSettings, TrainingSettings
 from lit3d.api.checkpoints import load
 from lit3d.canonical.checkpoint_upgrade import upgrade_checkpoint, upgrade_hparams, upgrade_net
@@ -149,6 +150,23 @@ def test_lit3d_eval_reads_it_in_todays_layout_and_predicts_as_before(old_checkpo
     assert dm.split == SplitSettings(val_subjects=2)
     assert dm.training == TrainingSettings()
     assert dm.config_hash() == OLD_CONFIG_HASH  # the same cache as before
+    assert dm.seed == 42  # the split's seed too
+
+
+def test_the_flat_seed_stays_the_datamodules_and_draws_the_figures():
+    new = upgrade_data_config({**OLD_DATA, "seed": 7})
+    assert new["seed"] == 7 and new["source"]["seed"] == 7
+    assert upgrade_data_config(new) == new
+
+
+def test_a_flat_data_config_and_its_nodes_spell_out_alike():
+    """heldout.npz files of either layout pool together: their data configs compare spelt out."""
+    written = {"_target_": OLD_DATA["_target_"], "data_dir": OLD_DATA["data_dir"], "image_size": 48, "seed": 42,
+               "source": {"kind": "synth", "kinds": ["humanoid"], "n_subjects": 9, "n_poses": 9,
+                          "mesh_resolution": 32},
+               "render": {"flow_targets": True}, "split": {"val_subjects": 2}}
+    assert full_data_config(OLD_DATA) == full_data_config(written)
+    assert full_data_config({**OLD_DATA, "fold": 1}) != full_data_config(written)
 
 
 def test_init_weights_starts_from_its_net(old_checkpoint):

@@ -14,7 +14,8 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 
-from datamodules.canonical.settings import SOURCE_SETTINGS
+from datamodules.canonical.settings import (SOURCE_SETTINGS, RenderSettings, SplitSettings, TrainingSettings, as_node,
+                                            parse, parse_source)
 
 # flat key -> (node, key in the node)
 RENDER = {k: ("render", k) for k in ("azimuths", "view_mode", "scale_mode", "flow_targets", "forward_flow")}
@@ -35,7 +36,9 @@ def upgrade_data_config(cfg: Mapping) -> dict:
     fields = {f.name for f in dataclasses.fields(SOURCE_SETTINGS[kind])} if kind in SOURCE_SETTINGS else set()
     out: dict = {"source": {"kind": kind}}
     for key, value in cfg.items():
-        if key in MOVED:
+        if key == "seed":  # the DataModule's (and, below, the synth figures')
+            out[key] = value
+        elif key in MOVED:
             node, name = MOVED[key]
             out.setdefault(node, {})[name] = value
         elif key in fields:
@@ -44,4 +47,19 @@ def upgrade_data_config(cfg: Mapping) -> dict:
             out[key] = value
     if "seed" in fields:  # the synth figures were drawn with the DataModule's seed
         out["source"]["seed"] = cfg.get("seed", 42)
+    return out
+
+
+# the DataModule's flat settings and their defaults (as its constructor has them)
+FLAT_DEFAULTS = {"root": None, "seed": 42, "batch_size": 8, "num_workers": 0, "prepare_workers": 0, "skip_bad": False,
+                 "phenotype_targets": False}
+
+
+def full_data_config(cfg: Mapping) -> dict:
+    """A data config of either layout with every setting spelt out (the nodes parsed, defaults filled in): two
+    configs of one data compare equal however much of it each wrote down."""
+    cfg = upgrade_data_config(cfg)
+    out = {**FLAT_DEFAULTS, **cfg, "source": as_node(parse_source(cfg.get("source") or {"kind": "synth"}))}
+    for name, cls in (("render", RenderSettings), ("split", SplitSettings), ("training", TrainingSettings)):
+        out[name] = as_node(parse(cls, cfg.get(name), name))
     return out

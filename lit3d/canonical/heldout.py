@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from datamodules.canonical.flat_config import upgrade_data_config
+from datamodules.canonical.flat_config import full_data_config
 from lit3d.utils.io import atomic_write_bytes
 
 HELDOUT_FILE = "heldout.npz"
@@ -95,8 +95,9 @@ def coverage_problems(items, expected) -> list[str]:
 
 
 def data_but_fold(data) -> dict:
-    """The data config of a ``heldout.npz`` (its JSON), with nodes (:func:`upgrade_data_config`), less the fold."""
-    data = upgrade_data_config(json.loads(str(data)))
+    """The data config of a ``heldout.npz`` (its JSON) spelt out (either layout: :func:`full_data_config`), less
+    the fold."""
+    data = full_data_config(json.loads(str(data)))
     data["split"] = {k: v for k, v in dict(data.get("split") or {}).items() if k != "fold"}
     return data
 
