@@ -119,7 +119,7 @@ def write_depth_cache(root: Path, breaker: Callable | None, skip_bad: bool = Fal
     """A complete canonical cache as ``prepare_data`` leaves it (manifest + one ``subjects/<s>.npz``
     per subject), with ``depth_1_0`` of subject ``s1`` passed through ``breaker(depth, mask)``."""
     subjects, poses = ("s0", "s1", "s2"), ("0", "1", "2")
-    dm = CanonicalDataModule(str(root), image_size=S, n_subjects=3, n_poses=3, n_folds=2, batch_size=2,
+    dm = CanonicalDataModule.from_flat(str(root), image_size=S, n_subjects=3, n_poses=3, n_folds=2, batch_size=2,
                              skip_bad=skip_bad)
     builder = dm.cache_builder()
     builder.begin()

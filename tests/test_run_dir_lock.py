@@ -52,13 +52,13 @@ def _holder(run: Path) -> subprocess.Popen:
 def test_second_training_into_a_busy_run_dir_is_refused(tmp_path):
     run = tmp_path / "run"
     common = [*CANONICAL, "logger=none", f"paths.data_dir={tmp_path}/data", f"hydra.run.dir={run}"]
-    first = _start(["lit3d-train", *common, "trainer.max_epochs=500", "task.lr=0.001"], tmp_path / "first")
+    first = _start(["lit3d-train", *common, "trainer.max_epochs=500", "task.optimizer.lr=0.001"], tmp_path / "first")
     try:
         # Hydra writes config.yaml, hydra.yaml, then overrides.yaml (not atomically): wait until all are written
         written = [run / ".hydra" / n for n in ("config.yaml", "overrides.yaml")]
         _wait_for(lambda: all(f.is_file() and f.stat().st_size > 0 for f in written), first, tmp_path / "first")
         hydra_cfg = (run / ".hydra" / "config.yaml").read_bytes()
-        res = _run(["lit3d-train", *common, "trainer.max_epochs=1", "task.lr=0.05"])
+        res = _run(["lit3d-train", *common, "trainer.max_epochs=1", "task.optimizer.lr=0.05"])
         assert res.returncode == 2, res.stderr[-3000:]
         assert "Traceback" not in res.stderr
         assert _errors(res.stderr) == [ln for ln in res.stderr.splitlines() if ln.strip()][-1:]
