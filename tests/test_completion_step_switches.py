@@ -19,20 +19,13 @@ from lit3d.completion.losses import gradient_penalty
 from lit3d.completion.module import CompletionTask
 from lit3d.utils.meta_autocast import MetaAutocast
 from lit3d.utils.step_cost import CostCounter, SavedBytes
-from tests.test_step_cost import tiny_nets
+from tests.completion_helpers import grid_pair, tiny_nets, tiny_task
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
-def _data(batch: int = 2, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
-    g = torch.Generator().manual_seed(seed)
-    y = (torch.rand(batch, 1, 32, 32, 32, generator=g) < 0.2).float()
-    return torch.nn.functional.max_pool3d(y, 4), y
-
-
 def _task(nets: dict, **kw) -> CompletionTask:
-    torch.manual_seed(0)
-    task = CompletionTask(nets=tiny_nets(nets), **kw)
+    task = tiny_task(nets, **kw)
     with torch.no_grad():  # a non-zero attention weight, so the attention counts
         task.critic.attn.gamma.fill_(0.5)
     return task
@@ -41,7 +34,7 @@ def _task(nets: dict, **kw) -> CompletionTask:
 def _batches(n: int) -> list[dict]:
     out = []
     for i in range(n):
-        x, y = _data(seed=i)
+        x, y = grid_pair(seed=i)
         out.append({"input": x, "target": y, "label": torch.tensor([0, 1]), "category": ["bench", "chair"]})
     return out
 
@@ -57,7 +50,7 @@ def _weights(net: torch.nn.Module) -> list[torch.Tensor]:
 
 
 def _penalty_and_grads(task: CompletionTask, precision: str, eps: torch.Tensor):
-    x, y = _data()
+    x, y = grid_pair()
     fake = torch.rand(y.shape, generator=torch.Generator().manual_seed(1))
     task.critic.zero_grad(set_to_none=True)
     gp, norm = gradient_penalty(task.critic, x, y, fake, eps=eps, precision=precision)
@@ -72,7 +65,7 @@ def test_switches_are_off_by_default_in_the_config():
 
 def test_fp32_penalty_is_the_penalty_of_before(completion_demo_nets):
     task = _task(completion_demo_nets)
-    x, y = _data()
+    x, y = grid_pair()
     fake, eps = torch.rand_like(y), torch.tensor([0.3, 0.8])
     gp, norm = gradient_penalty(task.critic, x, y, fake, eps=eps)
     gp.backward()
@@ -122,7 +115,7 @@ def test_bf16_penalty_runs_the_critic_in_bf16(completion_demo_nets):
     task = _task(completion_demo_nets)
     seen = []
     hook = task.critic.layers[1].register_forward_hook(lambda m, i, o: seen.append(o.dtype))
-    x, y = _data()
+    x, y = grid_pair()
     gradient_penalty(task.critic, x, y, y, precision="bf16")
     gradient_penalty(task.critic, x, y, y)
     hook.remove()
@@ -189,7 +182,7 @@ def test_compile_step_falls_back_to_eager_with_a_warning(completion_demo_nets, m
         return run
 
     task = _task(completion_demo_nets, compile_step=True)
-    x, y = _data()
+    x, y = grid_pair()
     torch.manual_seed(3)
     want, _ = task.critic_objective(x, y, True)
     step = CompiledStep(task, compile_fn=broken)
@@ -214,7 +207,7 @@ def test_compiled_step_gives_the_eager_losses_and_gradients(completion_demo_nets
     task = _task(completion_demo_nets, compile_step=True)
     step = CompiledStep(task)
     assert step.checked == set()  # compiled, not the fallback
-    x, y = _data()
+    x, y = grid_pair()
     labels = torch.tensor([0, 1])
     for name, args, net in (("critic_objective", (x, y, True), task.critic),
                             ("generator_objective", (x, y, labels, True), task.generator)):

@@ -10,14 +10,9 @@ import torch
 from lit3d.completion.module import CompletionTask
 from lit3d.completion.step_cost import completion_step_cost
 from lit3d.utils.step_cost import CostCounter, SavedBytes
+from tests.completion_helpers import tiny_nets
 
 META = torch.device("meta")
-
-
-def tiny_nets(demo: dict) -> dict:
-    """The demo nets shrunk: 8^3 -> 32^3, small latent, 4-layer critic (attention at 8^3)."""
-    return {**demo, "in_res": 8, "out_res": 32, "enc_channels": [8, 16], "latent_dim": 64, "k": 16,
-            "fixed_latent_dim": 64, "critic_channels": [8, 8, 8, 8], "critic_attention_res": 8}
 
 
 def _meta_task(nets: dict, **kw) -> CompletionTask:

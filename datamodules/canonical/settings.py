@@ -14,12 +14,13 @@ every settings object is hashable (a worker process caches its renderer by them)
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import ClassVar
 
 from datamodules.cache import DataError
 from lit3d.geometry.views import VIEW_MODES
+from lit3d.utils.settings_nodes import parse_node
 
 SCALE_MODES = ("shape", "subject")
 SPLIT_MODES = ("subject_pose", "pose", "all")
@@ -232,16 +233,8 @@ def _choice(name: str, value, choices: Sequence[str]) -> None:
 
 def parse(cls, node, name: str):
     """``node`` (a mapping, None for the defaults, or already a ``cls``) as a ``cls``; DataError naming
-    ``data.<name>.<key>`` for a key ``cls`` does not have."""
-    if isinstance(node, cls):
-        return node
-    node = dict(node or {})
-    fields = [f.name for f in dataclasses.fields(cls)]
-    unknown = [k for k in node if k not in fields]
-    if unknown:
-        raise DataError(f"data.{name}.{unknown[0]}: not a setting of {name} "
-                        f"({', '.join(fields) or 'it has none'})")
-    return cls(**node)
+    ``data.<name>.<key>`` for a key ``cls`` does not have (:func:`lit3d.utils.settings_nodes.parse_node`)."""
+    return parse_node(cls, node, f"data.{name}", DataError)
 
 
 def parse_source(node) -> SourceSettings:

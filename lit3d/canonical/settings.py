@@ -14,9 +14,10 @@ Sequences become tuples, so the settings are hashable and compare by value.
 """
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
+
+from lit3d.utils.settings_nodes import parse_node
 
 LR_SCHEDULES = ("constant", "cosine")  # task.optimizer.schedule
 
@@ -119,12 +120,5 @@ class PanelSettings:
 
 def parse(cls, node, name: str):
     """``node`` (a mapping, None for the defaults, or already a ``cls``) as a ``cls``; ValueError naming
-    ``task.<name>.<key>`` for a key ``cls`` does not have."""
-    if isinstance(node, cls):
-        return node
-    node = dict(node or {})
-    fields = [f.name for f in dataclasses.fields(cls)]
-    unknown = [k for k in node if k not in fields]
-    if unknown:
-        raise ValueError(f"task.{name}.{unknown[0]}: not a setting of task.{name} ({', '.join(fields)})")
-    return cls(**node)
+    ``task.<name>.<key>`` for a key ``cls`` does not have (:func:`lit3d.utils.settings_nodes.parse_node`)."""
+    return parse_node(cls, node, f"task.{name}")
