@@ -151,15 +151,15 @@ def _distance_row(level: int, vocab: int, n_shapes: int = 30, words_per_view: in
 
 
 def _gen(experiment: str, tmp: str, subjects: int, poses: int):
-    cfg = _cfg(experiment, tmp, [f"data.n_subjects={subjects}", f"data.n_poses={poses}", "data.own_poses=0",
-                                 "data.val_poses=training", "data.prepare_workers=0"])
+    cfg = _cfg(experiment, tmp, [f"data.source.n_subjects={subjects}", f"data.source.n_poses={poses}",
+                                 "data.source.own_poses=0", "data.split.val_poses=training", "data.prepare_workers=0"])
     dm = build_datamodule(cfg.data)
     t0 = time.perf_counter()
     dm.prepare_data()
     dt = time.perf_counter() - t0
-    pairs = subjects * poses * len(cfg.data.azimuths)
+    pairs = subjects * poses * len(cfg.data.render.azimuths)
     return dm, cfg, row(f"synthetic canonical pair generation, {experiment.split('_')[1]} {cfg.data.image_size}^2, "
-                        f"mesh resolution {cfg.data.mesh_resolution}", CMD, pairs / dt, None, unit="pairs/s",
+                        f"mesh resolution {cfg.data.source.mesh_resolution}", CMD, pairs / dt, None, unit="pairs/s",
                         threads=1, note=f"CanonicalDataModule.prepare_data: {subjects} subjects x {poses} poses "
                                         f"(+ 1 canonical render per subject), procedural figures, depth render "
                                         f"(EGL), compressed write; no baseline")

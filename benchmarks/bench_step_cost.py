@@ -3,7 +3,9 @@
 Rows (no timing: the count depends on the config alone, not on the machine):
 - completion (64^3 -> 256^3, ``experiment=completion_paper``) per part of the manual-optimisation step
   (:mod:`lit3d.completion.step_cost`), then with each option that cuts the step (``task.gp_every=4``,
-  ``task.critic_concat=true``; ratio = default / option), and the demo scale with the critic on;
+  ``task.critic_concat=true``, ``task.gp_precision=bf16``, then all three; ratio = default / option, in FLOPs; the
+  note gives the bytes saved for backward, which bf16 cuts), and the demo scale with the critic on.
+  ``task.compile_step`` has no row: it changes how the ops run (fusion, launches), not the count;
 - canonical (``experiment=canonical_paper``) at 128^2 and 500^2 (:mod:`lit3d.canonical.step_cost`).
 
 FLOPs are PyTorch's formulas (``torch.utils.flop_counter``: convolutions, matmuls, attention), a multiply-add
@@ -87,6 +89,24 @@ def _parts_note(cost: dict) -> str:
             f"(saved for backward, peak of the step) {cost['saved_bytes'] / 2**20:.0f} MiB/sample")
 
 
+# the switches that change the count (task.compile_step does not: the count is of the eager step's ops, and
+# compiling changes how they run, not how many FLOPs they take), one row each, then all of them together
+OPTIONS = (
+    ("task.gp_every=4 (lazy gradient penalty)", ["task.gp_every=4"]),
+    ("task.critic_concat=true (one critic pass over real + fake)", ["task.critic_concat=true"]),
+    ("task.gp_precision=bf16 (the penalty's critic pass in bf16: fewer bytes saved for backward, the same FLOPs)",
+     ["task.gp_precision=bf16"]),
+    ("every option on (gp_every=4, critic_concat, gp_precision=bf16)",
+     ["task.gp_every=4", "task.critic_concat=true", "task.gp_precision=bf16"]),
+)
+
+
+def _mib(cost: dict, part: str | None = None) -> str:
+    """Saved-for-backward MiB per sample of the step (its peak) or of one ``part``."""
+    b = cost["saved_bytes"] if part is None else next(p["saved_bytes"] for p in cost["parts"] if p["part"] == part)
+    return f"{b / 2**20:.0f}"
+
+
 def completion_rows() -> list[dict]:
     base = completion_cost()
     total = base["flops"] / 1e12
@@ -95,12 +115,13 @@ def completion_rows() -> list[dict]:
                 unit="TFLOP/sample",
                 note=_parts_note(base) + f"; the earlier count {REFERENCE_TFLOP:g} TFLOP: {off:+.1f}% (within 5%: "
                      f"{'yes' if abs(off) <= 5 else 'NO'}); optimiser and element-wise work not counted")]
-    for label, ov in (("task.gp_every=4 (lazy gradient penalty)", ["task.gp_every=4"]),
-                      ("task.critic_concat=true (one critic pass over real + fake)", ["task.critic_concat=true"])):
+    for label, ov in OPTIONS:
         c = completion_cost(overrides=ov)
         rows.append(row(f"completion train step FLOPs, paper, {label}", CMD, c["flops"] / 1e12, total,
                         unit="TFLOP/sample", baseline_name="default step",
-                        note=_parts_note(c) + f"; kernel-like ops {c['ops']:.0f} vs {base['ops']:.0f} by default"))
+                        note=_parts_note(c) + f"; kernel-like ops {c['ops']:.0f} vs {base['ops']:.0f} by default; "
+                             f"saved for backward: the step's peak {_mib(c)} vs {_mib(base)} MiB/sample, the penalty's "
+                             f"{_mib(c, 'critic penalty')} vs {_mib(base, 'critic penalty')}"))
     demo = completion_cost("completion_demo")
     plain = completion_cost("completion_demo", critic=False)
     rows.append(row("completion train step FLOPs, demo 16^3->64^3, critic on", CMD, demo["flops"] / 1e12, None,

@@ -4,7 +4,8 @@ Used as a Hydra callback by every multirun (``hydra.callbacks.collect`` in ``con
 the configs in ``sweeps/`` set its metrics and title; written when the multirun ends) and by
 hand: :func:`collect` (from the checkout: ``python -m studies.sweeps.collect SWEEP_DIR [METRIC ...]``).
 :class:`StudyStorage` makes a kept Optuna study (``hydra.sweeper.storage=sqlite:///optuna.db``) work and
-resume without replacing earlier trial dirs.
+resume without replacing earlier trial dirs; :class:`KeepEarlierJobs` refuses any multirun into a sweep dir
+that holds an earlier multirun's job dirs.
 """
 from __future__ import annotations
 
@@ -69,13 +70,19 @@ def job_label(job_dir: Path, ignore: Sequence[str] = ("hydra.", "+sweep", "exper
     return ", ".join(_normalise_override(o) for o in kept) or "(defaults)"
 
 
+WIDE = 12  # more metrics than this: the per-metric table is laid out one row per metric
+
+
 def collect(sweep_dir: str | Path, metrics: Sequence[str] | None = None,
             thesis: dict[str, Any] | None = None, title: str = "Sweep results") -> str:
-    """Markdown table: one row per job (its overrides), one column per metric.
+    """Markdown tables of a multirun's jobs, written to ``sweep_results.md`` and returned.
 
-    ``metrics`` None -> every ``test/...`` key found in any job. ``thesis`` maps a
-    row label (the override string) to the thesis's figure for that setting.
-    Jobs without metrics.json (failed or running) are listed as such.
+    ``metrics`` given (the ``sweeps/`` configs): one row per job (its overrides), one column per metric.
+    ``metrics`` None: every ``test/...`` key found in any job; the jobs table then holds each job's
+    monitored value (``monitor`` of its metrics.json), and the metrics follow in a second table with one
+    row per metric and one column per job whenever there are more than ``WIDE`` (a completion job has
+    hundreds: a row of them per job is unreadable). ``thesis`` maps a row label (the override string) to
+    the thesis's figure for that setting. Jobs without metrics.json (failed or running) are listed as such.
     """
     sweep_dir = Path(sweep_dir)
     jobs = sorted((p for p in sweep_dir.iterdir() if p.is_dir() and (p / ".hydra").is_dir()),
@@ -84,26 +91,53 @@ def collect(sweep_dir: str | Path, metrics: Sequence[str] | None = None,
     for job in jobs:
         mpath = job / "metrics.json"
         results[job] = json.loads(mpath.read_text()) if mpath.is_file() else None
+    named = metrics is not None
     if metrics is None:
         metrics = sorted({k for r in results.values() if r for k in r if k.startswith("test/")})
-    header = ["job", "setting", *metrics] + (["thesis"] if thesis else [])
+    tall = not named and len(metrics) > WIDE
+    monitors = sorted({str(r["monitor"]) for r in results.values() if r and r.get("monitor")})
+    if tall:  # one column: the monitored value (or whether the job finished)
+        header = ["job", "setting", f"{' / '.join(monitors)} (monitored)" if monitors else "status"]
+    else:
+        header = ["job", "setting", *metrics]
+    header += ["thesis"] if thesis else []
     rows = []
     for job, res in results.items():
         label = job_label(job)
-        cells = [fmt(res.get(m)) if res else "no metrics.json" for m in metrics]
-        extra = [fmt(thesis.get(label)) if isinstance(thesis.get(label), (int, float)) else str(thesis.get(label, "–"))] if thesis else []
-        rows.append([job.name, label, *cells, *extra])
+        if not res:
+            cells = ["no metrics.json"] * (1 if tall else len(metrics))
+        elif tall:
+            cells = [fmt(res.get("monitored_value")) if monitors else "done"]
+        else:
+            cells = [fmt(res.get(m)) for m in metrics]
+        rows.append([job.name, label, *cells, *([_thesis_cell(thesis, label)] if thesis else [])])
     text = f"# {title}\n\nSweep dir: `{sweep_dir}`\n\n" + markdown_table(header, rows) + "\n"
+    if tall:
+        done = [(job, res) for job, res in results.items() if res]
+        text += (f"\n## Test metrics: one row per metric ({len(metrics)}), one column per job\n\n"
+                 + markdown_table(["metric", *[job.name for job, _ in done]],
+                                  [[m, *[fmt(res.get(m)) for _, res in done]] for m in metrics]) + "\n")
     by_setting = over_seeds({job_label(j): r for j, r in results.items()}, metrics)
     if by_setting:
-        head = ["setting", "seeds", *metrics] + (["thesis"] if thesis else [])
-        srows = [[label, str(n), *cells] + ([fmt(thesis.get(label)) if isinstance(thesis.get(label), (int, float))
-                                            else str(thesis.get(label, "–"))] if thesis else [])
-                 for label, (n, cells) in by_setting.items()]
-        text += ("\n## Mean ± sd over seeds (sd of the jobs' values, ddof 1)\n\n"
-                 + markdown_table(head, srows) + "\n")
+        text += "\n## Mean ± sd over seeds (sd of the jobs' values, ddof 1)\n\n"
+        if tall:
+            labels = list(by_setting)
+            text += ("Seeds per setting: " + "; ".join(f"{lb}: {by_setting[lb][0]}" for lb in labels) + "\n\n"
+                     + markdown_table(["metric", *labels],
+                                      [[m, *[by_setting[lb][1][i] for lb in labels]] for i, m in enumerate(metrics)])
+                     + "\n")
+        else:
+            head = ["setting", "seeds", *metrics] + (["thesis"] if thesis else [])
+            srows = [[label, str(n), *cells] + ([_thesis_cell(thesis, label)] if thesis else [])
+                     for label, (n, cells) in by_setting.items()]
+            text += markdown_table(head, srows) + "\n"
     atomic_write_text(sweep_dir / "sweep_results.md", text)
     return text
+
+
+def _thesis_cell(thesis: dict[str, Any], label: str) -> str:
+    value = thesis.get(label)
+    return fmt(value) if isinstance(value, (int, float)) else str(thesis.get(label, "–"))
 
 
 def over_seeds(results: dict[str, dict | None], metrics: Sequence[str]) -> dict[str, tuple[int, list[str]]]:
@@ -187,6 +221,43 @@ def prepare_study_storage(url: str) -> None:
         engine.dispose()
 
 
+def earlier_job_dirs(sweep_dir: Path) -> list[str]:
+    """The job (trial) dirs an earlier multirun left in ``sweep_dir`` (``0/``, ``1/`` ... with a ``.hydra/``), in order."""
+    if not sweep_dir.is_dir():
+        return []
+    return sorted((p.name for p in sweep_dir.iterdir() if p.is_dir() and (p / ".hydra").is_dir()),
+                  key=lambda n: (len(n), n))
+
+
+def refuse_earlier_jobs(config) -> None:
+    """Stop the multirun (one line, exit 2) when its sweep dir holds the job dirs of an earlier one:
+    Hydra numbers a multirun's job dirs from 0, so the new jobs would train or evaluate afresh in
+    the earlier jobs' dirs and replace their results (a resumed Optuna study too)."""
+    from omegaconf import OmegaConf
+
+    sweep_dir = Path(str(config.hydra.sweep.dir))
+    earlier = earlier_job_dirs(sweep_dir)
+    if not earlier:
+        return
+    shown = ", ".join(earlier[:5]) + (", ..." if len(earlier) > 5 else "")
+    storage = OmegaConf.select(config, "hydra.sweeper.storage", default=None)
+    what = (f"holds the trial dirs of an earlier sweep ({shown}); a resumed study ({storage}) numbers its trial dirs"
+            if storage else f"holds the job dirs of an earlier multirun ({shown}); a new multirun numbers its job dirs")
+    print(f"error: {sweep_dir}: {what} from 0 again and would replace them: leave hydra.sweep.dir to its default "
+          "(a new timestamped folder) or choose another one", file=sys.stderr, flush=True)
+    sys.exit(2)
+
+
+class KeepEarlierJobs(Callback):
+    """Hydra callback, on for every multirun (``conf/hydra/default.yaml``, ``conf/hydra/eval.yaml``:
+    ``hydra.callbacks.earlier_jobs``): a sweep dir that holds the job dirs of an earlier multirun
+    (``hydra.sweep.dir=X`` given again) is refused with one line and exit 2 before any job runs
+    (:func:`refuse_earlier_jobs`); before, the second multirun's jobs replaced the first's results."""
+
+    def on_multirun_start(self, config, **kwargs) -> None:
+        refuse_earlier_jobs(config)
+
+
 class StudyStorage(Callback):
     """Hydra callback, on for every multirun (``conf/hydra/default.yaml``: ``hydra.callbacks.study_storage``);
     does nothing unless the Optuna sweeper keeps its study (``hydra.sweeper.storage=sqlite:///...``). Then,
@@ -201,13 +272,5 @@ class StudyStorage(Callback):
         storage = OmegaConf.select(config, "hydra.sweeper.storage", default=None)
         if not storage:
             return
-        sweep_dir = Path(str(config.hydra.sweep.dir))
-        earlier = sorted((p.name for p in sweep_dir.iterdir() if p.is_dir() and (p / ".hydra").is_dir()),
-                         key=lambda n: (len(n), n)) if sweep_dir.is_dir() else []
-        if earlier:
-            shown = ", ".join(earlier[:5]) + (", ..." if len(earlier) > 5 else "")
-            print(f"error: {sweep_dir}: holds the trial dirs of an earlier sweep ({shown}); a resumed study "
-                  f"({storage}) numbers its trial dirs from 0 again and would replace them: leave hydra.sweep.dir "
-                  "to its default (a new timestamped folder) or choose another one", file=sys.stderr, flush=True)
-            sys.exit(2)
+        refuse_earlier_jobs(config)  # before the database is touched (also where earlier_jobs is turned off)
         prepare_study_storage(str(storage))

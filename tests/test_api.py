@@ -25,7 +25,7 @@ QUALITY_FEATURES = ["task.features=[mask_ssim/ceramic_lightbulb/flat,chamfer]"]
 CHECKPOINTS = {  # name -> (experiment, overrides): untrained models at the tiny configs' sizes
     "completion": ("completion_demo", []),
     "canonical": ("canonical_tiny", []),
-    "canonical_redraw": ("canonical_tiny", ["task.net.head=redraw"]),
+    "canonical_redraw": ("canonical_tiny", ["task.net.head.kind=redraw"]),
     "quality": ("quality_demo", QUALITY_FEATURES),
 }
 

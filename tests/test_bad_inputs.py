@@ -119,7 +119,7 @@ def write_depth_cache(root: Path, breaker: Callable | None, skip_bad: bool = Fal
     """A complete canonical cache as ``prepare_data`` leaves it (manifest + one ``subjects/<s>.npz``
     per subject), with ``depth_1_0`` of subject ``s1`` passed through ``breaker(depth, mask)``."""
     subjects, poses = ("s0", "s1", "s2"), ("0", "1", "2")
-    dm = CanonicalDataModule(str(root), image_size=S, n_subjects=3, n_poses=3, n_folds=2, batch_size=2,
+    dm = CanonicalDataModule.from_flat(str(root), image_size=S, n_subjects=3, n_poses=3, n_folds=2, batch_size=2,
                              skip_bad=skip_bad)
     builder = dm.cache_builder()
     builder.begin()
@@ -338,7 +338,11 @@ CASES = [
     ("train-tosca-without-data-root", _option("experiment=canonical_tosca", "data.root"), _subprocess("lit3d-train"),
      ["missing value for data.root", "set data.root="]),
     ("train-misspelt-key", _option("trainer.max_epoch=3"), train_cli,
-     ["Could not override 'trainer.max_epoch'", "use +trainer.max_epoch=3"]),
+     ["Could not override 'trainer.max_epoch'", "did you mean trainer.max_epochs=3?"]),
+    # Hydra's own hint for the line above, "+trainer.max_epoch=3": the Trainer refuses it, in one line
+    ("train-plus-misspelt-trainer-argument", _option("experiment=completion_demo +trainer.max_epoch=3",
+                                                     "trainer.max_epoch"), train_overrides,
+     ["not an argument of lightning.pytorch.trainer.trainer.Trainer", "did you mean trainer.max_epochs?"]),
     ("eval-misspelt-key", _option("ckpt_pth=x.ckpt"), eval_cli, ["Could not override 'ckpt_pth'"]),
     ("train-bad-task-option-value", _option("experiment=canonical_demo task.on_nonfinite=bogus", "task config"),
      train_overrides, ["task.on_nonfinite must be one of", "'bogus'"]),

@@ -29,3 +29,15 @@ def test_gpu_run_refuses_without_cuda(tmp_path):
     with pytest.raises(SystemExit, match="no CUDA device"):
         run_gpu([], tmp_path / "rows.json")
     assert not (tmp_path / "rows.json").exists()
+
+
+def test_configuration_page_agrees_with_the_measured_gpu_rows():
+    """docs/configuration.md names the GPU of benchmarks/gpu_rows.json, and never says none was measured."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    page = " ".join((root / "docs" / "configuration.md").read_text().split())
+    measured = json.loads((root / "benchmarks" / "gpu_rows.json").read_text())
+    assert measured["rows"], "benchmarks/gpu_rows.json holds no row"
+    assert "not measured" not in page and "no GPU was lent" not in page
+    assert measured["gpu"] in page and "BENCHMARKS.md" in page

@@ -11,6 +11,7 @@ from omegaconf import OmegaConf
 from PIL import Image
 
 from datamodules.canonical.rendering import PairRenderer
+from datamodules.canonical.settings import RenderSettings, parse
 from lit3d.body.errors import BodyFitError
 from lit3d.body.model import DOFS
 from lit3d.body.points import backproject, observe
@@ -86,7 +87,8 @@ def test_canonical_depth_is_rendered_as_the_canonical_task_renders_anny_targets(
             return "canonical"
 
     ours = canonical_depth(v + 5.0, f, int(hp.image_size))  # the offset is normalised away
-    theirs = PairRenderer(Stub(), hp).render_views("s", v, f)[0][0]
+    render = parse(RenderSettings, OmegaConf.to_container(hp.render), "render")
+    theirs = PairRenderer(Stub(), render, int(hp.image_size)).render_views("s", v, f)[0][0]
     assert ours.shape == (hp.image_size, hp.image_size) and (ours > 0).mean() > 0.05
     assert np.array_equal(ours, theirs)
 

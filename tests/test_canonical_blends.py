@@ -66,10 +66,10 @@ def test_datamodule_blends_enter_training_only(tmp_path):
     _capsule_tosca(tmp_path / "tosca", n_poses=5)
     kw = dict(source="tosca", root=str(tmp_path / "tosca"), image_size=32, split="pose", n_folds=2,
               batch_size=2, azimuths=[0.0, 30.0], eval_views=[0])
-    plain = CanonicalDataModule(str(tmp_path / "c"), **kw)
+    plain = CanonicalDataModule.from_flat(str(tmp_path / "c"), **kw)
     plain.prepare_data()
     plain.setup()
-    dm = CanonicalDataModule(str(tmp_path / "c"), blend_poses=3, **kw)
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "c"), blend_poses=3, **kw)
     dm.setup()  # the same cache: blends are rendered in memory, not cached
     assert dm.config_hash() == plain.config_hash()
     extra = [r for r in dm.splits["train"] if r["pose"] >= BLEND_BASE]
@@ -85,7 +85,7 @@ def test_datamodule_blends_enter_training_only(tmp_path):
 
 def test_subject_with_two_connectivities_is_named(tmp_path):
     _capsule_tosca(tmp_path / "tosca", n_poses=5, bad_pose=0)  # the canonical pose: every fold's endpoint
-    dm = CanonicalDataModule(str(tmp_path / "c"), source="tosca", root=str(tmp_path / "tosca"), image_size=32,
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "c"), source="tosca", root=str(tmp_path / "tosca"), image_size=32,
                              split="pose", n_folds=2, batch_size=2, blend_poses=20)
     dm.prepare_data()
     with pytest.raises(DataError, match=r"dog blend \d+ \(poses .*different vertex counts"):
@@ -94,7 +94,7 @@ def test_subject_with_two_connectivities_is_named(tmp_path):
 
 @pytest.mark.skipif(not SHARED.is_dir(), reason="../shared/data/tosca8k not present")
 def test_real_tosca_blends_render(tmp_path):
-    dm = CanonicalDataModule(str(tmp_path / "t"), source="tosca", root=str(SHARED), classes=["wolf", "centaur"],
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "t"), source="tosca", root=str(SHARED), classes=["wolf", "centaur"],
                              image_size=32, split="pose", n_folds=2, view_mode="broadside", blend_poses=2)
     dm.prepare_data()
     dm.setup()

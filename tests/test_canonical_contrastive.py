@@ -1,4 +1,4 @@
-"""The contrastive identity term (task.contrastive_weight) and the batches it needs (data.batch_poses):
+"""The contrastive identity term (task.contrastive.weight) and the batches it needs (data.training.batch_poses):
 the loss against a loop written from the paper's formula, its wiring into the training step and the
 encoder or the output, learning, refused settings; the grouped batches' contents and order."""
 import math
@@ -52,8 +52,8 @@ def test_loss_without_positives_is_zero_and_differentiable():
 @pytest.mark.parametrize("on", ["latent", "output"])
 def test_training_step_adds_the_weighted_term_and_it_reaches_the_net(compose_cfg, on):
     batch = _batch()
-    kw = dict(contrastive_weight="{w}", contrastive_on=on, contrastive_dim=16, contrastive_channels=[8, 16])
-    losses, task = _step_losses(compose_cfg, batch, (0.0, 2.0), **kw)
+    node = {"weight": "{w}", "embed": on, "dim": 16, "channels": [8, 16]}
+    losses, task = _step_losses(compose_cfg, batch, (0.0, 2.0), contrastive=node)
     out = task.net(batch["depth"], batch["mask"])
     emb = task.contrastive_head(out)
     assert emb.shape == (8, 16)
@@ -66,8 +66,8 @@ def test_training_step_adds_the_weighted_term_and_it_reaches_the_net(compose_cfg
 
 def test_the_latent_term_learns_to_tell_the_subjects_apart(compose_cfg):
     torch.manual_seed(0)
-    task = CanonicalTask(net=_net(compose_cfg), mask_loss="bce", use_phases=False, contrastive_weight=1.0,
-                         contrastive_dim=16)
+    task = CanonicalTask(net=_net(compose_cfg), mask_loss="bce", phases={"use": False},
+                         contrastive={"weight": 1.0, "dim": 16})
     batch = _batch(n=8, classes=4)
     opt = torch.optim.Adam(task.parameters(), 3e-3)
     losses = []
@@ -85,10 +85,10 @@ def test_the_latent_term_learns_to_tell_the_subjects_apart(compose_cfg):
 
 
 def test_contrastive_settings_are_checked(compose_cfg):
-    with pytest.raises(ValueError, match="contrastive_on must be one of"):
-        CanonicalTask(net=_net(compose_cfg), contrastive_weight=1.0, contrastive_on="pixels", contrastive_dim=8)
+    with pytest.raises(ValueError, match="task.contrastive.embed must be one of"):
+        CanonicalTask(net=_net(compose_cfg), contrastive={"weight": 1.0, "embed": "pixels", "dim": 8})
     with pytest.raises(ValueError, match="embed_dim >= 1"):
-        CanonicalTask(net=_net(compose_cfg), contrastive_weight=1.0, contrastive_dim=0)
+        CanonicalTask(net=_net(compose_cfg), contrastive={"weight": 1.0, "dim": 0})
     assert CanonicalTask(net=_net(compose_cfg)).contrastive_head is None  # off by default
     with pytest.raises(ValueError, match="needs the MSFE latent"):
         ContrastiveEmbedder("latent", 8, 4, [4])(type("Out", (), {"latent": None})())

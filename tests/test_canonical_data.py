@@ -1,4 +1,5 @@
 """Synthetic figures, depth camera, canonical DataModule (cache, manifest, strict splits), TOSCA source."""
+import dataclasses
 import json
 from pathlib import Path
 
@@ -44,9 +45,9 @@ def test_per_subject_figure_poses_are_each_figures_own_and_change_the_cache(tmp_
     shared = [rotations("shared", s)[0] for s in ("humanoid001", "humanoid002")]
     assert all(np.array_equal(shared[0][k], shared[1][k]) for k in shared[0])  # the old draw: one pose for all
     kw = dict(n_subjects=3, n_poses=4, image_size=32, kinds=["humanoid"])
-    old = CanonicalDataModule(str(tmp_path), **kw)
+    old = CanonicalDataModule.from_flat(str(tmp_path), **kw)
     assert "pose_draw" not in old.cache_config()  # shared caches keep their hash
-    assert CanonicalDataModule(str(tmp_path), pose_draw="per_subject", **kw).config_hash() != old.config_hash()
+    assert CanonicalDataModule.from_flat(str(tmp_path), pose_draw="per_subject", **kw).config_hash() != old.config_hash()
     with pytest.raises(DataError, match="unknown pose_draw 'each'"):
         SynthSource(["humanoid"], 3, 4, 0, 32, 0, 15.0, 1.0, pose_draw="each")
 
@@ -70,7 +71,7 @@ def _dm(tmp_path, **kw):
     args = dict(image_size=32, n_subjects=6, n_poses=6, mesh_resolution=24, n_folds=3, batch_size=4,
                 kinds=["humanoid", "quadruped"], seed=1)
     args.update(kw)
-    return CanonicalDataModule(str(tmp_path / "data"), **args)
+    return CanonicalDataModule.from_flat(str(tmp_path / "data"), **args)
 
 
 def test_datamodule_cache_manifest_and_strict_split(tmp_path):
@@ -89,7 +90,7 @@ def test_datamodule_cache_manifest_and_strict_split(tmp_path):
     assert b["depth"].shape == b["canon_mask"].shape == (4, 1, 32, 32)
     assert float(b["depth"].max()) <= 1 and float(b["depth"][b["mask"] > 0].min()) >= 0.1 - 1e-3
     assert ((b["depth"] > 0) == (b["mask"] > 0)).all()
-    dm.hparams.batch_poses = 2  # data.batch_poses: 2 subjects x 2 poses a batch
+    dm.training = dataclasses.replace(dm.training, batch_poses=2)  # data.training.batch_poses: 2 subjects x 2 poses a batch
     for b in dm.train_dataloader():
         assert b["subject_idx"][0] == b["subject_idx"][1] and b["subject_idx"][2] == b["subject_idx"][3]
     png = dm.show(3, tmp_path / "show.png")
@@ -154,9 +155,9 @@ def test_split_functions_cover_every_fold():
 
 def test_bad_config_is_named(tmp_path):
     with pytest.raises(DataError, match="needs root"):
-        CanonicalDataModule(str(tmp_path), image_size=32, source="tosca")
+        CanonicalDataModule.from_flat(str(tmp_path), image_size=32, source="tosca")
     with pytest.raises(DataError, match="unknown canonical data source"):
-        CanonicalDataModule(str(tmp_path), image_size=32, source="nope")
+        CanonicalDataModule.from_flat(str(tmp_path), image_size=32, source="nope")
 
 
 def test_tosca_source_on_written_files(tmp_path):
@@ -170,7 +171,7 @@ def test_tosca_source_on_written_files(tmp_path):
             bent = v + 0.05 * pose * np.stack([v[:, 2] ** 2, 0 * v[:, 2], 0 * v[:, 2]], 1)
             (tosca.write_mat if pose % 2 else tosca.write_off)(root / f"{cls}{pose}.{'mat' if pose % 2 else 'off'}",
                                                                bent * (1 + 0.1 * rng.random()), f)
-    dm = CanonicalDataModule(str(tmp_path / "c"), source="tosca", root=str(root), image_size=32, split="pose",
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "c"), source="tosca", root=str(root), image_size=32, split="pose",
                              n_folds=3, batch_size=2)
     dm.prepare_data()
     dm.setup()
@@ -181,7 +182,7 @@ def test_tosca_source_on_written_files(tmp_path):
 
 @pytest.mark.skipif(not SHARED.is_dir(), reason="../shared/data/tosca8k not present")
 def test_real_tosca8k_renders(tmp_path):
-    dm = CanonicalDataModule(str(tmp_path / "t"), source="tosca", root=str(SHARED), classes=["wolf", "centaur"],
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "t"), source="tosca", root=str(SHARED), classes=["wolf", "centaur"],
                              image_size=32, split="pose", n_folds=2)
     dm.prepare_data()
     dm.setup()
@@ -225,7 +226,7 @@ def test_flip_lr_mirrors_the_target_only_when_input_and_target_share_the_camera(
     fixed: one camera for both, so input and target are mirrored together."""
     import torch
 
-    dm = CanonicalDataModule(str(tmp_path / "data"), image_size=32, n_subjects=3, n_poses=3, mesh_resolution=16,
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "data"), image_size=32, n_subjects=3, n_poses=3, mesh_resolution=16,
                              n_folds=3, batch_size=4, kinds=["quadruped"], seed=1, split="pose",
                              view_mode=view_mode, flip_lr=True)
     dm.prepare_data()
@@ -258,7 +259,7 @@ def test_eval_views_train_on_every_azimuth_and_evaluate_the_chosen_ones(tmp_path
 
     assert mirror_views([0.0, -25.0, 25.0]) == {0: 0, 1: 2, 2: 1}
     assert mirror_views([0.0, 30.0]) == {0: 0, 1: 1}  # no opposite turn: the same view
-    dm = CanonicalDataModule(str(tmp_path / "data"), image_size=32, n_subjects=3, n_poses=3, mesh_resolution=16,
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "data"), image_size=32, n_subjects=3, n_poses=3, mesh_resolution=16,
                              n_folds=3, batch_size=4, kinds=["quadruped"], seed=1, split="pose",
                              view_mode="broadside", azimuths=[0.0, -25.0, 25.0], eval_views=[0], flip_lr=True)
     dm.prepare_data()
@@ -280,7 +281,7 @@ def test_eval_views_train_on_every_azimuth_and_evaluate_the_chosen_ones(tmp_path
             seen.add((r["view"], mirrored))
     assert (1, True) in seen and (1, False) in seen
     with pytest.raises(DataError, match="eval_views"):
-        CanonicalDataModule(str(tmp_path / "x"), image_size=32, azimuths=[0.0, 30.0], eval_views=[2])
+        CanonicalDataModule.from_flat(str(tmp_path / "x"), image_size=32, azimuths=[0.0, 30.0], eval_views=[2])
 
 
 def test_roll_turns_the_input_only_and_keeps_depth_inside_the_mask(tmp_path):
@@ -296,7 +297,7 @@ def test_roll_turns_the_input_only_and_keeps_depth_inside_the_mask(tmp_path):
     rd, rm = roll(d, m, 90.0)
     assert torch.equal(rm[0], m[0].T)  # symmetric about the centre: a quarter turn is the transpose
     assert (rd[rm == 0] == 0).all() and torch.allclose(rd[rm > 0], torch.tensor(0.7))
-    dm = CanonicalDataModule(str(tmp_path / "data"), image_size=32, n_subjects=3, n_poses=3, mesh_resolution=16,
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "data"), image_size=32, n_subjects=3, n_poses=3, mesh_resolution=16,
                              n_folds=3, batch_size=4, kinds=["quadruped"], seed=1, split="pose",
                              view_mode="broadside", roll_deg=45.0)
     dm.prepare_data()
@@ -327,7 +328,7 @@ def test_train_pose_fraction_thins_training_poses_per_subject_and_keeps_the_test
             thin_training(train, bad, seed=0)
 
     def dm(fraction):
-        d = CanonicalDataModule(str(tmp_path / "data"), image_size=32, n_subjects=2, n_poses=8, mesh_resolution=16,
+        d = CanonicalDataModule.from_flat(str(tmp_path / "data"), image_size=32, n_subjects=2, n_poses=8, mesh_resolution=16,
                                 n_folds=2, batch_size=4, kinds=["humanoid"], seed=1, split="pose",
                                 train_pose_fraction=fraction)
         d.prepare_data()
@@ -344,7 +345,7 @@ def test_train_pose_fraction_thins_training_poses_per_subject_and_keeps_the_test
 
 
 def test_own_poses_train_only_and_each_figures_own(tmp_path):
-    """data.own_poses: every figure N poses of its own, given to training only; the test keeps the poses
+    """data.source.own_poses: every figure N poses of its own, given to training only; the test keeps the poses
     that every figure shares, and no two figures share an own pose."""
     subject_poses = {f"s{i}": [0, 1, 2, OWN_POSE_BASE, OWN_POSE_BASE + 1] for i in range(6)}
     pairs = fold_pairs(subject_poses, "subject_pose", 3, 0, seed=0, val_subjects=1)
@@ -364,12 +365,12 @@ def test_own_poses_train_only_and_each_figures_own(tmp_path):
     depth = {(r["subject"], r["pose"]): first[i]["mask"] for i, r in enumerate(dm.splits["train"])}
     assert not torch.equal(depth[(a, OWN_POSE_BASE)], depth[(b, OWN_POSE_BASE)])  # each figure's own pose
     assert all(bool(first[i]["has_flow"]) for i, r in enumerate(dm.splits["train"]) if r["pose"] >= OWN_POSE_BASE)
-    with pytest.raises(DataError, match="own_poses"):
-        CanonicalDataModule(str(tmp_path / "t"), 32, source="tosca", root=str(tmp_path), own_poses=2).source
+    with pytest.raises(DataError, match=r"data.source \(tosca\).own_poses: not a setting"):  # only synth has them
+        CanonicalDataModule(str(tmp_path / "t"), 32, source={"kind": "tosca", "own_poses": 2}, root=str(tmp_path))
 
 
 def test_val_poses_own_validates_new_poses_of_the_validation_subjects():
-    """data.val_poses=own: the validation subjects in their own poses (none of them in any training pair);
+    """data.split.val_poses=own: the validation subjects in their own poses (none of them in any training pair);
     training and test unchanged; refused without own poses or for an unknown name."""
     subject_poses = {f"s{i}": [0, 1, 2, OWN_POSE_BASE, OWN_POSE_BASE + 1] for i in range(6)}
     plain = fold_pairs(subject_poses, "subject_pose", 3, 0, seed=0, val_subjects=1)

@@ -57,10 +57,10 @@ def test_per_subject_poses_are_each_subjects_own_and_change_the_cache(tmp_path):
     assert any(not np.array_equal(own[0][k], own[1][k]) for k in own[0])  # two people, two poses
     assert any(not np.array_equal(own[0][k], bodies.sample_pose(0, 3)[k]) for k in own[0])  # not the shared draw
     kw = dict(source="anny", n_subjects=4, n_poses=4, image_size=48)
-    shared = CanonicalDataModule(str(tmp_path / "a"), **kw)
-    assert shared.config_hash() == CanonicalDataModule(str(tmp_path / "a"), pose_draw="shared", **kw).config_hash()
+    shared = CanonicalDataModule.from_flat(str(tmp_path / "a"), **kw)
+    assert shared.config_hash() == CanonicalDataModule.from_flat(str(tmp_path / "a"), pose_draw="shared", **kw).config_hash()
     assert "pose_draw" not in shared.cache_config()  # old caches keep their hash
-    assert CanonicalDataModule(str(tmp_path / "a"), pose_draw="per_subject", **kw).config_hash() != shared.config_hash()
+    assert CanonicalDataModule.from_flat(str(tmp_path / "a"), pose_draw="per_subject", **kw).config_hash() != shared.config_hash()
     from datamodules.canonical.sources import AnnySource
 
     with pytest.raises(DataError, match="unknown pose_draw 'each'"):
@@ -99,7 +99,7 @@ def test_anny_bodies_are_people_in_plausible_poses(body_model):
 
 
 def test_anny_datamodule_pairs_share_each_subjects_canonical(tmp_path):
-    dm = CanonicalDataModule(str(tmp_path / "anny"), source="anny", n_subjects=4, n_poses=4, image_size=48,
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "anny"), source="anny", n_subjects=4, n_poses=4, image_size=48,
                              split="subject_pose", n_folds=2, split_seed=0, seed=1, batch_size=4)
     dm.prepare_data()
     dm.setup()
@@ -121,13 +121,13 @@ def test_anny_datamodule_pairs_share_each_subjects_canonical(tmp_path):
     te = {r["subject"] for r in dm.splits["test"]}
     assert te and not te & {r["subject"] for r in dm.splits["train"]}
     # a second training seed keeps the people and the split (split_seed, body_seed)
-    dm2 = CanonicalDataModule(str(tmp_path / "anny"), source="anny", n_subjects=4, n_poses=4, image_size=48,
+    dm2 = CanonicalDataModule.from_flat(str(tmp_path / "anny"), source="anny", n_subjects=4, n_poses=4, image_size=48,
                               split="subject_pose", n_folds=2, split_seed=0, seed=2, batch_size=4)
     assert dm2.config_hash() == dm.config_hash()
     dm2.setup()
     assert dm2.splits["test"] == dm.splits["test"]
-    # phenotype targets (task.phenotype_weight) come from the same draw, not from a new cache
-    dm3 = CanonicalDataModule(str(tmp_path / "anny"), source="anny", n_subjects=4, n_poses=4, image_size=48,
+    # phenotype targets (task.phenotype.weight) come from the same draw, not from a new cache
+    dm3 = CanonicalDataModule.from_flat(str(tmp_path / "anny"), source="anny", n_subjects=4, n_poses=4, image_size=48,
                               split="subject_pose", n_folds=2, split_seed=0, seed=1, batch_size=4,
                               phenotype_targets=True)
     assert dm3.config_hash() == dm.config_hash()
@@ -181,7 +181,7 @@ def test_faust_and_sumner_errors_name_the_folder(tmp_path):
         posesets.index_sumner(tmp_path)
     tosca.write_off(tmp_path / "subject0_pose1.off", v, f)
     with pytest.raises(DataError, match="no canonical pose 0 for subject"):
-        CanonicalDataModule(str(tmp_path / "c"), source="faust", root=str(tmp_path), image_size=32).source
+        CanonicalDataModule.from_flat(str(tmp_path / "c"), source="faust", root=str(tmp_path), image_size=32).source
 
 
 def test_sumner_reference_is_pose_zero(tmp_path):
@@ -205,7 +205,7 @@ def test_depth_is_scale_free_and_split_all_tests_every_item(tmp_path):
             for p in range(3):
                 v, f = _blob(seed=10 * s + p)
                 tosca.write_off(tmp_path / root / f"subject{s}_pose{p}.off", v * scale + shift, f)
-    dms = [CanonicalDataModule(str(tmp_path / f"cache_{r}"), source="faust", root=str(tmp_path / r),
+    dms = [CanonicalDataModule.from_flat(str(tmp_path / f"cache_{r}"), source="faust", root=str(tmp_path / r),
                                image_size=48, split="all", n_folds=1, batch_size=16) for r in ("m", "unit")]
     for dm in dms:
         dm.prepare_data()

@@ -1,4 +1,4 @@
-"""The subject classifier (task.identity_weight) and the phenotype regression (task.phenotype_weight)
+"""The subject classifier (task.identity.weight) and the phenotype regression (task.phenotype.weight)
 on the MSFE latent: wired into the loss and the encoder, learn their targets, refuse settings they
 cannot serve."""
 import pytest
@@ -23,8 +23,8 @@ def _batch(n=8, size=32, classes=4):
 
 def test_identity_loss_reaches_the_encoder_and_learns_the_subjects(compose_cfg):
     torch.manual_seed(0)
-    task = CanonicalTask(net=_net(compose_cfg), mask_loss="bce", use_phases=False, identity_weight=1.0,
-                         identity_classes=4)
+    task = CanonicalTask(net=_net(compose_cfg), mask_loss="bce", phases={"use": False},
+                         identity={"weight": 1.0, "classes": 4})
     batch = _batch()
     latent = task.net(batch["depth"], batch["mask"]).latent
     assert latent.shape == (8, task.identity_head.in_features)
@@ -47,25 +47,25 @@ def test_identity_loss_reaches_the_encoder_and_learns_the_subjects(compose_cfg):
 
 
 def test_identity_settings_are_checked(compose_cfg):
-    with pytest.raises(ValueError, match="identity_classes >= 2"):
-        CanonicalTask(net=_net(compose_cfg), identity_weight=1.0, identity_classes=0)
+    with pytest.raises(ValueError, match="task.identity.classes >= 2"):
+        CanonicalTask(net=_net(compose_cfg), identity={"weight": 1.0, "classes": 0})
     with pytest.raises(ValueError, match="arch=unet"):
-        CanonicalTask(net=_net(compose_cfg), arch="unet", identity_weight=1.0, identity_classes=4)
-    task = CanonicalTask(net=_net(compose_cfg), identity_weight=1.0, identity_classes=2)
+        CanonicalTask(net=_net(compose_cfg), arch="unet", identity={"weight": 1.0, "classes": 4})
+    task = CanonicalTask(net=_net(compose_cfg), identity={"weight": 1.0, "classes": 2})
     batch = _batch(classes=4)
-    with pytest.raises(ValueError, match="subject index 3 outside identity_classes=2"):
+    with pytest.raises(ValueError, match="subject index 3 outside identity.classes=2"):
         task._identity_loss(task.net(batch["depth"], batch["mask"]).latent, batch["subject_idx"])
     assert CanonicalTask(net=_net(compose_cfg)).identity_head is None  # off by default
 
 
 def _step_losses(compose_cfg, batch, weights, **task_kw):
-    """``({weight: training_step loss}, the last task)``: one task per weight (``task_kw`` names the weight
-    with ``{w}``), same seed, the same batch."""
+    """``({weight: training_step loss}, the last task)``: one task per weight (``task_kw``: objective nodes, one
+    of which names the weight with ``{w}``), same seed, the same batch."""
     losses = {}
     for w in weights:
         torch.manual_seed(0)
-        task = CanonicalTask(net=_net(compose_cfg), mask_loss="bce", use_phases=False,
-                             **{k: (w if v == "{w}" else v) for k, v in task_kw.items()})
+        task = CanonicalTask(net=_net(compose_cfg), mask_loss="bce", phases={"use": False},
+                             **{k: {f: (w if v == "{w}" else v) for f, v in node.items()} for k, node in task_kw.items()})
         task.log = lambda *a, **k: None  # no trainer here: logging is not what these tests check
         losses[w] = task.training_step(batch, 0)
     return losses, task
@@ -73,7 +73,7 @@ def _step_losses(compose_cfg, batch, weights, **task_kw):
 
 def test_training_step_adds_the_weighted_identity_term(compose_cfg):
     batch = _batch()
-    losses, task = _step_losses(compose_cfg, batch, (0.0, 2.0), identity_weight="{w}", identity_classes=4)
+    losses, task = _step_losses(compose_cfg, batch, (0.0, 2.0), identity={"weight": "{w}", "classes": 4})
     ce = task._identity_loss(task.net(batch["depth"], batch["mask"]).latent, batch["subject_idx"])
     assert losses[2.0].item() == pytest.approx(losses[0.0].item() + 2.0 * ce.item(), rel=1e-4)
 
@@ -88,8 +88,8 @@ def _pheno_batch(n=8, size=32):
 
 def test_phenotype_regression_reaches_the_encoder_and_learns_the_shapes(compose_cfg):
     torch.manual_seed(0)
-    task = CanonicalTask(net=_net(compose_cfg), mask_loss="bce", use_phases=False, phenotype_weight=1.0,
-                         phenotype_dims=2)
+    task = CanonicalTask(net=_net(compose_cfg), mask_loss="bce", phases={"use": False},
+                         phenotype={"weight": 1.0, "dims": 2})
     batch = _pheno_batch()
     err = task._phenotype_error(task.net(batch["depth"], batch["mask"]).latent, batch)
     assert err.shape == (8, 2)
@@ -108,14 +108,14 @@ def test_phenotype_regression_reaches_the_encoder_and_learns_the_shapes(compose_
 
 def test_training_step_adds_the_weighted_phenotype_term_and_needs_targets(compose_cfg):
     batch = _pheno_batch()
-    losses, task = _step_losses(compose_cfg, batch, (0.0, 3.0), phenotype_weight="{w}", phenotype_dims=2)
+    losses, task = _step_losses(compose_cfg, batch, (0.0, 3.0), phenotype={"weight": "{w}", "dims": 2})
     mse = task._phenotype_error(task.net(batch["depth"], batch["mask"]).latent, batch).pow(2).mean()
     assert losses[3.0].item() == pytest.approx(losses[0.0].item() + 3.0 * mse.item(), rel=1e-4)
     with pytest.raises(ValueError, match="data.phenotype_targets=true"):
         task.training_step(_batch(), 0)
-    with pytest.raises(ValueError, match="phenotype_dims=3"):
-        bad = CanonicalTask(net=_net(compose_cfg), phenotype_weight=1.0, phenotype_dims=3)
+    with pytest.raises(ValueError, match="task.phenotype.dims=3"):
+        bad = CanonicalTask(net=_net(compose_cfg), phenotype={"weight": 1.0, "dims": 3})
         bad._phenotype_error(bad.net(batch["depth"], batch["mask"]).latent, batch)
-    with pytest.raises(ValueError, match="phenotype_dims >= 1"):
-        CanonicalTask(net=_net(compose_cfg), phenotype_weight=1.0, phenotype_dims=0)
+    with pytest.raises(ValueError, match="task.phenotype.dims >= 1"):
+        CanonicalTask(net=_net(compose_cfg), phenotype={"weight": 1.0, "dims": 0})
     assert CanonicalTask(net=_net(compose_cfg)).phenotype_head is None  # off by default

@@ -43,7 +43,7 @@ def test_non_square_input(small):
 
 def test_ablation_switches_drop_components_and_still_train(small):
     for lfe, msfe in [(True, True), (False, True), (True, False), (False, False)]:
-        net = CanonicalNet(**{**small, "use_lfe": lfe, "use_msfe": msfe})
+        net = CanonicalNet(**{**small, "lfe": {**small["lfe"], "use": lfe}, "msfe": {**small["msfe"], "use": msfe}})
         assert (net.lfe is not None) == lfe and (net.msfe is not None) == msfe
         d = torch.rand(2, 1, 32, 32)
         out = net(d, (d > 0.5).float())
@@ -109,9 +109,9 @@ def test_he_init_fits_training_pairs_that_the_default_init_does_not(compose_cfg,
     from datamodules.canonical import CanonicalDataModule
     from lit3d.canonical.losses import canonical_loss
 
-    net_cfg = OmegaConf.to_container(compose_cfg(["task=canonical", "task.net.image_size=64", "task.net.head=redraw"]).task.net,
+    net_cfg = OmegaConf.to_container(compose_cfg(["task=canonical", "task.net.image_size=64", "task.net.head.kind=redraw"]).task.net,
                                      resolve=True)
-    dm = CanonicalDataModule(str(tmp_path / "data"), image_size=64, n_subjects=6, n_poses=4, mesh_resolution=24,
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "data"), image_size=64, n_subjects=6, n_poses=4, mesh_resolution=24,
                              n_folds=2, kinds=["humanoid", "quadruped"], seed=1, split="pose", view_mode="broadside")
     dm.prepare_data()
     dm.setup()

@@ -19,7 +19,7 @@ def _dm(tmp_path, fold=0, **kw):
     args = dict(image_size=32, n_subjects=4, n_poses=3, mesh_resolution=16, n_folds=3, batch_size=4,
                 kinds=["humanoid", "quadruped"], seed=1, split="pose", val_per_subject=1, fold=fold)
     args.update(kw)
-    dm = CanonicalDataModule(str(tmp_path / "data"), **args)
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "data"), **args)
     dm.prepare_data()
     dm.setup()
     return dm

@@ -10,7 +10,7 @@ from datamodules.canonical import CanonicalDataModule, DataError, tosca
 
 
 def _synth(path, **kw):
-    return CanonicalDataModule(str(path), image_size=32, n_subjects=4, n_poses=3, mesh_resolution=24, n_folds=2,
+    return CanonicalDataModule.from_flat(str(path), image_size=32, n_subjects=4, n_poses=3, mesh_resolution=24, n_folds=2,
                                kinds=["humanoid", "quadruped"], seed=1, flow_targets=True, own_poses=1, **kw)
 
 
@@ -39,7 +39,7 @@ def test_a_bad_mesh_file_stops_the_workers_with_its_name(tmp_path):
             tosca.write_off(root / f"{cls}{pose}.off", cap.vertices * (1 + 0.1 * pose), cap.faces)
     text = (root / "dog1.off").read_text().splitlines()
     (root / "dog1.off").write_text("\n".join(text[: len(text) // 3]))  # a truncated download
-    dm = CanonicalDataModule(str(tmp_path / "c"), source="tosca", root=str(root), image_size=32, split="pose",
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "c"), source="tosca", root=str(root), image_size=32, split="pose",
                              n_folds=2, prepare_workers=2)
     with pytest.raises(DataError, match="dog1"):
         dm.prepare_data()

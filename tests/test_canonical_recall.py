@@ -27,8 +27,8 @@ def _batch(n=16, classes=K, size=SIZE):
 
 def _task(**kw):
     return CanonicalTask(net={"image_size": SIZE, "recall_channels": [8, 16], "init": "he"}, arch="recall",
-                         identity_classes=K, identity_weight=1.0, use_phases=False, alpha=1.0, beta=1.0,
-                         mask_loss="bce", **kw)
+                         mask_loss="bce", identity={"classes": K, "weight": 1.0},
+                         phases={"use": False, "alpha": 1.0, "beta": 1.0}, **kw)
 
 
 def test_recall_learns_the_subjects_and_draws_their_canonical_images():
@@ -62,22 +62,22 @@ def test_recall_learns_the_subjects_and_draws_their_canonical_images():
 
 def test_recall_settings_and_templates_are_checked():
     with pytest.raises(ValueError, match="n_subjects >= 2"):
-        CanonicalTask(net={"image_size": SIZE, "recall_channels": [8]}, arch="recall", identity_classes=0)
+        CanonicalTask(net={"image_size": SIZE, "recall_channels": [8]}, arch="recall", identity={"classes": 0})
     net = SubjectRecallNet(K, SIZE, (8,))
     with pytest.raises(ValueError, match=r"depth has shape \(3, 1, 32, 32\), expected \(4, 1, 32, 32\)"):
         net.set_templates(torch.zeros(3, 1, SIZE, SIZE), torch.zeros(3, 1, SIZE, SIZE))
     task = _task()
     batch, _, _ = _batch(classes=K + 1)
-    with pytest.raises(ValueError, match="subject index 4 outside identity_classes=4"):
+    with pytest.raises(ValueError, match="subject index 4 outside identity.classes=4"):
         task._identity_loss(task.net(batch["depth"], batch["mask"]).latent, batch["subject_idx"])
 
 
 def test_fit_fills_the_templates_from_training_data_and_the_checkpoint_keeps_them(tmp_path):
     pl.seed_everything(0, workers=True)
-    dm = CanonicalDataModule(str(tmp_path / "data"), image_size=SIZE, n_subjects=3, n_poses=6, mesh_resolution=24,
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "data"), image_size=SIZE, n_subjects=3, n_poses=6, mesh_resolution=24,
                              n_folds=3, batch_size=8, kinds=["humanoid"], split="pose", seed=0)
-    task = CanonicalTask(net={"image_size": SIZE, "recall_channels": [8, 16]}, arch="recall", identity_classes=3,
-                         identity_weight=1.0, use_phases=False, mask_loss="bce")
+    task = CanonicalTask(net={"image_size": SIZE, "recall_channels": [8, 16]}, arch="recall", mask_loss="bce",
+                         identity={"classes": 3, "weight": 1.0}, phases={"use": False})
     tr = pl.Trainer(max_epochs=1, logger=False, enable_progress_bar=False, enable_model_summary=False,
                     accelerator="cpu", num_sanity_val_steps=0, default_root_dir=str(tmp_path))
     tr.fit(task, dm)

@@ -126,7 +126,7 @@ def test_write_figures_one_contact_sheet_per_test_subject(tmp_path, compose_cfg)
     from lit3d.canonical.module import CanonicalTask
 
     S = 32
-    dm = CanonicalDataModule(str(tmp_path / "data"), image_size=S, n_subjects=6, n_poses=6, mesh_resolution=20,
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "data"), image_size=S, n_subjects=6, n_poses=6, mesh_resolution=20,
                              n_folds=3, kinds=["humanoid"], seed=0)
     dm.prepare_data()
     dm.setup()

@@ -29,7 +29,7 @@ def test_zero_flow_splat_reproduces_its_input_exactly():
 
 
 def test_untrained_splat_net_returns_its_input(compose_cfg):
-    net_cfg = OmegaConf.to_container(compose_cfg(["experiment=canonical_tiny", "task.net.head=splat"]).task.net,
+    net_cfg = OmegaConf.to_container(compose_cfg(["experiment=canonical_tiny", "task.net.head.kind=splat"]).task.net,
                                      resolve=True)
     net = build_canonical_net({"kind": "canonical", **net_cfg})
     assert isinstance(net.head, SplatHead)

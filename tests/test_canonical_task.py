@@ -11,6 +11,7 @@ from datamodules.canonical import CanonicalDataModule
 from omegaconf import OmegaConf
 
 from lit3d.canonical import evaluator
+from lit3d.canonical.checkpoint_upgrade import upgrade_hparams
 from lit3d.canonical.module import CanonicalTask, validation_retrieval
 from lit3d.canonical.warp_loss import warp_terms
 from lit3d.cli.common import build_datamodule, build_task
@@ -45,7 +46,7 @@ def _train(tmp_path, net, epochs, retrieval=None, size=48, n=9, mesh_resolution=
     """Fit and test on synthetic humanoids; returns (task, datamodule, test metrics + evaluator protocol
     with the evaluation settings ``retrieval``, ``mesh_baselines``, ``baseline_max_vertices``)."""
     pl.seed_everything(0, workers=True)
-    dm = CanonicalDataModule(str(tmp_path / "data"), image_size=size, n_subjects=n, n_poses=n,
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "data"), image_size=size, n_subjects=n, n_poses=n,
                              mesh_resolution=mesh_resolution, n_folds=3, batch_size=8, kinds=["humanoid"], seed=0)
     task = CanonicalTask(net=net(size), **task_kw)
     settings = _settings(retrieval, mesh_baselines, baseline_max_vertices)
@@ -109,10 +110,10 @@ def test_tiny_run_scores_mesh_baselines_and_a_unet_run_under_its_source(tmp_path
 def test_config_builds_task_and_data(compose_cfg):
     cfg = compose_cfg(["experiment=canonical_demo"])
     task = build_task(cfg.task)
-    assert isinstance(task, CanonicalTask) and task.hparams.use_lfe and task.hparams.use_phases
+    assert isinstance(task, CanonicalTask) and task.net.lfe is not None and task.phases.use
     dm = build_datamodule(cfg.data)
-    assert isinstance(dm, CanonicalDataModule) and dm.hparams.image_size == 64 and dm.hparams.val_poses == "own"
-    off = compose_cfg(["experiment=canonical_demo", "task.use_lfe=false", "task.use_phases=false"])
+    assert isinstance(dm, CanonicalDataModule) and dm.hparams.image_size == 64 and dm.split.val_poses == "own"
+    off = compose_cfg(["experiment=canonical_demo", "task.net.lfe.use=false", "task.phases.use=false"])
     t2 = build_task(off.task)
     assert t2.net.lfe is None and t2.configure_callbacks() == []
 
@@ -150,8 +151,8 @@ def test_checkpoint_loads_with_weights_only(tmp_path, tiny_net):
     torch.save(ckpt, tmp_path / "old.ckpt")
     assert isinstance(CanonicalTask.load_from_checkpoint(tmp_path / "old.ckpt", map_location="cpu",
                                                          weights_only=True), CanonicalTask)
-    with pytest.raises(ValueError, match="task.arch=unet"):
-        CanonicalTask(net=tiny_net(), unet_baseline=True)
+    with pytest.raises(ValueError, match="task.arch=unet"):  # a checkpoint with the removed baseline switch on
+        upgrade_hparams({"net": tiny_net(), "unet_baseline": True})
 
 
 def test_fine_tuning_starts_from_the_pretrained_net(tmp_path, tiny_net):
@@ -163,10 +164,11 @@ def test_fine_tuning_starts_from_the_pretrained_net(tmp_path, tiny_net):
     tr = pl.Trainer(max_epochs=1, logger=False, accelerator="cpu", enable_progress_bar=False)
     tr.strategy.connect(pre)
     tr.save_checkpoint(tmp_path / "pre.ckpt")
-    dm = CanonicalDataModule(str(tmp_path / "data"), image_size=48, n_subjects=6, n_poses=6, mesh_resolution=32,
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "data"), image_size=48, n_subjects=6, n_poses=6, mesh_resolution=32,
                              n_folds=3, batch_size=4, kinds=["humanoid"], seed=0)
-    tuned = CanonicalTask(net=tiny_net(), init_weights=str(tmp_path / "pre.ckpt"), lr=1e-5, mask_loss="bce")
-    fresh = CanonicalTask(net=tiny_net(), lr=1e-5, mask_loss="bce")
+    tuned = CanonicalTask(net=tiny_net(), init_weights=str(tmp_path / "pre.ckpt"), mask_loss="bce",
+                          optimizer={"lr": 1e-5})
+    fresh = CanonicalTask(net=tiny_net(), mask_loss="bce", optimizer={"lr": 1e-5})
     for task in (tuned, fresh):
         pl.Trainer(max_epochs=1, limit_train_batches=1, logger=False, enable_checkpointing=False, enable_progress_bar=False,
                    enable_model_summary=False, accelerator="cpu", num_sanity_val_steps=0,
@@ -176,7 +178,8 @@ def test_fine_tuning_starts_from_the_pretrained_net(tmp_path, tiny_net):
         return max(float((a - b).detach().abs().max()) for a, b in zip(task.net.parameters(), pre.net.parameters()))
 
     assert gap(tuned) < 1e-3 < 0.05 < gap(fresh)  # Adam at lr 1e-5: one step moves a weight by about 1e-5
-    other = dict(tiny_net(), lfe_out=tiny_net()["lfe_out"] + 1)
+    net = tiny_net()
+    other = {**net, "lfe": {**net["lfe"], "out": net["lfe"]["out"] + 1}}
     with pytest.raises(ValueError, match=r"pre\.ckpt: not a pretrained net for this one"):
         CanonicalTask(net=other).load_initial_weights(str(tmp_path / "pre.ckpt"))
 
@@ -185,8 +188,9 @@ def test_warp_terms_join_the_loss_with_their_weights(tiny_net):
     """The warp head's terms: flow, visibility and smoothness always, the depth offset's total variation
     only with offset_smooth_weight > 0, the depth's slope only with depth_grad_weight > 0, each times its weight."""
     torch.manual_seed(0)
-    kw = dict(net={**tiny_net(), "head": "warp"}, use_phases=False, alpha=1.0, beta=1.0, flow_weight=2.0,
-              vis_weight=3.0, smooth_weight=4.0)
+    net = tiny_net()
+    kw = dict(net={**net, "head": {**net["head"], "kind": "warp"}}, phases={"use": False, "alpha": 1.0, "beta": 1.0},
+              warp={"flow_weight": 2.0, "vis_weight": 3.0, "smooth_weight": 4.0})
     batch = {"depth": torch.rand(2, 1, 48, 48), "canon_depth": torch.rand(2, 1, 48, 48),
              "flow": torch.randn(2, 2, 48, 48), "has_flow": torch.tensor([True, False])}
     batch["mask"] = (batch["depth"] > 0.3).float()
@@ -209,13 +213,13 @@ def test_warp_terms_join_the_loss_with_their_weights(tiny_net):
                                                                batch["canon_mask"]).detach())}
     for name, (weight, term) in optional.items():
         assert float(term) > 0, name
-        task = CanonicalTask(**kw, **{name: weight})
+        task = CanonicalTask(**{**kw, "warp": {**kw["warp"], name: weight}})
         task.load_state_dict(base.state_dict())
         task.log = task.log_dict = lambda *a, **k: None
         got = float(task.training_step(batch, 0).detach())
         assert got == pytest.approx(float(expected + weight * term), rel=1e-5), name
-        with pytest.raises(ValueError, match=rf"task.{name}={weight:g} needs the warp head"):
-            CanonicalTask(**{**kw, "net": {**tiny_net(), "head": "redraw"}}, **{name: weight})  # a term with no effect
+        with pytest.raises(ValueError, match=rf"task.warp.{name}={weight:g} needs the warp head"):  # a term with no effect
+            CanonicalTask(**{**kw, "net": {**tiny_net(), "head": {"kind": "redraw"}}, "warp": {**kw["warp"], name: weight}})
 
 
 def test_validation_retrieval_finds_each_subject_by_its_mask():
@@ -233,7 +237,7 @@ def test_validation_retrieval_finds_each_subject_by_its_mask():
 
 
 def test_cosine_schedule_falls_to_zero_over_the_runs_steps(tiny_net):
-    task = CanonicalTask(net=tiny_net(), lr=2e-3, lr_schedule="cosine")
+    task = CanonicalTask(net=tiny_net(), optimizer={"lr": 2e-3, "schedule": "cosine"})
     task._trainer = SimpleNamespace(estimated_stepping_batches=10)  # what Lightning counts for the fit
     cfg = task.configure_optimizers()
     opt, sched = cfg["optimizer"], cfg["lr_scheduler"]["scheduler"]
@@ -245,7 +249,7 @@ def test_cosine_schedule_falls_to_zero_over_the_runs_steps(tiny_net):
         sched.step()
     assert rates[0] == pytest.approx(2e-3) and rates[5] == pytest.approx(1e-3)  # half-way: half the rate
     assert all(a > b for a, b in zip(rates, rates[1:])) and opt.param_groups[0]["lr"] == pytest.approx(0, abs=1e-12)
-    constant = CanonicalTask(net=tiny_net(), lr=2e-3).configure_optimizers()
+    constant = CanonicalTask(net=tiny_net(), optimizer={"lr": 2e-3}).configure_optimizers()
     assert isinstance(constant, torch.optim.Adam)
-    with pytest.raises(ValueError, match="lr_schedule"):
-        CanonicalTask(net=tiny_net(), lr_schedule="linear")
+    with pytest.raises(ValueError, match="task.optimizer.schedule"):
+        CanonicalTask(net=tiny_net(), optimizer={"schedule": "linear"})

@@ -11,6 +11,7 @@ from omegaconf import OmegaConf
 from datamodules.canonical import CanonicalDataModule
 from datamodules.canonical.flow import flow_targets
 from datamodules.canonical.rendering import PairRenderer
+from datamodules.canonical.settings import RenderSettings
 from datamodules.canonical.sources import AnnySource, SynthSource
 from lit3d.canonical.factory import build_canonical_net
 from lit3d.canonical.nets import UNetTrunk
@@ -19,8 +20,8 @@ from lit3d.canonical.losses import flow_loss
 from lit3d.canonical.warp import AttendFlow, WarpHead, pixels_to_grid, warp_compose, warp_image
 from lit3d.render.depth import render_depth
 
-HP = dict(image_size=96, azimuths=[0.0], view_mode="fixed", scale_mode="shape", skip_bad=False, flow_targets=True,
-          forward_flow=True)
+SIZE = 96
+RENDER = RenderSettings(azimuths=(0.0,), view_mode="fixed", scale_mode="shape", flow_targets=True, forward_flow=True)
 
 
 def _t(a) -> torch.Tensor:
@@ -59,10 +60,10 @@ def test_zero_flow_reproduces_the_posed_input_exactly():
 @pytest.mark.parametrize("reconstruction,parts,steps,attend", [("downup", 0, 1, 0), ("unet", 0, 1, 0), ("downup", 4, 1, 0),
                                                               ("downup", 0, 3, 0), ("downup", 0, 1, 12)])
 def test_untrained_warp_net_returns_its_input(compose_cfg, reconstruction, parts, steps, attend):
-    net_cfg = OmegaConf.to_container(compose_cfg(["experiment=canonical_tiny", "task.net.head=warp",
-                                                  f"task.net.reconstruction={reconstruction}",
-                                                  f"task.net.warp_parts={parts}", f"task.net.warp_attend_grid={attend}",
-                                                  f"task.net.warp_refine_steps={steps}"]).task.net, resolve=True)
+    net_cfg = OmegaConf.to_container(compose_cfg(["experiment=canonical_tiny", "task.net.head.kind=warp",
+                                                  f"task.net.reconstruction.kind={reconstruction}",
+                                                  f"task.net.head.parts={parts}", f"task.net.head.attend_grid={attend}",
+                                                  f"task.net.head.refine_steps={steps}"]).task.net, resolve=True)
     net = build_canonical_net({"kind": "canonical", **net_cfg})
     assert isinstance(net.head, WarpHead)
     assert isinstance(net.reconstruction, UNetTrunk) == (reconstruction == "unet")
@@ -159,12 +160,11 @@ def test_occluded_surface_is_not_visible():
 
 @pytest.mark.parametrize("source", ["synth", "anny"])
 def test_true_flows_reproduce_the_canonical_mask(source):
-    hp = OmegaConf.create(HP)
     src = (SynthSource(["humanoid", "quadruped"], 2, 3, 0, 40, 0, 15.0, 1.0) if source == "synth"
            else AnnySource(1, 3, 0, 0, 15.0, 1.0))
-    size = HP["image_size"]
+    size = SIZE
     for subject in src.subjects():
-        arrays = PairRenderer(src, hp).render_subject(subject)
+        arrays = PairRenderer(src, RENDER, SIZE).render_subject(subject)
         canon = _unpack(arrays["mask_canonical_0"], size)
         for p in arrays["poses"]:
             flow = arrays[f"flow_{p}_0"].astype(np.float32)
@@ -189,7 +189,7 @@ def test_true_flows_reproduce_the_canonical_mask(source):
 
 
 def test_mirrored_pairs_keep_a_true_flow(tmp_path):
-    dm = CanonicalDataModule(str(tmp_path / "data"), image_size=48, n_subjects=3, n_poses=3, mesh_resolution=28,
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "data"), image_size=48, n_subjects=3, n_poses=3, mesh_resolution=28,
                              n_folds=3, batch_size=4, kinds=["humanoid"], seed=1, split="all", flow_targets=True,
                              flip_lr=False)
     dm.prepare_data()
@@ -214,12 +214,12 @@ def test_mirrored_pairs_keep_a_true_flow(tmp_path):
 
 
 def test_cache_without_flows_keeps_its_config(tmp_path):
-    dm = CanonicalDataModule(str(tmp_path / "d"), image_size=32, n_subjects=3, n_poses=3, mesh_resolution=24)
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "d"), image_size=32, n_subjects=3, n_poses=3, mesh_resolution=24)
     assert "flow_targets" not in dm.cache_config()
     # the forward flow is opt-in: without it a flow cache keeps its hash
     kw = dict(image_size=32, n_subjects=3, n_poses=3, mesh_resolution=24, flow_targets=True)
-    flows = CanonicalDataModule(str(tmp_path / "f"), **kw).cache_config()["flow_targets"]
-    both = CanonicalDataModule(str(tmp_path / "b"), forward_flow=True, **kw).cache_config()["flow_targets"]
+    flows = CanonicalDataModule.from_flat(str(tmp_path / "f"), **kw).cache_config()["flow_targets"]
+    both = CanonicalDataModule.from_flat(str(tmp_path / "b"), forward_flow=True, **kw).cache_config()["flow_targets"]
     assert "forward" not in flows and both == flows + "+forward"
 
 
@@ -316,7 +316,7 @@ def test_escape_flow_reads_the_posed_background_where_the_canonical_form_has_non
     moved = _warped_mask(posed, out)
     assert not moved[(canon == 0)].any() and moved[canon > 0].mean() > 0.9
     assert _warped_mask(posed, flow)[(canon == 0) & (posed > 0)].all()  # without it the posed body stays
-    # task.flow_on=image pays it there (a flow already leading off the posed body costs nothing), the other
+    # task.warp.flow_on=image pays it there (a flow already leading off the posed body costs nothing), the other
     # choices do not read the background
     from types import SimpleNamespace
 

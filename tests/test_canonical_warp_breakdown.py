@@ -6,24 +6,26 @@ import torch
 from omegaconf import OmegaConf
 
 from datamodules.canonical.rendering import PairRenderer
+from datamodules.canonical.settings import RenderSettings
 from datamodules.canonical.sources import SynthSource
 from lit3d.canonical.factory import build_canonical_net
 from studies.canonical.warp_breakdown import PICTURE_COLUMNS, ROWS, breakdown, markdown, picture, summarise
 
-HP = dict(image_size=64, azimuths=[0.0], view_mode="fixed", scale_mode="shape", skip_bad=False, flow_targets=True)
+SIZE = 64
+RENDER = RenderSettings(azimuths=(0.0,), view_mode="fixed", scale_mode="shape", flow_targets=True)
 
 
 def _batch() -> dict:
     """Every pose of two procedural figures (a humanoid, a quadruped) at 64², with flow targets."""
     src = SynthSource(["humanoid", "quadruped"], 2, 3, 0, 32, 0, 15.0, 1.0)
-    size = HP["image_size"]
+    size = SIZE
 
     def unpack(a):
         return np.unpackbits(a)[: size * size].reshape(size, size).astype(np.float32)
 
     items = []
     for subject in src.subjects():
-        a = PairRenderer(src, OmegaConf.create(HP)).render_subject(subject)
+        a = PairRenderer(src, RENDER, SIZE).render_subject(subject)
         for p in a["poses"]:
             items.append({"depth": a[f"depth_{p}_0"].astype(np.float32)[None], "mask": unpack(a[f"mask_{p}_0"])[None],
                           "canon_depth": a["depth_canonical_0"].astype(np.float32)[None],
@@ -33,7 +35,7 @@ def _batch() -> dict:
 
 
 def test_breakdown_of_an_untrained_head_and_its_oracle(compose_cfg):
-    cfg = compose_cfg(["experiment=canonical_tiny", "task.net.head=warp", "data.image_size=64"])
+    cfg = compose_cfg(["experiment=canonical_tiny", "task.net.head.kind=warp", "data.image_size=64"])
     net = build_canonical_net({"kind": "canonical", **OmegaConf.to_container(cfg.task.net, resolve=True)}).eval()
     batch = _batch()
     figures = breakdown(net, batch)
@@ -53,7 +55,7 @@ def test_breakdown_of_an_untrained_head_and_its_oracle(compose_cfg):
 
 
 def test_breakdown_refuses_a_net_without_a_warp_head(compose_cfg):
-    cfg = compose_cfg(["experiment=canonical_tiny", "task.net.head=redraw"])
+    cfg = compose_cfg(["experiment=canonical_tiny", "task.net.head.kind=redraw"])
     net = build_canonical_net({"kind": "canonical", **OmegaConf.to_container(cfg.task.net, resolve=True)})
     with pytest.raises(ValueError, match="warp head"):
         breakdown(net, {})

@@ -5,8 +5,8 @@ import torch
 
 
 def test_flow_and_visibility_are_paid_where_asked():
-    """``task.flow_on``: ``visible`` pays the flow only where the posed view shows the point, ``foreground``
-    on every canonical foreground pixel; neither pays the background. ``task.vis_on``: ``image`` pays the
+    """``task.warp.flow_on``: ``visible`` pays the flow only where the posed view shows the point, ``foreground``
+    on every canonical foreground pixel; neither pays the background. ``task.warp.vis_on``: ``image`` pays the
     visibility on the background too (target 0), ``foreground`` does not."""
     from types import SimpleNamespace
 
@@ -45,6 +45,6 @@ def test_flow_and_visibility_are_paid_where_asked():
     batch["fflow"][:, 1, 2:6, 2:6] = -8.0  # 2 grid units upwards on the 16 posed body pixels
     assert float(warp_terms(out, batch, "visible")["flow"]) == pytest.approx(0.0, abs=1e-3)  # none seen: nothing paid
     assert float(warp_terms(out, batch, "foreground")["flow"]) == pytest.approx(2.0, abs=1e-3)
-    # a batch with backward targets only (data.forward_flow=false) cannot teach the splat head: said, not skipped
-    with pytest.raises(ValueError, match="data.forward_flow=true"):
+    # a batch with backward targets only (data.render.forward_flow=false) cannot teach the splat head: said, not skipped
+    with pytest.raises(ValueError, match="data.render.forward_flow=true"):
         warp_terms(out, {k: v for k, v in batch.items() if k not in ("fflow", "fvis")}, "foreground")

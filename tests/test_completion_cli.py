@@ -13,6 +13,7 @@ import torch
 from lit3d.cli.common import UserError
 from lit3d.cli.evaluate import evaluate
 from lit3d.cli.train import train
+from lit3d.utils.tables import fmt
 
 REPO = Path(__file__).resolve().parents[1]
 TINY = [
@@ -82,12 +83,16 @@ def test_train_then_eval_writes_tables_and_figures(compose_cfg, data_dir, tmp_pa
     # checkpoints load with torch's safe loader, and carry the evaluation settings the test used
     saved = torch.load(best[0], map_location="cpu", weights_only=True)
     assert saved["lit3d"]["evaluation"]["surface"]["points"] == 2000 and "test/same/chamfer_l1" in metrics
+    # the tested (best) weights' validation IoU, as lit3d-eval measures it, in metrics.json and results.md
+    assert metrics["val/iou"] == pytest.approx(metrics["monitored_value"])
+    assert f"(validation IoU {fmt(metrics['val/iou'])})." in (run / "results.md").read_text()
 
     ecfg = compose_cfg([f"ckpt_path={best[0]}", "task=completion"], config_name="eval", data_dir=data_dir)
     emetrics = evaluate(ecfg)
     out = Path(ecfg.paths.output_dir)
     assert (out / "metrics.json").is_file() and "test/same/iou" in emetrics
     assert "test/same/chamfer_l1" in emetrics  # evaluation.surface: the checkpoint's, set up before the test
+    assert emetrics["val/iou"] == pytest.approx(metrics["val/iou"], abs=1e-6)  # the same weights, the same number
     text = (out / "results.md").read_text()
     assert "Tables 3.1 / 3.2" in text and "(thesis 3.2)" in text and "lit3d, multi-category (ours)" in text
     assert list(out.glob("completion_*.png"))
@@ -170,8 +175,10 @@ def test_data_cli_prints_manifest_and_writes_png(data_dir, tmp_path):
     out = tmp_path / "data_run"
     res = _run([bin_path("lit3d-data"), *TINY, f"paths.data_dir={data_dir}", f"hydra.run.dir={out}", "--show", "4"], REPO)
     assert res.returncode == 0, res.stderr[-3000:]
-    assert "manifest" in res.stdout
-    assert (out / "completion_samples.png").is_file()
+    info = json.loads(res.stdout)  # stdout is the JSON alone (log and "wrote" lines on stderr): `> file.json` works
+    assert "manifest_hash" in info
+    assert json.loads((out / "data_summary.json").read_text()) == info  # the same JSON in the run dir
+    assert (out / "completion_samples.png").is_file() and "completion_samples.png" in res.stderr
 
 
 def test_missing_data_root_is_one_line(tmp_path):

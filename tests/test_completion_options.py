@@ -12,20 +12,9 @@ from torch.utils.data import DataLoader
 
 from lit3d.completion.losses import critic_loss, gradient_penalty
 from lit3d.completion.module import CompletionTask
-from tests.test_step_cost import tiny_nets
+from tests.completion_helpers import grid_pair, tiny_nets, tiny_task
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
-
-
-def _data(batch: int = 2, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
-    g = torch.Generator().manual_seed(seed)
-    y = (torch.rand(batch, 1, 32, 32, 32, generator=g) < 0.2).float()
-    return torch.nn.functional.max_pool3d(y, 4), y
-
-
-def _task(nets: dict, **kw) -> CompletionTask:
-    torch.manual_seed(0)
-    return CompletionTask(nets=tiny_nets(nets), **kw)
 
 
 def _critic_grads(task: CompletionTask) -> list[torch.Tensor]:
@@ -38,8 +27,8 @@ def test_options_are_off_by_default_in_the_config():
 
 
 def test_gp_every_1_is_the_critic_loss_of_before(completion_demo_nets):
-    task = _task(completion_demo_nets)
-    x, y = _data()
+    task = tiny_task(completion_demo_nets)
+    x, y = grid_pair()
     torch.manual_seed(5)
     loss, logs = task.critic_objective(x, y, with_penalty=True)
     loss.backward()
@@ -57,8 +46,8 @@ def test_gp_every_1_is_the_critic_loss_of_before(completion_demo_nets):
 
 
 def test_gp_every_2_weighs_the_penalty_twice_and_skips_it_otherwise(completion_demo_nets):
-    task = _task(completion_demo_nets, gp_every=2)
-    x, y = _data()
+    task = tiny_task(completion_demo_nets, gp_every=2)
+    x, y = grid_pair()
     torch.manual_seed(5)
     with_gp, logs = task.critic_objective(x, y, with_penalty=True)
     without, logs_no = task.critic_objective(x, y, with_penalty=False)
@@ -71,7 +60,7 @@ def test_gp_every_2_weighs_the_penalty_twice_and_skips_it_otherwise(completion_d
 
 
 def test_gp_every_2_computes_the_penalty_on_alternate_critic_updates(completion_demo_nets):
-    task = _task(completion_demo_nets, gp_every=2, critic_steps=1)
+    task = tiny_task(completion_demo_nets, gp_every=2, critic_steps=1)
     calls = []
     penalty = task.critic_penalty
 
@@ -82,7 +71,7 @@ def test_gp_every_2_computes_the_penalty_on_alternate_critic_updates(completion_
     task.critic_penalty = spy
     batches = []
     for i in range(4):
-        x, y = _data(seed=i)
+        x, y = grid_pair(seed=i)
         batches.append({"input": x, "target": y, "label": torch.tensor([0, 1]), "category": ["bench", "chair"]})
     trainer = pl.Trainer(accelerator="cpu", max_epochs=1, limit_val_batches=0, logger=False, enable_checkpointing=False,
                          enable_progress_bar=False, enable_model_summary=False)
@@ -96,12 +85,12 @@ def test_gp_every_below_1_is_refused(completion_demo_nets):
 
 
 def test_critic_concat_gives_the_two_passes_scores_and_gradients(completion_demo_nets):
-    two, one = _task(completion_demo_nets), _task(completion_demo_nets, critic_concat=True)
+    two, one = tiny_task(completion_demo_nets), tiny_task(completion_demo_nets, critic_concat=True)
     one.critic.load_state_dict(two.critic.state_dict())
     with torch.no_grad():  # a non-zero attention weight, so the attention counts
         for t in (one, two):
             t.critic.attn.gamma.fill_(0.5)
-    x, y = _data()
+    x, y = grid_pair()
     fake = torch.rand_like(y)
     grads = []
     for task in (two, one):

@@ -149,7 +149,7 @@ def test_summary_gives_the_line_train_gives(overrides, compose_cfg, capsys, monk
 def test_summary_of_nets_that_cannot_run_at_their_size(compose_cfg, capsys, monkeypatch):
     """Six pooling levels on a 48^2 image: the meta forward's shape error as one line."""
     monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
-    line = _summary_line(compose_cfg, capsys, ["experiment=canonical_tiny", "task.net.lfe_channels=[4,4,4,4,4,4]"])
+    line = _summary_line(compose_cfg, capsys, ["experiment=canonical_tiny", "task.net.lfe.channels=[4,4,4,4,4,4]"])
     assert line.startswith("error: task config: the nets do not run at these sizes (") and "too small" in line, line
 
 
@@ -157,8 +157,8 @@ def test_splat_head_without_the_forward_flow_is_one_config_error(compose_cfg):
     """Valid values that do not go together: the splat head with a flow cache lacking the forward flow."""
     from lit3d.cli.config_checks import ConfigValueError, check_config_values
 
-    base = ["experiment=canonical_tiny", "task.net.head=splat", "data.flow_targets=true"]
-    with pytest.raises(ConfigValueError, match=r"task.net.head=splat .*expected data.forward_flow=true"):
+    base = ["experiment=canonical_tiny", "task.net.head.kind=splat", "data.render.flow_targets=true"]
+    with pytest.raises(ConfigValueError, match=r"task.net.head.kind=splat .*expected data.render.forward_flow=true"):
         check_config_values(compose_cfg(base))
-    check_config_values(compose_cfg([*base, "data.forward_flow=true"]))
-    check_config_values(compose_cfg(["experiment=canonical_tiny", "task.net.head=warp", "data.flow_targets=true"]))
+    check_config_values(compose_cfg([*base, "data.render.forward_flow=true"]))
+    check_config_values(compose_cfg(["experiment=canonical_tiny", "task.net.head.kind=warp", "data.render.flow_targets=true"]))

@@ -63,9 +63,9 @@ def test_config_errors_become_one_line_and_bugs_keep_their_traceback():
     from datamodules.cache import DataError
 
     def bad_value():
-        raise DataError("data.n_poses=0: need at least one pose")
+        raise DataError("data.source.n_poses=0: need at least one pose")
 
-    with pytest.raises(UserError, match="data config: data.n_poses=0"):
+    with pytest.raises(UserError, match="data config: data.source.n_poses=0"):
         _construct("data", bad_value)
     with pytest.raises(UserError, match="task config: .*unexpected keyword argument 'widht'"):
         _construct("task", lambda: _Net(widht=3))

@@ -116,7 +116,7 @@ def test_a_checkpoint_from_before_the_node_evaluates_with_its_task_hparams(train
         evaluate(_eval_cfg(path, tmp_path / "eval"))
     assert recorded == [{**EVALUATION_LEGACY, **legacy}]  # keys it lacks: the constructor's defaults then
     assert "task hyper-parameters" in caplog.text
-    with pytest.raises(ValueError, match="unexpected keyword argument 'retreival'"):
+    with pytest.raises(TypeError, match="unexpected keyword argument 'retreival'"):
         CanonicalTask(net=old["hyper_parameters"]["net"], retreival=None)  # a misspelt key is still an error
 
 

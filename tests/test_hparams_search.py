@@ -67,9 +67,9 @@ def test_two_optuna_trials_of_a_tiny_config(tmp_path):
     trials = [json.loads((sweep / str(i) / "metrics.json").read_text()) for i in range(2)]
     assert all(t["monitor"] == "val/depth_mse" for t in trials)
     assert best["best_value"] == pytest.approx(min(t["monitored_value"] for t in trials))  # minimised
-    assert set(best["best_params"]) == {"task.lr", "task.net.warp_hidden"}
+    assert set(best["best_params"]) == {"task.optimizer.lr", "task.net.head.hidden"}
     lrs = {next(o for o in yaml.safe_load((sweep / str(i) / ".hydra" / "overrides.yaml").read_text())
-                if o.startswith("task.lr=")) for i in range(2)}
+                if o.startswith("task.optimizer.lr=")) for i in range(2)}
     assert len(lrs) == 2  # the sampler proposed two settings
     assert all((sweep / str(i) / "curves.png").is_file() for i in range(2))
 

@@ -25,6 +25,17 @@ def test_gaussian_kernel_is_the_textbook_gaussian(window, sigma):
     assert np.abs(k.numpy() - g / g.sum()).max() < 1e-15
 
 
+def test_gaussian_kernel1d_is_made_once_and_handed_out_as_copies():
+    """Made once per (window, sigma): bit-identical to kornia's, and each call gets its own copy (changing one
+    leaves the next intact)."""
+    from kornia.filters import get_gaussian_kernel1d
+
+    first = im.gaussian_kernel1d(11, 1.5)
+    assert torch.equal(first, get_gaussian_kernel1d(11, 1.5, dtype=torch.float64)[0])
+    first.zero_()
+    assert torch.equal(im.gaussian_kernel1d(11, 1.5), get_gaussian_kernel1d(11, 1.5, dtype=torch.float64)[0])
+
+
 @pytest.mark.parametrize("padding,mode", [("symmetric", "reflect"), ("reflect", "mirror"),
                                           ("replicate", "nearest"), ("zeros", "constant")])
 def test_separable_filter_matches_scipy_borders(padding, mode):

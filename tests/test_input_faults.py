@@ -301,3 +301,22 @@ def test_bad_paths_are_named_for_what_they_are(tmp_path):
                        ("nothing.png", "no such file")):
         with pytest.raises(InputError, match=what):
             read_depth(tmp_path / name)
+
+
+def test_float_millimetres_are_refused_as_a_unit_mistake(tmp_path, cli):
+    """Float depth is metres; float millimetres (a person at 2800) were read as 2.8 km: the body fit wrote a
+    person 2.8 km away with only a "poor fit" warning, the completion an object as far. Now one line names
+    the file, the median and the fix; float metres and integer millimetres of the same scene are read."""
+    depth = np.zeros((24, 32), np.float32)
+    depth[6:18, 8:24] = 2.8
+    np.save(tmp_path / "metres.npy", depth)
+    np.save(tmp_path / "millimetres.npy", depth * 1000)
+    code, lines = cli(tmp_path / "millimetres.npy", tmp_path / "metres.npy", "--out", tmp_path / "out")
+    assert code == 2 and _errors(lines)[0] == (
+        f"lit3d-reconstruct: error: {tmp_path / 'millimetres.npy'}: float depth is read as metres, and the depth's "
+        "median is 2800 m, more than 100 m (millimetres?); float depth must be metres: divide by 1000, or save "
+        "integer millimetres (a uint16 PNG or .npy)"), lines
+    assert (tmp_path / "out" / "metres.obj").is_file() and not (tmp_path / "out" / "millimetres.obj").exists()
+    with pytest.raises(InputError, match=r"depth_scale 1 m, and the depth's median is 2800 m"):
+        from lit3d.reconstruct.depth_io import depth_from_array
+        depth_from_array(np.round(depth * 1000).astype(np.uint16), "d.npy", depth_scale=1.0)

@@ -169,7 +169,7 @@ def test_a_stopped_canonical_preparation_counts_its_subjects(tmp_path, monkeypat
     """The canonical data's stop line says "N of M items done" like the completion data's (M: the subjects)."""
     from datamodules.canonical import CanonicalDataModule
 
-    dm = CanonicalDataModule(str(tmp_path / "c"), image_size=32, n_subjects=3, n_poses=2, mesh_resolution=16, n_folds=2)
+    dm = CanonicalDataModule.from_flat(str(tmp_path / "c"), image_size=32, n_subjects=3, n_poses=2, mesh_resolution=16, n_folds=2)
     render, calls = CanonicalDataModule._render_subject, []
 
     def render_then_ctrl_c(self, subject):

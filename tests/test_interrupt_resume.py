@@ -37,15 +37,15 @@ REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 
 # canonical demo at 32^2 with tiny nets: 6 subjects x 6 poses, 3 folds -> 16 train pairs = 4 batches
-# (the old mixed validation rule, data.val_subjects=null, keeps 4 subjects for training)
+# (the old mixed validation rule, data.split.val_subjects=null, keeps 4 subjects for training)
 CANONICAL = [
-    "experiment=canonical_demo", "data.image_size=32", "data.n_subjects=6", "data.n_poses=6", "data.val_subjects=null",
-    "data.mesh_resolution=20", "data.kinds=[humanoid]", "data.batch_size=4", "task.net.image_size=32",
-    "task.net.lfe_channels=[8,12,16]", "task.net.msfe_channels=[6,6,4]", "task.net.msfe_grid=6",
-    "task.net.fuser_hidden=64", "task.net.fuser_out=48", "task.net.msfe_dec_channels=[32,16,12,8,8,8]",
-    "task.net.rec_channels=[12,16,24]", "evaluation.retrieval=null",
+    "experiment=canonical_demo", "data.image_size=32", "data.source.n_subjects=6", "data.source.n_poses=6", "data.split.val_subjects=null",
+    "data.source.mesh_resolution=20", "data.source.kinds=[humanoid]", "data.batch_size=4", "task.net.image_size=32",
+    "task.net.lfe.channels=[8,12,16]", "task.net.msfe.channels=[6,6,4]", "task.net.msfe.grid=6",
+    "task.net.msfe.fuser_hidden=64", "task.net.msfe.fuser_out=48", "task.net.msfe.dec_channels=[32,16,12,8,8,8]",
+    "task.net.reconstruction.channels=[12,16,24]", "evaluation.retrieval=null",
     "evaluation.mesh_baselines=[]", "task.mask_loss=bce", "test_after_fit=false", "callbacks.progress_bar=null",
-    "+trainer.limit_val_batches=0", "data.own_poses=0", "data.val_poses=training", "data.prepare_workers=0",
+    "+trainer.limit_val_batches=0", "data.source.own_poses=0", "data.split.val_poses=training", "data.prepare_workers=0",
 ]
 CANONICAL_STEPS_PER_EPOCH = 4
 PHASES = [{"start": 0, "alpha": 10.0, "beta": 1000.0}, {"start": 1, "alpha": 1000.0, "beta": 1000.0},
@@ -53,7 +53,7 @@ PHASES = [{"start": 0, "alpha": 10.0, "beta": 1000.0}, {"start": 1, "alpha": 100
 
 
 def _phases_override(phases: list[dict]) -> str:
-    return "task.phases=[" + ",".join("{" + ",".join(f"{k}:{v}" for k, v in p.items()) + "}" for p in phases) + "]"
+    return "task.phases.weights=[" + ",".join("{" + ",".join(f"{k}:{v}" for k, v in p.items()) + "}" for p in phases) + "]"
 
 
 # completion demo nets (64^3) on 16 synthetic training items: 4 batches of 4; the critic from step 0,
@@ -117,10 +117,11 @@ def canonical_data(tmp_path_factory) -> Path:
 def test_sigterm_saves_last_and_resume_continues_canonical(tmp_path, canonical_data):
     run = tmp_path / "run"
     per_epoch = 8  # batches of 2: a SIGTERM mostly lands mid-epoch (the case Lightning resumes specially)
-    # task.alpha/beta are the constant weights (used without phases): set apart from every phase's,
+    # task.phases.alpha/beta are the constant weights (used without phases): set apart from every phase's,
     # so a resumed step that missed its phase's weights shows in the logged losses
     # the redraw head: its loss is exactly alpha * depth + beta * mask (the warp head adds flow terms)
-    common = [*CANONICAL, "task.net.head=redraw", "data.batch_size=2", "task.alpha=1.0", "task.beta=1.0", "task.phase_unit=epochs",
+    common = [*CANONICAL, "task.net.head.kind=redraw", "data.batch_size=2", "task.phases.alpha=1.0", "task.phases.beta=1.0",
+              "task.phases.unit=epochs",
               "logger=csv", "trainer.log_every_n_steps=1", "callbacks.resume_state.every_n_train_batches=1",
               f"paths.data_dir={canonical_data}", f"hydra.run.dir={run}"]
     last = run / "checkpoints" / "last.ckpt"
@@ -294,7 +295,7 @@ def test_canonical_cache_hash_is_the_same_in_another_process_and_differs_by_seed
 # ----------------------------------------------------------------------------- NaN / Inf losses
 def _overflowing(compose_cfg, canonical_data, mode: str, *extra: str):
     """Canonical training whose weighted loss overflows to Inf at the first step (alpha = 1e39 in float32)."""
-    return compose_cfg([*CANONICAL, "logger=none", "task.use_phases=false", "task.alpha=1e39",
+    return compose_cfg([*CANONICAL, "logger=none", "task.phases.use=false", "task.phases.alpha=1e39",
                         f"task.on_nonfinite={mode}", "trainer.max_epochs=1", *extra], data_dir=canonical_data)
 
 

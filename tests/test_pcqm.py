@@ -153,6 +153,22 @@ def test_subsampled_evaluation_is_deterministic(sphere, monkeypatch):
     assert all(abs(v) < 1e-12 for v in pcqm(p, p, c, c).values())
 
 
+def test_shared_trees_give_the_same_result(sphere, monkeypatch):
+    """Trees built once (lit3d.metrics.pointcloud.kd_tree, as the feature table shares them with PointSSIM):
+    the same result, bit for bit, as PCQM building its own, also when it subsamples; a tree of other points is
+    refused."""
+    from lit3d.metrics.pointcloud import kd_tree
+
+    p, c = sphere
+    q = p + np.random.default_rng(8).normal(0, 0.005, p.shape)
+    d = np.clip(c + np.random.default_rng(9).normal(0, 0.02, c.shape), 0, 1)
+    assert pcqm(p, q, c, d, trees=(kd_tree(p), kd_tree(q))) == pcqm(p, q, c, d)
+    monkeypatch.setattr(pcqm_module, "POINT_BUDGET", 500)
+    assert pcqm(p, q, c, d, trees=(kd_tree(p), kd_tree(q)), workers=1) == pcqm(p, q, c, d, workers=1)
+    with pytest.raises(ValueError, match="not a tree of those points"):
+        pcqm(p, q, c, d, trees=(kd_tree(p), kd_tree(p[:-1])))
+
+
 def test_rgb_to_lab_matches_skimage():
     rng = np.random.default_rng(8)
     rgb = np.concatenate([rng.uniform(size=(2000, 3)), np.eye(3), [[0, 0, 0], [1, 1, 1], [0.02, 0.03, 0.01]]])

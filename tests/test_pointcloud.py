@@ -155,6 +155,56 @@ def test_splat_matches_mesh_render_of_sphere():
     assert dots.median() > 0.98 and both.any()
 
 
+def test_zbuffer_equals_a_bounds_tested_scatter_per_splat_pixel():
+    """lit3d.render.splat.nearest_splats (a margin around each view, a sink for discs that cannot reach the
+    image, the points grouped by radius) against the plain form: every splat pixel of every point scattered
+    with a bounds test. Every radius 0..MAX_RADIUS_PX, centres inside, on the border and far outside the image,
+    equal keys (ties): the same z-buffer, bit for bit."""
+    from lit3d.render.splat import EMPTY, MAX_RADIUS_PX, _disc, nearest_splats
+
+    g = torch.Generator().manual_seed(0)
+    v, n, s = 3, 400, 64
+    row = torch.randint(-30, s + 30, (v, n), generator=g)
+    col = torch.randint(-30, s + 30, (v, n), generator=g)
+    key = torch.randint(0, 50, (v, n), generator=g) * n + torch.arange(n)  # quantised depth x N + index
+    radius = torch.randint(0, MAX_RADIUS_PX + 1, (n,), generator=g)
+    expect = torch.full((v, s * s), EMPTY, dtype=torch.int64)
+    for r in range(MAX_RADIUS_PX + 1):
+        sel = radius == r
+        for dy, dx in _disc(r).tolist():
+            y, x = row[:, sel] + dy, col[:, sel] + dx
+            ok = (y >= 0) & (y < s) & (x >= 0) & (x < s)
+            for j in range(v):
+                expect[j].scatter_reduce_(0, (y[j] * s + x[j])[ok[j]], key[j, sel][ok[j]], "amin")
+    got = nearest_splats(row, col, key, radius, s)
+    assert torch.equal(got, expect) and (got == EMPTY).any() and (got != EMPTY).any()
+
+
+def test_local_frames_column_form_is_the_row_form_bit_for_bit():
+    """local_frames gathers the neighbour offsets one coordinate at a time (lit3d.render.points.column_covariance);
+    the normals are bit-identical to those of the (N, k, 3) offsets' covariance (its mean over the middle axis
+    and row-wise products), on a lattice with duplicate points and on points of very different scales."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(4)
+    clouds = [np.round(sphere_points(3000) * 30) / 30,
+              rng.normal(size=(3000, 3)) * np.exp(rng.normal(size=(3000, 1)) * 2)]
+    for p in clouds:
+        _, idx = cKDTree(p).query(p, k=16)
+        p32 = (p - p.mean(0)).astype(np.float32)
+        nb = p32[idx] - p32[:, None, :]
+        lf = local_frames(p)
+        for name, kk in (("flat", 8), ("smooth", 16)):
+            x = nb[:, :kk]
+            m = x.mean(1, dtype=np.float64)
+            cov = np.empty((len(p), 3, 3))
+            for i in range(3):
+                for j in range(3):
+                    xi, xj = np.ascontiguousarray(x[..., i]), np.ascontiguousarray(x[..., j])
+                    cov[:, i, j] = np.einsum("nk,nk->n", xi, xj, dtype=np.float64) - kk * m[:, i] * m[:, j]
+            assert np.array_equal(lf[name], smallest_eigenvector(cov)), name
+
+
 def coloured_sphere(noise: float, seed: int = 0) -> PointShape:
     p = sphere_points(6000)
     c = 0.5 + 0.4 * np.stack([np.sin(6 * p[:, 0]), np.cos(5 * p[:, 1]), np.sin(4 * p[:, 2])], 1)
@@ -234,7 +284,7 @@ def test_cached_frames_is_thread_safe(monkeypatch):
 
     calls: dict[int, int] = {}
 
-    def slow_frames(p):
+    def slow_frames(p, workers=-1):
         calls[len(p)] = calls.get(len(p), 0) + 1
         time.sleep(0.02)  # let the other threads reach the check while this one computes
         return {"n": np.full(1, len(p))}

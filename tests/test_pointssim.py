@@ -106,6 +106,21 @@ def test_single_thread_path_matches():
     assert pointssim(p, q, c, c, workers=1) == pointssim(p, q, c, c)
 
 
+def test_shared_trees_give_the_same_scores():
+    """Trees built once (lit3d.metrics.pointcloud.kd_tree, as the feature table shares them with PCQM): every
+    score bit-identical to PointSSIM building its own, duplicate points (ties) included; a tree of other
+    points is refused."""
+    from lit3d.metrics.pointcloud import kd_tree
+
+    p, c = surface(900)
+    p = np.round(p * 40) / 40  # a lattice: many equidistant neighbours, where tie-breaking would show
+    q = p + np.random.default_rng(7).normal(0, 0.01, p.shape)
+    for options in ({}, {"workers": 1}):
+        assert pointssim(p, q, c, c, trees=(kd_tree(p), kd_tree(q)), **options) == pointssim(p, q, c, c, **options)
+    with pytest.raises(ValueError, match="not a tree of those points"):
+        pointssim(p, q, c, c, trees=(kd_tree(q), kd_tree(q)))
+
+
 def test_bad_arguments():
     p, _ = surface(50)
     with pytest.raises(ValueError, match="estimator"):

@@ -13,10 +13,11 @@ from lit3d.features.common import UNLEARNED_COLOUR_STYLES, overall_score
 from lit3d.features.points import PIQ_STYLES
 from lit3d.features.table import FeatureConfig, feature_table
 from lit3d.metrics.pcqm import pcqm
+from lit3d.metrics.pointcloud import pointcloud_baselines
 from lit3d.metrics.pointssim import pointssim
 from lit3d.render.colour_styles import apply_colour_styles
 from lit3d.render.gbuffer import RenderConfig
-from lit3d.render.points import PointShape
+from lit3d.render.points import PointShape, load_points, local_frames
 from lit3d.render.splat import point_frame, render_point_gbuffers
 from lit3d.render.styles import apply_styles
 
@@ -91,3 +92,27 @@ def test_field_metrics_enter_the_table_and_the_unlearned_score_keeps_its_styles(
     # an older table (without the new measures) is another cache key: never read back as this one
     assert cfg.key_dict() != FeatureConfig(render=cfg.render, styles=cfg.styles, measures=cfg.measures,
                                            colour_measures=(), point_measures=(), workers=1).key_dict()
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_point_metrics_in_the_table_equal_each_metric_computed_alone(tmp_path, workers):
+    """The table computes PointSSIM and PCQM on one KD-tree per cloud, on worker threads beside the frames and
+    renders (lit3d.features.points._point_metrics), the reference's frames while the distorted cloud loads
+    (no cache folder) or after the cache look-up: each value bit-identical to the metric run alone, building its
+    own trees, and to the D1/D2/Y-PSNR baselines from the clouds' own local frames. The clouds lie on a lattice
+    (duplicate and equidistant points), where a different neighbour search would break ties differently."""
+    def lattice(shape: PointShape) -> PointShape:
+        return PointShape(np.round(shape.points * 24) / 24, shape.colours)
+
+    ref, dist = lattice(sphere(0.0)), lattice(sphere(0.15, 1))
+    cfg = FeatureConfig(render=RenderConfig(size=48, shadings=("flat",)), styles=("jade",), measures=("mask_ssim",),
+                        colour_measures=(), workers=workers)
+    pa, pb = load_points(ref), load_points(dist)  # the canonical point order the table works in
+    frame_c, frame_s = point_frame(pa.points)
+    a, b = (pa.points - frame_c) * frame_s, (pb.points - frame_c) * frame_s
+    expect = {**pointcloud_baselines(a, b, local_frames(pa.points)["smooth"], local_frames(pb.points)["smooth"],
+                                     pa.colours, pb.colours),
+              **pointssim(a, b, pa.colours, pb.colours), **pcqm(a, b, pa.colours, pb.colours)}
+    for cache_dir in (None, tmp_path):
+        f = feature_table(ref, dist, cfg, cache_dir=cache_dir).features
+        assert {k: f[k] for k in expect} == expect

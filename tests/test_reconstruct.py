@@ -264,3 +264,23 @@ def test_iou_reference():
     b = np.zeros((4, 4, 4), bool)
     a[:2], b[1:3] = True, True
     assert occupancy_iou(a, b) == pytest.approx(1 / 3)
+
+
+def test_a_refused_checkpoint_leaves_no_out_folder(tmp_path, capsys):
+    """--out (and its missing parents) are made before the checkpoint is read; a run that fails there
+    removes them again. An --out that existed before stays."""
+    from lit3d.cli.reconstruct import main
+
+    depth = np.zeros((120, 160), np.float32)
+    depth[40:80, 60:100] = 1.2
+    np.save(tmp_path / "d.npy", depth)
+    (tmp_path / "bad.ckpt").write_bytes(b"garbage")
+    for ckpt, said in (("missing.ckpt", "checkpoint not found"), ("bad.ckpt", "not a readable checkpoint")):
+        out = tmp_path / "new" / ckpt / "out"
+        assert main([str(tmp_path / "d.npy"), "--ckpt", str(tmp_path / ckpt), "--out", str(out)]) == 2
+        assert said in capsys.readouterr().err
+        assert not (tmp_path / "new").exists()
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    assert main([str(tmp_path / "d.npy"), "--ckpt", str(tmp_path / "bad.ckpt"), "--out", str(kept)]) == 2
+    assert kept.is_dir()

@@ -52,13 +52,13 @@ def _holder(run: Path) -> subprocess.Popen:
 def test_second_training_into_a_busy_run_dir_is_refused(tmp_path):
     run = tmp_path / "run"
     common = [*CANONICAL, "logger=none", f"paths.data_dir={tmp_path}/data", f"hydra.run.dir={run}"]
-    first = _start(["lit3d-train", *common, "trainer.max_epochs=500", "task.lr=0.001"], tmp_path / "first")
+    first = _start(["lit3d-train", *common, "trainer.max_epochs=500", "task.optimizer.lr=0.001"], tmp_path / "first")
     try:
         # Hydra writes config.yaml, hydra.yaml, then overrides.yaml (not atomically): wait until all are written
         written = [run / ".hydra" / n for n in ("config.yaml", "overrides.yaml")]
         _wait_for(lambda: all(f.is_file() and f.stat().st_size > 0 for f in written), first, tmp_path / "first")
         hydra_cfg = (run / ".hydra" / "config.yaml").read_bytes()
-        res = _run(["lit3d-train", *common, "trainer.max_epochs=1", "task.lr=0.05"])
+        res = _run(["lit3d-train", *common, "trainer.max_epochs=1", "task.optimizer.lr=0.05"])
         assert res.returncode == 2, res.stderr[-3000:]
         assert "Traceback" not in res.stderr
         assert _errors(res.stderr) == [ln for ln in res.stderr.splitlines() if ln.strip()][-1:]
@@ -169,3 +169,22 @@ def test_what_a_run_that_waited_may_do(tmp_path):
     for command, ckpt in (("train", None), ("train", tmp_path / "elsewhere.ckpt"), ("eval", "last")):
         with pytest.raises(OutputError, match=r"left its results here \(checkpoints/epoch=1.ckpt\).*: choose another"):
             check_waited(run, command, ckpt)
+
+
+def test_an_optuna_search_without_dash_m_claims_no_run_dir(tmp_path):
+    """``lit3d-train hparams_search=...`` sweeps (``hydra.mode: MULTIRUN``): its jobs run in the sweep
+    dir, so no ``runs/<time>`` dir with a lock file is made for it; a plain run still claims its dir."""
+    from lit3d.cli.common import compose_config
+    from lit3d.cli.rundir import claim_run_dir
+
+    common = ["experiment=completion_demo", f"paths.log_dir={tmp_path}/logs"]
+    cfg = compose_config("train", ["hparams_search=completion_optuna", *common], return_hydra_config=True)
+    args, lock = claim_run_dir(cfg, ["hparams_search=completion_optuna", *common])
+    with lock:
+        assert args == ["hparams_search=completion_optuna", *common]
+        assert not (tmp_path / "logs").exists()
+    cfg = compose_config("train", common, return_hydra_config=True)
+    args, lock = claim_run_dir(cfg, common)
+    with lock:
+        runs = list((tmp_path / "logs" / "completion" / "runs").iterdir())
+        assert len(runs) == 1 and (runs[0] / ".lit3d.lock").exists() and args[-1] == f"hydra.run.dir={runs[0]}"

@@ -10,14 +10,9 @@ import torch
 from lit3d.completion.module import CompletionTask
 from lit3d.completion.step_cost import completion_step_cost
 from lit3d.utils.step_cost import CostCounter, SavedBytes
+from tests.completion_helpers import tiny_nets
 
 META = torch.device("meta")
-
-
-def tiny_nets(demo: dict) -> dict:
-    """The demo nets shrunk: 8^3 -> 32^3, small latent, 4-layer critic (attention at 8^3)."""
-    return {**demo, "in_res": 8, "out_res": 32, "enc_channels": [8, 16], "latent_dim": 64, "k": 16,
-            "fixed_latent_dim": 64, "critic_channels": [8, 8, 8, 8], "critic_attention_res": 8}
 
 
 def _meta_task(nets: dict, **kw) -> CompletionTask:
@@ -82,6 +77,15 @@ def test_step_total_is_the_parts_weighted_by_their_runs_and_each_option_counts(c
     plain = completion_step_cost(_meta_task(nets, adversarial=False))
     assert [p["part"] for p in plain["parts"]] == ["generator"]
     assert plain["flops"] < parts["generator"]["flops"]
+
+
+def test_bf16_penalty_keeps_the_flops_and_saves_fewer_bytes(completion_demo_nets):
+    nets = tiny_nets(completion_demo_nets)
+    base = {p["part"]: p for p in completion_step_cost(_meta_task(nets))["parts"]}
+    bf16 = {p["part"]: p for p in completion_step_cost(_meta_task(nets, gp_precision="bf16"))["parts"]}
+    assert all(bf16[k]["flops"] == base[k]["flops"] for k in base)
+    assert bf16["critic penalty"]["saved_bytes"] < base["critic penalty"]["saved_bytes"]
+    assert all(bf16[k]["saved_bytes"] == base[k]["saved_bytes"] for k in base if k != "critic penalty")
 
 
 def test_step_cost_refuses_a_task_with_real_weights(completion_demo_nets):

@@ -291,3 +291,10 @@ def test_folder_cli_help_and_version(capsys):
     assert "against the targets of a prepared completion data split" in out
     assert out.count("    lit3d-eval-folder ") == 3  # three examples
     assert out.endswith(f"lit3d-eval-folder (lit3d) {lit3d_version()}\n")
+
+
+def test_results_md_says_why_a_validation_iou_is_absent(tmp_path):
+    text = write_results({"test/same/iou": 0.5, "test/threshold": 0.4, "val/iou": 0.546}, tmp_path).read_text()
+    assert "Threshold chosen on validation: 0.40 (validation IoU 0.546)." in text
+    text = write_results({"test/same/iou": 0.5, "test/threshold": 0.5}, tmp_path).read_text()
+    assert "validation IoU –" not in text and "no validation IoU was measured for these weights" in text

@@ -45,6 +45,24 @@ def test_collect_groups_seeds_into_mean_and_sd(tmp_path):
     assert (tmp_path / "sweep_results.md").read_text() == text
 
 
+def test_every_metric_table_is_one_row_per_metric_not_one_row_of_hundreds(tmp_path):
+    """A plain multirun (no metrics named) of a task with hundreds of test keys: the jobs table holds the
+    monitored value, and the test metrics follow one row each, one column per job."""
+    keys = [f"test/{split}/{m}/{c}" for split in ("same", "cross") for m in ("iou", "chamfer_l1", "fscore_1pct")
+            for c in ("bench", "chair", "couch", "table")]
+    for n, seed in enumerate((0, 1, 2)):
+        _job(tmp_path, str(n), ["experiment=completion_demo", "task.adversarial=true", f"seed={seed}"],
+             {"monitor": "val/iou", "monitored_value": 0.5 + 0.01 * n, **{k: 0.1 * n for k in keys}})
+    _job(tmp_path, "3", ["experiment=completion_demo", "task.adversarial=true", "seed=3"], None)
+    text = collect(tmp_path)
+    widest = max(line.count("|") for line in text.splitlines())
+    assert widest <= 6, widest  # metric + 3 jobs (or job, setting, monitored), not 24 metric columns
+    assert "| job | setting | val/iou (monitored) |" in text and "| 1 | task.adversarial=true, seed=1 | 0.510 |" in text
+    assert "| 3 | task.adversarial=true, seed=3 | no metrics.json |" in text
+    assert "| test/same/iou/chair | 0.000 | 0.100 | 0.200 |" in text
+    assert "| test/same/iou/chair | 0.100 ± 0.100 |" in text  # over seeds, one row per metric too
+
+
 def test_no_seed_table_without_repeated_settings():
     assert over_seeds({"task.nets.k=50": {"m": 1.0}, "task.nets.k=100": {"m": 2.0}}, ["m"]) == {}
 
@@ -108,3 +126,37 @@ def test_a_collect_failure_does_not_fail_the_multirun(tmp_path, caplog):
     with caplog.at_level(logging.WARNING, logger="lit3d.sweeps"):
         CollectResults().on_multirun_end(cfg)
     assert "no sweep_results.md" in caplog.text and not (tmp_path / "sweep_results.md").exists()
+
+
+@pytest.mark.parametrize("config_name", ["train", "eval"])
+def test_every_multirun_keeps_the_job_dirs_of_an_earlier_one(config_name):
+    assert _hydra_callbacks(config_name, [])["earlier_jobs"] == {"_target_": "lit3d.sweeps.KeepEarlierJobs"}
+
+
+@pytest.mark.parametrize("command", [
+    ["lit3d-summary", "-m", "experiment=completion_demo", "seed=1,2"],  # a plain multirun
+    ["lit3d-train", "hparams_search=canonical_optuna", "experiment=canonical_tiny"],  # an in-memory Optuna study again
+], ids=["plain", "optuna"])
+def test_a_multirun_into_a_sweep_dir_with_earlier_jobs_is_refused(tmp_path, command):
+    """``hydra.sweep.dir=X`` given to a second multirun: Hydra numbers its jobs from 0 again, so they ran in
+    the first multirun's job dirs and replaced their results (config.yaml, metrics.json, checkpoints; an
+    interrupted in-memory Optuna study run again too). Now one line and exit 2 before any job; the earlier
+    job dirs are as they were."""
+    sweep = tmp_path / "sweep"
+    earlier = {}
+    for i in (0, 1):
+        (sweep / str(i) / ".hydra").mkdir(parents=True)
+        (sweep / str(i) / "metrics.json").write_text(json.dumps({"test/x": i}))
+        earlier[i] = (sweep / str(i) / "metrics.json").read_bytes()
+    env = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}
+    env["OMP_NUM_THREADS"] = "1"
+    res = subprocess.run([str(Path(sys.executable).parent / command[0]), *command[1:], f"hydra.sweep.dir={sweep}",
+                          f"paths.data_dir={tmp_path}/data"], check=False, cwd=REPO, env=env, capture_output=True, text=True,
+                         timeout=300)
+    lines = res.stderr.strip().splitlines()
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr[-3000:]
+    assert lines[-1] == (f"error: {sweep}: holds the job dirs of an earlier multirun (0, 1); a new multirun numbers its "
+                         "job dirs from 0 again and would replace them: leave hydra.sweep.dir to its default (a new "
+                         "timestamped folder) or choose another one"), lines
+    assert sorted(p.name for p in sweep.iterdir()) == ["0", "1"] and not (tmp_path / "data").exists()
+    assert all((sweep / str(i) / "metrics.json").read_bytes() == earlier[i] for i in (0, 1))

@@ -1,4 +1,4 @@
-"""Training batches made of several poses of each subject (``data.batch_poses``): what a contrastive
+"""Training batches made of several poses of each subject (``data.training.batch_poses``): what a contrastive
 identity term (:mod:`lit3d.canonical.contrastive`) needs, since a random batch of 16 among 140 people
 x 24 poses rarely holds one person twice.
 """

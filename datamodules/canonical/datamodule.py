@@ -1,26 +1,32 @@
 """Canonical-form data: pairs (posed depth + mask, canonical depth + mask) seen from the same camera.
 
-Sources (:mod:`datamodules.canonical.sources`): ``synth`` (procedural figures), ``anny``, meshes under ``root``.
+Settings (:mod:`datamodules.canonical.settings`, one frozen dataclass per config node):
+``data.source`` (``kind``: ``synth`` procedural figures, ``anny``, or meshes under ``data.root``: ``tosca``,
+``shrec14``, ``faust``, ``sumner``; only that source's fields), ``data.render``, ``data.split``,
+``data.training``; flat: ``data_dir``, ``image_size``, ``root``, ``seed``, ``batch_size``, ``num_workers``,
+``prepare_workers``, ``skip_bad``, ``phenotype_targets``.
 
 Every shape is centred on its bounding-box centre and scaled so that its longest side is 1
-(``scale_mode="shape"``, as the thesis) or by the subject's canonical scale
-(``scale_mode="subject"``), then rendered with pyrender (EGL) by an orthographic camera on
-+z looking down -z (after turning the shape by each azimuth in ``azimuths``). Depth is
+(``render.scale_mode="shape"``, as the thesis) or by the subject's canonical scale
+(``"subject"``), then rendered with pyrender (EGL) by an orthographic camera on
++z looking down -z (after turning the shape by each azimuth in ``render.azimuths``). Depth is
 normalised to [0, 1]: 0 = background, foreground in [0.1, 1], nearer = larger.
-``view_mode`` (:mod:`lit3d.geometry.views`): ``fixed`` = the azimuths as given; ``broadside`` = each
+``render.view_mode`` (:mod:`lit3d.geometry.views`): ``fixed`` = the azimuths as given; ``broadside`` = each
 shape (posed and canonical alike) first turned so that its broad side faces the camera, then
-by each azimuth. ``flip_lr``: training inputs mirrored left-right with probability 1/2; the target
-with them under ``fixed`` only (:class:`~datamodules.canonical.dataset.CanonicalPairDataset` says why). ``eval_views``: indices into ``azimuths`` that
-val, test and the pooled held-out set use (null: all); training always sees every view, so extra
-azimuths are training augmentation while evaluation keeps one view per pose. ``roll_deg``: training
-inputs turned in the image plane by up to that many degrees (a rolled camera; the target stays).
-``blend_poses``: extra training poses per subject, vertex blends of two of the fold's training poses
-(:mod:`datamodules.canonical.blends`); ``own_poses`` (synth): each subject's own training-only poses;
-``val_poses=own`` validates in the validation subjects' own poses (new poses, as the test), not the training ones.
-``train_pose_fraction``: train on that share of each subject's training poses (a learning curve).
-``flow_targets``: also cache, for every pose whose mesh corresponds to the canonical one, the warp head's backward flow
-and visibility (:mod:`datamodules.canonical.flow`; ``forward_flow``: the splat head's forward ones too); items carry them.
-``batch_poses`` K >= 2: batches of ``batch_size / K`` subjects x K poses (``task.contrastive_weight``).
+by each azimuth. ``training.flip_lr``: training inputs mirrored left-right with probability 1/2; the target
+with them under ``fixed`` only (:class:`~datamodules.canonical.dataset.CanonicalPairDataset` says why).
+``split.eval_views``: indices into ``render.azimuths`` that val, test and the pooled held-out set use (null:
+all); training always sees every view, so extra azimuths are training augmentation while evaluation keeps
+one view per pose. ``training.roll_deg``: training inputs turned in the image plane by up to that many
+degrees (a rolled camera; the target stays). ``training.blend_poses``: extra training poses per subject,
+vertex blends of two of the fold's training poses (:mod:`datamodules.canonical.blends`);
+``source.own_poses`` (synth): each subject's own training-only poses; ``split.val_poses=own`` validates in
+the validation subjects' own poses (new poses, as the test), not the training ones.
+``split.train_pose_fraction``: train on that share of each subject's training poses (a learning curve).
+``render.flow_targets``: also cache, for every pose whose mesh corresponds to the canonical one, the warp
+head's backward flow and visibility (:mod:`datamodules.canonical.flow`; ``render.forward_flow``: the splat
+head's forward ones too); items carry them. ``training.batch_poses`` K >= 2: batches of ``batch_size / K``
+subjects x K poses (``task.contrastive.weight``).
 
 Batches (``B`` samples, ``S = image_size``):
     depth, mask              (B, 1, S, S) float32   posed input; mask in {0, 1}
@@ -45,7 +51,7 @@ Bad input: every depth image is checked when rendered and when the cache is read
 ``skip_bad=True`` a bad posed image or mesh drops that pose and a bad canonical image drops
 the subject, each with a logged warning, counted in ``describe()["skipped_bad_files"]``.
 
-Splits (``split``: ``subject_pose``, ``pose`` or ``all``): :mod:`datamodules.canonical.splits`.
+Splits (``split.mode``: ``subject_pose``, ``pose`` or ``all``): :mod:`datamodules.canonical.splits`.
 """
 from __future__ import annotations
 
@@ -63,15 +69,17 @@ from datamodules.canonical.blends import add_blends
 from datamodules.canonical.dataset import CanonicalPairDataset, mirror_views, subject_balanced_sampler
 from datamodules.canonical.images import (depth_image_problem, depth_pairs_png, read_subject, remove_legacy_subject_files,
                                           unpack_mask)
-from datamodules.canonical.prepare import SUBJECTS_DIR, subject_file, write_subject_files
+from datamodules.canonical.flat_config import upgrade_data_config
+from datamodules.canonical.prepare import SUBJECTS_DIR, RenderJob, subject_file, write_subject_files
 from datamodules.canonical.rendering import PairRenderer
 from datamodules.canonical.sheets import pose_sheet
-from datamodules.canonical.sources import ROOTLESS, CANONICAL_SOURCES, Shrec14Source, SynthSource, ToscaSource, make_source
-from datamodules.canonical.splits import (SPLIT_MODES, CANONICAL_SPLITS, deal, fold_pairs, split_counts, split_pose,
-                                          split_subject_pose, thin_training)
+from datamodules.canonical.settings import (ROOTLESS, RenderSettings, SourceSettings, SplitSettings, TrainingSettings,
+                                            parse, parse_source)
+from datamodules.canonical.sources import Shrec14Source, SynthSource, ToscaSource, build_source
+from datamodules.canonical.splits import (CANONICAL_SPLITS, deal, fold_pairs, split_counts, split_pose, split_subject_pose,
+                                          thin_training)
 from datamodules.loaders import evaluation_loader
 from lit3d.body_model import bodies
-from lit3d.geometry.views import VIEW_MODES
 
 log = logging.getLogger("lit3d")
 
@@ -87,72 +95,29 @@ __all__ = ["CANONICAL_SPLITS", "CanonicalDataModule", "DataError", "CanonicalPai
 class CanonicalDataModule(pl.LightningDataModule):
     """Posed/canonical depth pairs (synthetic figures, TOSCA or SHREC'14); see module docstring."""
 
-    def __init__(
-        self,
-        data_dir: str,
-        image_size: int,
-        source: str = "synth",
-        root: str | None = None,
-        seed: int = 42,
-        batch_size: int = 8,
-        num_workers: int = 0,
-        # synthetic figures
-        kinds: Sequence[str] = ("humanoid", "quadruped"),
-        n_subjects: int = 12,
-        n_poses: int = 12,
-        mesh_resolution: int = 56,
-        pose_seed: int = 0,
-        yaw_range: float = 15.0,
-        pose_strength: float = 1.0,
-        # Anny bodies (source=anny; also n_subjects, n_poses, pose_seed, yaw_range, pose_strength)
-        body_seed: int = 0,
-        # real data
-        classes: Sequence[str] | None = None,
-        canonical_pose: int = 0,
-        up_axis: str = "z",
-        cla: str | None = None,
-        # rendering
-        azimuths: Sequence[float] = (0.0,),
-        view_mode: str = "fixed",
-        scale_mode: str = "shape",
-        # splits
-        split: str = "subject_pose",
-        split_seed: int | None = None,
-        n_folds: int = 3,
-        fold: int = 0,
-        val_per_subject: int = 1,
-        max_val_items: int | None = 64,
-        skip_bad: bool = False,
-        balance_subjects: bool = False,
-        flip_lr: bool = False,
-        eval_views: Sequence[int] | None = None,
-        roll_deg: float = 0.0,
-        blend_poses: int = 0,
-        train_pose_fraction: float = 1.0,
-        flow_targets: bool = False,
-        forward_flow: bool = False,
-        val_subjects: int | None = None,
-        phenotypes: str = "uniform",
-        pose_draw: str = "shared", own_poses: int = 0,
-        phenotype_targets: bool = False,
-        batch_poses: int = 0, prepare_workers: int = 0, val_poses: str = "training",
-    ):
+    def __init__(self, data_dir: str, image_size: int, source: dict | SourceSettings | None = None,
+                 root: str | None = None, render: dict | RenderSettings | None = None,
+                 split: dict | SplitSettings | None = None, training: dict | TrainingSettings | None = None,
+                 seed: int = 42, batch_size: int = 8, num_workers: int = 0, prepare_workers: int = 0,
+                 skip_bad: bool = False, phenotype_targets: bool = False):
+        """``source``, ``render``, ``split``, ``training``: the config nodes of
+        :mod:`datamodules.canonical.settings` (None: every default; ``source``: synthetic figures)."""
         super().__init__()
         self.save_hyperparameters()
-        if source not in CANONICAL_SOURCES:
-            raise DataError(f"unknown canonical data source '{source}' ({', '.join(CANONICAL_SOURCES)})")
-        if source not in ROOTLESS and not root:
-            raise DataError(f"data source '{source}' needs root=<folder with the meshes>")
-        if scale_mode not in ("shape", "subject"):
-            raise DataError(f"scale_mode must be 'shape' or 'subject', got '{scale_mode}'")
-        if view_mode not in VIEW_MODES:
-            raise DataError(f"view_mode must be one of {', '.join(VIEW_MODES)}, got '{view_mode}'")
-        n_views = len(azimuths)
+        self.source_settings = parse_source(source if source is not None else {"kind": "synth"})
+        self.render = parse(RenderSettings, render, "render")
+        self.split = parse(SplitSettings, split, "split")
+        self.training = parse(TrainingSettings, training, "training")
+        if self.source_settings.kind not in ROOTLESS and not root:
+            raise DataError(f"data source '{self.source_settings.kind}' needs root=<folder with the meshes>")
+        n_views = len(self.render.azimuths)
+        eval_views = self.split.eval_views
         if eval_views is not None and (not eval_views or any(not 0 <= int(v) < n_views for v in eval_views)):
             raise DataError(f"eval_views must be indices into azimuths (0..{n_views - 1}), got {list(eval_views)}")
-        if split not in SPLIT_MODES:
-            raise DataError(f"split must be one of {', '.join(SPLIT_MODES)}, got '{split}'")
         self.data_dir = Path(data_dir)
+        self.root, self.image_size, self.seed = root, int(image_size), int(seed)
+        self.batch_size, self.num_workers, self.prepare_workers = int(batch_size), int(num_workers), int(prepare_workers)
+        self.skip_bad, self.phenotype_targets = bool(skip_bad), bool(phenotype_targets)
         self._source = None
         self.manifest: dict = {}
         self.cache: dict[str, dict] = {}
@@ -161,40 +126,39 @@ class CanonicalDataModule(pl.LightningDataModule):
         self.subject_index: dict[str, int] = {}
         self.skipped: list[str] = []  # bad inputs skipped (skip_bad=True), rendering + loading
 
+    @classmethod
+    def from_flat(cls, data_dir: str, image_size: int, **flat) -> "CanonicalDataModule":
+        """Built from the flat keys of a data config written before the settings were nodes
+        (:func:`~datamodules.canonical.flat_config.upgrade_data_config`)."""
+        return cls(**upgrade_data_config({"data_dir": data_dir, "image_size": image_size, **flat}))
+
     # ------------------------------------------------------------------ configuration
     @property
     def source(self):
         """The mesh source (:mod:`datamodules.canonical.sources`), built on first use."""
         if self._source is None:
-            self._source = make_source(self.hparams)
+            self._source = build_source(self.source_settings, self.root)
         return self._source
 
+    @property
+    def source_kind(self) -> str:
+        """The data source's name (``data.source.kind``: synth, anny, tosca, ...)."""
+        return self.source_settings.kind
+
     def cache_config(self) -> dict:
-        """Everything that changes the cached images (not splits or loader settings)."""
-        hp = self.hparams
-        keys = ["source", "image_size", "azimuths", "scale_mode"]
-        if hp.source == "synth":
-            keys += ["kinds", "n_subjects", "n_poses", "mesh_resolution", "pose_seed", "yaw_range", "pose_strength",
-                     "seed"]
-        elif hp.source == "anny":
-            keys += ["n_subjects", "n_poses", "body_seed", "pose_seed", "yaw_range", "pose_strength"]
-        else:
-            keys += ["root", "classes", "canonical_pose", "up_axis", "cla"]
-        cfg = {k: (list(hp[k]) if isinstance(hp[k], (list, tuple)) else hp[k]) for k in keys}
-        if hp.source == "anny":  # the sampler's and anny's versions: another release may pose differently
+        """Everything that changes the cached images (not splits or loader settings), under the keys the
+        caches have always hashed (the same cache keeps its hash)."""
+        src, render = self.source_settings, self.render
+        cfg = {"source": src.kind, "image_size": self.image_size, "azimuths": list(render.azimuths),
+               "scale_mode": render.scale_mode, **src.cache_fields(self.root)}
+        if src.kind == "anny":  # the sampler's and anny's versions: another release may pose differently
             cfg["bodies"] = [bodies.BODIES_VERSION, bodies.anny_version()]
-            if hp.phenotypes != "uniform":  # absent for the old draw: its caches keep their hash
-                cfg["phenotypes"] = hp.phenotypes
-        if hp.source in ("synth", "anny") and hp.get("pose_draw", "shared") != "shared":  # absent: old hashes kept
-            cfg["pose_draw"] = hp.pose_draw
-        if hp.get("own_poses", 0):  # absent without them: old hashes kept
-            cfg["own_poses"] = int(hp.own_poses)
-        if hp.skip_bad:  # a cache rendered while skipping may lack poses
+        if self.skip_bad:  # a cache rendered while skipping may lack poses
             cfg["skip_bad"] = True
-        if hp.view_mode != "fixed":  # absent for the old convention: its caches keep their hash
-            cfg["view_mode"] = hp.view_mode
-        if hp.flow_targets:  # absent without flows, and "+forward" only with them: those caches keep their hash
-            cfg["flow_targets"] = FLOW_VERSION + ("+forward" if hp.forward_flow else "")
+        if render.view_mode != "fixed":  # absent for the old convention: its caches keep their hash
+            cfg["view_mode"] = render.view_mode
+        if render.flow_targets:  # absent without flows, and "+forward" only with them: those caches keep their hash
+            cfg["flow_targets"] = FLOW_VERSION + ("+forward" if render.forward_flow else "")
         return cfg
 
     def cache_builder(self) -> CacheBuilder:
@@ -209,7 +173,7 @@ class CanonicalDataModule(pl.LightningDataModule):
     @property
     def renderer(self) -> PairRenderer:
         """Renders subjects (:class:`~datamodules.canonical.rendering.PairRenderer`)."""
-        return PairRenderer(self.source, self.hparams)
+        return PairRenderer(self.source, self.render, self.image_size, self.skip_bad)
 
     def normalized_mesh(self, subject: str, pose) -> tuple[np.ndarray, np.ndarray]:
         """The mesh of (subject, pose) centred and scaled as it is rendered (``pose="canonical"`` ok)."""
@@ -233,9 +197,10 @@ class CanonicalDataModule(pl.LightningDataModule):
         """Render the subjects still missing from ``builder`` (``prepare_workers`` processes); (items, manifest extra)."""
         subjects = self.source.subjects()
         builder.total_items = len(subjects)  # named by a Ctrl-C's stop line (each builder.has() is a stop point)
-        skipped = write_subject_files(builder, subjects, self._render_subject, self.hparams, self.hparams.prepare_workers)
+        job = RenderJob(self.source_settings, self.root, self.render, self.image_size, self.skip_bad)
+        skipped = write_subject_files(builder, subjects, self._render_subject, job, self.prepare_workers)
         return [{"file": subject_file(s), "subject": s} for s in subjects], {
-            "complete": True, "source": self.hparams.source, "image_size": self.hparams.image_size,
+            "complete": True, "source": self.source_kind, "image_size": self.image_size,
             "subjects": subjects, "categories": {s: self.source.category(s) for s in subjects}, "skipped": skipped}
 
     # ------------------------------------------------------------------ loading and splits
@@ -244,13 +209,12 @@ class CanonicalDataModule(pl.LightningDataModule):
         man = builder.manifest()
         if not man or not man.get("complete") or man.get("config_hash") != builder.config_hash:
             raise DataError(f"{self.data_dir}: no complete cache for this config; run prepare_data() (lit3d-data)")
-        hp = self.hparams
         self.manifest = man
         self.skipped = list(man.get("skipped", []))
         for item in man["items"]:
             s = item["subject"]
-            entry, problems = read_subject(builder.path(item["file"]), hp.image_size, len(hp.azimuths))
-            if problems and not hp.skip_bad:
+            entry, problems = read_subject(builder.path(item["file"]), self.image_size, len(self.render.azimuths))
+            if problems and not self.skip_bad:
                 raise DataError(problems[0])
             for msg in problems:
                 log.warning("skipping: %s", msg)
@@ -266,44 +230,44 @@ class CanonicalDataModule(pl.LightningDataModule):
         that order), drawn again from the source's seeds (nothing new in the cache); DataError for a source
         without phenotypes."""
         if not hasattr(self.source, "phenotype"):
-            raise DataError(f"phenotype_targets: data source '{self.hparams.source}' has no phenotypes (anny has)")
+            raise DataError(f"phenotype_targets: data source '{self.source_kind}' has no phenotypes (anny has)")
         return {s: np.array([self.source.phenotype(s)[k] for k in bodies.PHENOTYPE_RANGES], np.float32) for s in self.cache}
 
     def setup(self, stage: str | None = None) -> None:
         if self.datasets:
             return
         self._load_cache()
-        hp = self.hparams
+        sp, tr = self.split, self.training
         subject_poses = {s: c["poses"] for s, c in self.cache.items()}
-        pairs = self._pairs(hp.fold)
-        phenotypes = self.subject_phenotypes() if hp.get("phenotype_targets") else None
-        pairs["train"] = thin_training(pairs["train"], hp.train_pose_fraction, hp.seed + hp.fold)
-        if hp.max_val_items and len(pairs["val"]) > hp.max_val_items:
-            idx = np.random.default_rng(self.split_seed).choice(len(pairs["val"]), hp.max_val_items, replace=False)
+        pairs = self._pairs(sp.fold)
+        phenotypes = self.subject_phenotypes() if self.phenotype_targets else None
+        pairs["train"] = thin_training(pairs["train"], sp.train_pose_fraction, self.seed + sp.fold)
+        if sp.max_val_items and len(pairs["val"]) > sp.max_val_items:
+            idx = np.random.default_rng(self.split_seed).choice(len(pairs["val"]), sp.max_val_items, replace=False)
             pairs["val"] = [pairs["val"][i] for i in sorted(idx)]
         self.splits = {k: [{"subject": s, "pose": p, "view": v} for s, p in v_ for v in self.views(k)]
                        for k, v_ in pairs.items()}
-        if hp.blend_poses:  # rendered now: they depend on the fold's training poses
-            added = add_blends(self.cache, pairs["train"], hp.blend_poses, hp.seed, hp.fold, self.renderer.raw_mesh,
+        if tr.blend_poses:  # rendered now: they depend on the fold's training poses
+            added = add_blends(self.cache, pairs["train"], tr.blend_poses, self.seed, sp.fold, self.renderer.raw_mesh,
                                self.renderer.render_views)
             self.splits["train"] += [{"subject": s, "pose": p, "view": v} for s, p in added for v in self.views("train")]
         for k in CANONICAL_SPLITS:
-            if not self.splits[k] and hp.split == "all" and k != "test":
+            if not self.splits[k] and sp.mode == "all" and k != "test":
                 continue  # evaluation only: nothing to train or validate on
             if not self.splits[k]:
-                raise DataError(f"split '{k}' is empty (subjects {len(subject_poses)}, folds {hp.n_folds}): "
+                raise DataError(f"split '{k}' is empty (subjects {len(subject_poses)}, folds {sp.n_folds}): "
                                 "use more subjects/poses or fewer folds")
             self.datasets[k] = CanonicalPairDataset(self.splits[k], self.cache, self.subject_index, phenotypes=phenotypes,
-                                           flip_lr=hp.flip_lr and k == "train", flip_target=hp.view_mode == "fixed",
-                                           mirror_view=mirror_views(hp.azimuths),
-                                           roll_deg=hp.roll_deg if k == "train" else 0.0)
+                                           flip_lr=tr.flip_lr and k == "train", flip_target=self.render.view_mode == "fixed",
+                                           mirror_view=mirror_views(self.render.azimuths),
+                                           roll_deg=tr.roll_deg if k == "train" else 0.0)
         tr = {(r["subject"], r["pose"]) for r in self.splits["train"]}
         te = self.splits["test"]
         leaks = []
-        if hp.split == "subject_pose":
+        if sp.mode == "subject_pose":
             leaks += ["test subject in training"] * bool({r["subject"] for r in te} & {s for s, _ in tr})
             leaks += ["test pose in training"] * bool({r["pose"] for r in te} & {p for _, p in tr})
-            if hp.get("val_subjects") is not None:
+            if sp.val_subjects is not None:
                 va = {r["subject"] for r in self.splits["val"]}
                 leaks += ["validation subject in test or training"] * bool(va & ({r["subject"] for r in te} |
                                                                                 {s for s, _ in tr}))
@@ -314,14 +278,13 @@ class CanonicalDataModule(pl.LightningDataModule):
     @property
     def split_seed(self) -> int:
         """The seed that deals subjects and poses into folds (``split_seed``, else ``seed``)."""
-        return int(self.hparams.seed if self.hparams.split_seed is None else self.hparams.split_seed)
+        return int(self.seed if self.split.seed is None else self.split.seed)
 
     def _pairs(self, fold: int) -> dict[str, list[tuple]]:
         """``{split: [(subject, pose), ...]}`` of fold ``fold`` over the loaded cache."""
-        hp = self.hparams
-        return fold_pairs({s: c["poses"] for s, c in self.cache.items()}, hp.split, hp.n_folds, fold,
-                          self.split_seed, hp.val_per_subject, hp.get("val_subjects"),
-                          hp.get("val_poses", "training"))
+        sp = self.split
+        return fold_pairs({s: c["poses"] for s, c in self.cache.items()}, sp.mode, sp.n_folds, fold,
+                          self.split_seed, sp.val_per_subject, sp.val_subjects, sp.val_poses)
 
     def held_out_records(self) -> list[dict]:
         """Every item some fold tests (``{"subject", "pose", "view"}``, sorted): the set that the
@@ -329,16 +292,16 @@ class CanonicalDataModule(pl.LightningDataModule):
         For ``split=pose`` that is every non-canonical pose of every subject with 2+ poses."""
         if not self.cache:
             self.setup()
-        pairs = sorted({sp for f in range(self.hparams.n_folds) for sp in self._pairs(f)["test"]}, key=str)
+        pairs = sorted({sp for f in range(self.split.n_folds) for sp in self._pairs(f)["test"]}, key=str)
         return [{"subject": s, "pose": p, "view": v} for s, p in pairs for v in self.views("test")]
 
     def views(self, split: str) -> list[int]:
         """Indices into ``azimuths`` that ``split`` uses: training every view, val/test (and the pooled
         held-out set) ``eval_views`` when set (more training views than evaluation asks for)."""
-        every = list(range(len(self.hparams.azimuths)))
-        if split == "train" or self.hparams.eval_views is None:
+        every = list(range(len(self.render.azimuths)))
+        if split == "train" or self.split.eval_views is None:
             return every
-        return [int(v) for v in self.hparams.eval_views]
+        return [int(v) for v in self.split.eval_views]
 
     def held_out_ids(self) -> list[str]:
         """``"subject/pose/view"`` of :meth:`held_out_records`."""
@@ -347,20 +310,20 @@ class CanonicalDataModule(pl.LightningDataModule):
     @property
     def _workers(self) -> dict:
         """The loaders' worker settings (``num_workers``, kept alive between epochs when there are any)."""
-        return dict(num_workers=self.hparams.num_workers, persistent_workers=self.hparams.num_workers > 0)
+        return dict(num_workers=self.num_workers, persistent_workers=self.num_workers > 0)
 
     def _loader(self, split: str, shuffle: bool) -> DataLoader:
         if not shuffle:  # val/test: every item once, also under DDP
-            return evaluation_loader(self.datasets[split], self.hparams.batch_size, **self._workers)
-        return DataLoader(self.datasets[split], batch_size=self.hparams.batch_size, shuffle=shuffle, **self._workers)
+            return evaluation_loader(self.datasets[split], self.batch_size, **self._workers)
+        return DataLoader(self.datasets[split], batch_size=self.batch_size, shuffle=shuffle, **self._workers)
 
     def train_dataloader(self):
-        train, hp = self.datasets["train"], self.hparams
-        if hp.batch_poses:  # several poses of each subject per batch (a contrastive identity term)
-            return DataLoader(train, batch_sampler=SubjectGroupedBatches(train.records, hp.batch_size, hp.batch_poses,
-                                                                         hp.seed), **self._workers)
-        if hp.balance_subjects:
-            return DataLoader(train, batch_size=hp.batch_size, sampler=subject_balanced_sampler(train.records, hp.seed),
+        train, tr = self.datasets["train"], self.training
+        if tr.batch_poses:  # several poses of each subject per batch (a contrastive identity term)
+            return DataLoader(train, batch_sampler=SubjectGroupedBatches(train.records, self.batch_size, tr.batch_poses,
+                                                                         self.seed), **self._workers)
+        if tr.balance_subjects:
+            return DataLoader(train, batch_size=self.batch_size, sampler=subject_balanced_sampler(train.records, self.seed),
                               **self._workers)
         return self._loader("train", True)
 
@@ -375,11 +338,11 @@ class CanonicalDataModule(pl.LightningDataModule):
         if not self.datasets:
             self.setup()
         cats = self.manifest.get("categories", {})
-        out = {"source": self.hparams.source, "image_size": self.hparams.image_size,
+        out = {"source": self.source_kind, "image_size": self.image_size,
                "manifest_hash": self.manifest.get("manifest_hash", self.manifest["config_hash"]),
                "config_hash": self.manifest["config_hash"], "generator_version": self.manifest["version"],
                "skipped_bad_files": len(self.skipped),
-               "split_mode": self.hparams.split, "fold": self.hparams.fold, "n_folds": self.hparams.n_folds,
+               "split_mode": self.split.mode, "fold": self.split.fold, "n_folds": self.split.n_folds,
                "subjects": len(self.cache)}
         out.update({k: split_counts(self.splits[k], cats) for k in CANONICAL_SPLITS})
         return out

@@ -5,7 +5,7 @@ Items (``S = image_size``): ``depth``, ``mask``, ``canon_depth``, ``canon_mask``
 float32; ``subject`` str, ``subject_idx``, ``pose``, ``view`` int; ``flow`` ``(2, S, S)`` (backward
 flow in pixels, :mod:`datamodules.canonical.flow`), ``vis`` ``(1, S, S)`` float32, ``fflow`` and
 ``fvis`` (the forward flow and visibility, at posed pixels, same shapes; only from a cache that holds
-them, ``data.forward_flow``) and ``has_flow``
+them, ``data.render.forward_flow``) and ``has_flow``
 bool (zeros and False for an item without targets, or whose input is rolled or mirrored without its
 target); ``phenotype`` ``(P,)`` float32 when the dataset is given phenotypes. With ``flip_lr`` (training
 only) the posed images of an item are mirrored left-right with probability 1/2, and the canonical
@@ -51,7 +51,7 @@ class CanonicalPairDataset(Dataset):
         self.flip_target = flip_target  # ... and the canonical target with it (same camera only)
         self.mirror_view = dict(mirror_view or {})
         self.roll_deg = float(roll_deg)
-        # items carry the forward flow when the cache holds it (data.forward_flow): all items or none, for collation
+        # items carry the forward flow when the cache holds it (data.render.forward_flow): all items or none, for collation
         self.forward_flow = any(c.get("fflow") for c in cache.values())
 
     def __len__(self):

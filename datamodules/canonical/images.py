@@ -84,7 +84,7 @@ def read_subject(path: Path, size: int, n_views: int) -> tuple[dict | None, list
         got = {}
         for f_name, v_name in (("flow", "vis"), ("fflow", "fvis")):
             if f_name == "fflow" and f"fflow_{key}" not in arrays and f"fvis_{key}" not in arrays:
-                continue  # a cache without the forward flow (data.forward_flow=false)
+                continue  # a cache without the forward flow (data.render.forward_flow=false)
             f, m = arrays.get(f"{f_name}_{key}"), unpack_mask(arrays.get(f"{v_name}_{key}"), size)
             if f is None or f.shape != (2, size, size) or m is None or not np.isfinite(f).all():
                 problems.append(f"{path}: {f_name}_{key}: flow target not (2, {size}, {size}) and finite, or its "

@@ -23,6 +23,7 @@ import numpy as np
 from datamodules.cache import DataError
 from datamodules.canonical.flow import flow_targets
 from datamodules.canonical.images import depth_image_problem
+from datamodules.canonical.settings import RenderSettings
 from lit3d.geometry.normalise import bounding_frame
 from lit3d.geometry.views import base_azimuth
 from lit3d.render.depth import render_depth, rotate_y
@@ -31,12 +32,12 @@ log = logging.getLogger("lit3d")
 
 
 class PairRenderer:
-    """Renders the subjects of ``source`` (:mod:`datamodules.canonical.sources`) with the DataModule's
-    hyper-parameters ``hp`` (``image_size``, ``azimuths``, ``view_mode``, ``scale_mode``, ``skip_bad``,
-    ``flow_targets``, ``forward_flow``)."""
+    """Renders the subjects of ``source`` (:mod:`datamodules.canonical.sources`) as ``render`` says
+    (:class:`~datamodules.canonical.settings.RenderSettings`: azimuths, view and scale mode, flow targets)
+    at ``image_size``; ``skip_bad``: a bad pose is dropped with a warning instead of raising."""
 
-    def __init__(self, source, hp):
-        self.source, self.hp = source, hp
+    def __init__(self, source, render: RenderSettings, image_size: int, skip_bad: bool = False):
+        self.source, self.render, self.image_size, self.skip_bad = source, render, int(image_size), bool(skip_bad)
 
     def raw_mesh(self, subject: str, pose) -> tuple[np.ndarray, np.ndarray]:
         """``(V, 3)``, ``(F, 3)`` of (subject, pose) as the source gives it (``pose="canonical"`` ok)."""
@@ -46,7 +47,7 @@ class PairRenderer:
     def frame(self, subject: str, v: np.ndarray) -> tuple[np.ndarray, float]:
         """Centre ``(3,)`` and scale that normalise raw vertices ``v`` of ``subject`` (``scale_mode``:
         ``subject`` takes the scale of the subject's canonical mesh)."""
-        scale = bounding_frame(self.raw_mesh(subject, "canonical")[0])[1] if self.hp.scale_mode == "subject" else None
+        scale = bounding_frame(self.raw_mesh(subject, "canonical")[0])[1] if self.render.scale_mode == "subject" else None
         return bounding_frame(v, scale)
 
     def normalise(self, subject: str, v: np.ndarray) -> np.ndarray:
@@ -61,8 +62,8 @@ class PairRenderer:
 
     def view_azimuths(self, v: np.ndarray, f: np.ndarray) -> list[float]:
         """Azimuth of every configured view of normalised vertices ``v``: view mode's base + offset."""
-        base = base_azimuth(v, f, self.hp.view_mode)
-        return [base + float(az) for az in self.hp.azimuths]
+        base = base_azimuth(v, f, self.render.view_mode)
+        return [base + float(az) for az in self.render.azimuths]
 
     def render_views(self, subject: str, v: np.ndarray, f: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
         """(depth, mask) ``(S, S)`` of every azimuth of raw mesh ``v, f``; DataError for a bad image."""
@@ -71,7 +72,7 @@ class PairRenderer:
     def _render_normalised(self, v: np.ndarray, f: np.ndarray) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[float]]:
         """(depth, mask) ``(S, S)`` of every view of normalised vertices ``v``, and the views' azimuths;
         DataError for a bad image."""
-        size, azimuths, out = self.hp.image_size, self.view_azimuths(v, f), []
+        size, azimuths, out = self.image_size, self.view_azimuths(v, f), []
         for vi, az in enumerate(azimuths):
             d, m = render_depth(v, f, size, az)
             problem = depth_image_problem(d, m, size)
@@ -84,7 +85,7 @@ class PairRenderer:
         """The subject's canonical depth ``(S, S)`` float32 and mask ``(S, S)`` bool seen from view ``view``
         turned by a further ``turn_deg`` degrees about the vertical (a jittered camera)."""
         v, f = self.normalized_mesh(subject, "canonical")
-        return render_depth(v, f, self.hp.image_size, self.view_azimuths(v, f)[int(view)] + float(turn_deg))
+        return render_depth(v, f, self.image_size, self.view_azimuths(v, f)[int(view)] + float(turn_deg))
 
     def _pose_arrays(self, subject: str, pose, canon: dict | None) -> dict[str, np.ndarray]:
         """Depth (float16) and packed mask of every view of one pose, with flow and visibility when
@@ -107,7 +108,7 @@ class PairRenderer:
             flow, vis = flow_targets(canon_v, posed_v, cd, cm, d, m)
             out[f"flow_{pose}_{vi}"] = flow.astype(np.float16)
             out[f"vis_{pose}_{vi}"] = np.packbits(vis)
-            if self.hp.get("forward_flow", False):  # per posed pixel, where its point lies in the canonical image
+            if self.render.forward_flow:  # per posed pixel, where its point lies in the canonical image
                 fflow, fvis = flow_targets(posed_v, canon_v, d, m, cd, cm)
                 out[f"fflow_{pose}_{vi}"] = fflow.astype(np.float16)
                 out[f"fvis_{pose}_{vi}"] = np.packbits(fvis)
@@ -115,7 +116,6 @@ class PairRenderer:
 
     def render_subject(self, subject: str) -> dict[str, np.ndarray]:
         """Arrays of one subject's cache file; ``skipped`` lists the poses dropped by ``skip_bad``."""
-        hp = self.hp
         arrays: dict[str, np.ndarray] = {}
         canon = None
         try:
@@ -127,7 +127,7 @@ class PairRenderer:
         for vi, (d, m) in enumerate(views):
             arrays[f"depth_canonical_{vi}"] = d.astype(np.float16)
             arrays[f"mask_canonical_{vi}"] = np.packbits(m)
-        if hp.get("flow_targets", False):
+        if self.render.flow_targets:
             canon = {"raw": cv, "faces": cf, "verts": verts, "azimuths": azimuths, "views": views}
         poses, skipped = list(self.source.poses(subject)), []
         for p in poses:
@@ -135,7 +135,7 @@ class PairRenderer:
                 arrays.update(self._pose_arrays(subject, p, canon))
             except Exception as exc:
                 msg = f"{subject} pose {p}: {exc}"
-                if not hp.skip_bad:
+                if not self.skip_bad:
                     raise DataError(msg) from exc
                 log.warning("skipping: %s", msg)
                 skipped.append(msg)

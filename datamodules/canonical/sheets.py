@@ -45,7 +45,7 @@ def pose_sheet(dm, path: str | Path, n_subjects: int = 4, n_poses: int = 5, cell
     for r in rows:
         r["cells"] += [blank] * (n_cols - len(r["cells"]))
     columns = ["canonical"] + [f"posed {i + 1}" for i in range(n_cols - 1)]
-    title = f"{dm.hparams.source}: {len(subjects)} subjects, shaded as rendered (normalised, camera on +z)"
+    title = f"{dm.source_kind}: {len(subjects)} subjects, shaded as rendered (normalised, camera on +z)"
     img = labelled_grid(rows, columns, title, cell=cell, left=170)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -1,5 +1,6 @@
 """Where canonical-form meshes come from: one class per data source, each enumerating subjects and
-poses and loading meshes ``(V, 3) float, (F, 3) int`` unnormalised with y up.
+poses and loading meshes ``(V, 3) float, (F, 3) int`` unnormalised with y up; :func:`build_source` builds
+one from its settings (:mod:`datamodules.canonical.settings`, the ``data.source`` node).
 
     synth    procedural humanoids / quadrupeds (``datamodules.canonical.figures``); canonical = T-pose
              / standing pose; no download.
@@ -22,12 +23,11 @@ from datamodules.cache import DataError
 from datamodules.canonical import figures, shrec14, tosca
 from datamodules.canonical.flow import skinned_canonical
 from datamodules.canonical.posesets import index_faust, index_sumner
+from datamodules.canonical.settings import (POSE_DRAWS, ROOTLESS, AnnySettings, SourceSettings,
+                                            SynthSettings)
 from datamodules.canonical.splits import OWN_POSE_BASE
 from lit3d.body_model import bodies
 
-CANONICAL_SOURCES = ("synth", "tosca", "shrec14", "anny", "faust", "sumner")
-ROOTLESS = ("synth", "anny")  # sources that need no root folder
-POSE_DRAWS = ("shared", "per_subject")  # Anny: pose p the same for every subject, or each subject's own
 
 
 class _Source:
@@ -97,7 +97,7 @@ class SynthSource(_Source):
         turn = 90.0 if kind == "quadruped" else 0.0  # figure_mesh shows quadrupeds from the side
         if pose == "canonical":
             return subj, None, 0.0, turn
-        own_pose = pose >= OWN_POSE_BASE  # data.own_poses: the subject's pose pose - OWN_POSE_BASE
+        own_pose = pose >= OWN_POSE_BASE  # data.source.own_poses: the subject's pose pose - OWN_POSE_BASE
         if own_pose:
             pose = pose - OWN_POSE_BASE
         own = [int(subject[len(kind):])] if self.pose_draw == "per_subject" or own_pose else []  # the subject's own poses
@@ -247,23 +247,29 @@ class SumnerSource(_MeshFileSource):
         self.canon, self.up_axis = 0, "y"
 
 
-def make_source(hp) -> _Source:
-    """The source named by ``hp.source`` built from the DataModule's hyper-parameters ``hp``."""
-    if hp.source == "synth":
-        return SynthSource(hp.kinds, hp.n_subjects, hp.n_poses, hp.seed, hp.mesh_resolution,
-                           hp.pose_seed, hp.yaw_range, hp.pose_strength, hp.get("pose_draw", "shared"),
-                           hp.get("own_poses", 0))
-    if hp.get("own_poses", 0):
-        raise DataError(f"own_poses={hp.own_poses}: only the synth source draws poses of its own (source={hp.source})")
-    if hp.source == "tosca":
-        return ToscaSource(hp.root, hp.classes, hp.canonical_pose, hp.up_axis)
-    if hp.source == "shrec14":
-        return Shrec14Source(hp.root, hp.cla, hp.canonical_pose, hp.up_axis)
-    if hp.source == "anny":
-        return AnnySource(hp.n_subjects, hp.n_poses, hp.body_seed, hp.pose_seed, hp.yaw_range, hp.pose_strength,
-                          hp.get("phenotypes", "uniform"), hp.get("pose_draw", "shared"))
-    if hp.source == "faust":
-        return FaustSource(hp.root, hp.canonical_pose)
-    if hp.source == "sumner":
-        return SumnerSource(hp.root, hp.classes)
-    raise DataError(f"unknown canonical data source '{hp.source}' ({', '.join(CANONICAL_SOURCES)})")
+def build_source(settings: SourceSettings, root: str | None = None) -> _Source:
+    """The source of ``settings`` (:mod:`datamodules.canonical.settings`); ``root``: the mesh folder of the
+    sources that read files (``data.root``)."""
+    if settings.kind not in ROOTLESS and not root:
+        raise DataError(f"data source '{settings.kind}' needs root=<folder with the meshes>")
+    return SOURCE_BUILDERS[settings.kind](settings, root)
+
+
+def _synth(s: SynthSettings, root) -> SynthSource:
+    return SynthSource(s.kinds, s.n_subjects, s.n_poses, s.seed, s.mesh_resolution, s.pose_seed, s.yaw_range,
+                       s.pose_strength, s.pose_draw, s.own_poses)
+
+
+def _anny(s: AnnySettings, root) -> AnnySource:
+    return AnnySource(s.n_subjects, s.n_poses, s.body_seed, s.pose_seed, s.yaw_range, s.pose_strength, s.phenotypes,
+                      s.pose_draw)
+
+
+SOURCE_BUILDERS = {
+    "synth": _synth,
+    "anny": _anny,
+    "tosca": lambda s, root: ToscaSource(root, s.classes, s.canonical_pose, s.up_axis),
+    "shrec14": lambda s, root: Shrec14Source(root, s.cla, s.canonical_pose, s.up_axis),
+    "faust": lambda s, root: FaustSource(root, s.canonical_pose),
+    "sumner": lambda s, root: SumnerSource(root, s.classes),
+}

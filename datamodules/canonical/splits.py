@@ -22,11 +22,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from datamodules.cache import DataError
+from datamodules.canonical.settings import SPLIT_MODES, VAL_POSES
 
 CANONICAL_SPLITS = ("train", "val", "test")
-OWN_POSE_BASE = 20_000  # pose ids from here on: a subject's own training-only poses (synth data.own_poses)
-SPLIT_MODES = ("subject_pose", "pose", "all")
-VAL_POSES = ("training", "own")  # data.val_poses: which poses the validation subjects are seen in
+OWN_POSE_BASE = 20_000  # pose ids from here on: a subject's own training-only poses (synth data.source.own_poses)
 
 
 def deal(items: Sequence, n_groups: int, seed: int) -> list[list]:
@@ -121,7 +120,7 @@ def fold_pairs(subject_poses: dict[str, list], mode: str, n_folds: int, fold: in
     if val_poses not in VAL_POSES:
         raise DataError(f"val_poses must be one of {', '.join(VAL_POSES)}, got '{val_poses}'")
     if val_poses == "own" and val_subjects is None:
-        raise DataError("val_poses=own needs validation subjects of their own (data.val_subjects=N)")
+        raise DataError("val_poses=own needs validation subjects of their own (data.split.val_subjects=N)")
     own = {s: [p for p in ps if p >= OWN_POSE_BASE] for s, ps in subject_poses.items()}
     if any(own.values()):
         shared = {s: [p for p in ps if p < OWN_POSE_BASE] for s, ps in subject_poses.items()}
@@ -132,7 +131,7 @@ def fold_pairs(subject_poses: dict[str, list], mode: str, n_folds: int, fold: in
             pairs["val"] = [(s, p) for s in sorted({s for s, _ in pairs["val"]}) for p in own[s]]
         return pairs
     if val_poses == "own":
-        raise DataError("val_poses=own needs subjects with poses of their own (synth data.own_poses > 0)")
+        raise DataError("val_poses=own needs subjects with poses of their own (synth data.source.own_poses > 0)")
     if mode == "all":
         return {"train": [], "val": [], "test": [(s, p) for s, ps in sorted(subject_poses.items()) for p in ps]}
     if mode == "subject_pose":

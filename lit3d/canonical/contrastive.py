@@ -15,7 +15,7 @@ seen in training (unlike the closed-set classifier).
 - ``on="output"``: the predicted canonical form itself (depth times mask, and the mask; ``(B, 2, S, S)``)
   through a small strided CNN: the image that retrieval reads must tell them apart, whatever the pose.
 
-Batches need several poses of each subject (``data.batch_poses``, see
+Batches need several poses of each subject (``data.training.batch_poses``, see
 :class:`datamodules.canonical.batches.SubjectGroupedBatches`); anchors without a positive in the
 batch do not count, and a batch without any gives 0.
 """
@@ -58,7 +58,7 @@ class ContrastiveEmbedder(nn.Module):
         ``embed_dim``: the embedding width; ``channels``: the output CNN's widths, one stride-2 3x3 conv each."""
         super().__init__()
         if on not in CONTRASTIVE_INPUTS:
-            raise ValueError(f"contrastive_on must be one of {CONTRASTIVE_INPUTS}, got {on!r}")
+            raise ValueError(f"task.contrastive.embed must be one of {CONTRASTIVE_INPUTS}, got {on!r}")
         if embed_dim < 1 or (on == "output" and not channels):
             raise ValueError(f"contrastive embedding needs embed_dim >= 1 (and channels for on=output), got "
                              f"embed_dim={embed_dim}, channels={list(channels)}")
@@ -80,7 +80,7 @@ class ContrastiveEmbedder(nn.Module):
         ``depth``, ``mask`` ``(B, 1, S, S)``) -> ``(B, embed_dim)``."""
         if self.on == "latent":
             if out.latent is None:
-                raise ValueError("contrastive_on=latent needs the MSFE latent (task.use_msfe=true)")
+                raise ValueError("task.contrastive.embed=latent needs the MSFE latent (task.net.msfe.use=true)")
             return self.body(out.latent.float())
         mask = out.mask.float()
         return self.body(torch.cat([out.depth.float() * mask, mask], dim=1))

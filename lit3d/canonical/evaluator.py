@@ -103,10 +103,9 @@ def heldout_items(task, outputs: dict[str, torch.Tensor], datamodule, settings: 
     trainer = getattr(task, "_trainer", None)
     if (trainer is not None and not trainer.is_global_zero) or not hasattr(datamodule, "held_out_ids"):
         return None
-    hp = datamodule.hparams
     return heldout_arrays(
         outputs, {i: s for s, i in datamodule.subject_index.items()}, datamodule.held_out_ids(),
-        prediction_source(task), dict(hp), hp.fold, hp.n_folds,
+        prediction_source(task), dict(datamodule.hparams), datamodule.split.fold, datamodule.split.n_folds,
         settings_of({"mask_threshold": task.hparams.mask_threshold, **settings}))
 
 

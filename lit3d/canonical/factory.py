@@ -1,6 +1,7 @@
 """Builds the canonical-form nets from their config and initialises them; per-component summary rows.
 
-    net = build_canonical_net({"kind": "canonical", "init": "he", "head": "warp", **sizes})
+    net = build_canonical_net({"kind": "canonical", "init": "he", "image_size": 64, "lfe": {...}, "msfe": {...},
+                               "reconstruction": {...}, "head": {"kind": "warp", "hidden": 16}})
 """
 from __future__ import annotations
 

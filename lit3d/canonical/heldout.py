@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from datamodules.canonical.flat_config import full_data_config
 from lit3d.utils.io import atomic_write_bytes
 
 HELDOUT_FILE = "heldout.npz"
@@ -93,6 +94,14 @@ def coverage_problems(items, expected) -> list[str]:
     return out
 
 
+def data_but_fold(data) -> dict:
+    """The data config of a ``heldout.npz`` (its JSON) spelt out (either layout: :func:`full_data_config`), less
+    the fold."""
+    data = full_data_config(json.loads(str(data)))
+    data["split"] = {k: v for k, v in dict(data.get("split") or {}).items() if k != "fold"}
+    return data
+
+
 def pool(run_dirs, strict: bool = True) -> dict[str, np.ndarray]:
     """Merge the ``heldout.npz`` of every fold into one set (items sorted by id). Raises ValueError
     when the folds disagree on the data or the source, or (``strict``) when some expected item is
@@ -101,9 +110,8 @@ def pool(run_dirs, strict: bool = True) -> dict[str, np.ndarray]:
     if not folds:
         raise ValueError("no run dirs given")
     def same(key, a, b):
-        if key == "data":  # every setting but the fold
-            a, b = ({k: v for k, v in json.loads(str(x)).items() if k != "fold"} for x in (a, b))
-            return a == b
+        if key == "data":  # every setting but the fold (files of either config layout)
+            return data_but_fold(a) == data_but_fold(b)
         return np.array_equal(a, b)
 
     for key in ("data", "source", "expected"):

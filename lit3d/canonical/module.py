@@ -12,23 +12,30 @@ version does not).
 A NaN/Inf loss term stops training with the step and the term named
 (``on_nonfinite="raise"``) or skips that step (``"skip"``, counted in ``skipped_steps``).
 
-``phenotype_weight > 0`` adds a linear regression of the body's phenotypes (``phenotype_dims``; Anny's
-6, ``data.phenotype_targets``) from the MSFE latent and its mean squared error, times that weight: a
-body-shape code that, unlike a closed-set subject classifier, means the same for people never seen
-(``val/phenotype_mae`` on the validation subjects). ``contrastive_weight > 0`` adds the supervised contrastive
-loss across the poses of one subject in the batch (:mod:`lit3d.canonical.contrastive`; ``data.batch_poses``).
+The settings are config nodes (:mod:`lit3d.canonical.settings`): ``net`` (the net's sizes and switches,
+:func:`~lit3d.canonical.factory.build_canonical_net`), ``optimizer``, ``phases`` and the auxiliary objectives,
+each off at weight 0:
 
-``identity_weight > 0`` adds a subject classifier (one linear layer, ``identity_classes`` outputs) on the
-MSFE's fused latent and its cross-entropy, times that weight, to the loss: the latent names the subject too.
+- ``phenotype`` adds a linear regression of the body's phenotypes (``phenotype.dims``; Anny's 6,
+  ``data.phenotype_targets``) from the MSFE latent and its mean squared error, times ``phenotype.weight``: a
+  body-shape code that, unlike a closed-set subject classifier, means the same for people never seen
+  (``val/phenotype_mae`` on the validation subjects);
+- ``contrastive`` adds the supervised contrastive loss across the poses of one subject in the batch
+  (:mod:`lit3d.canonical.contrastive`; ``data.training.batch_poses``);
+- ``identity`` adds a subject classifier (one linear layer, ``identity.classes`` outputs) on the MSFE's fused
+  latent and its cross-entropy, times ``identity.weight``: the latent names the subject too;
+- ``warp``: with ``net.head="warp"`` (:mod:`lit3d.canonical.warp`; it moves the posed pixels instead of
+  redrawing them; ``"splat"``, :mod:`lit3d.canonical.splat`: pushes them by a forward flow) its terms
+  (:data:`WARP_TERMS`, :mod:`lit3d.canonical.warp_loss`) times their ``warp.<term>_weight`` join the loss, the
+  flow and visibility where the batch has flow targets (``data.render.flow_targets``), paid where
+  ``warp.flow_on`` and ``warp.vis_on`` say.
 
 ``arch="recall"`` is the closed-set recall row (:mod:`lit3d.canonical.recall`): a subject classifier
-(``identity_classes`` subjects) whose output is the recalled training canonical image; its templates are
-filled from the training data at fit start and saved in the checkpoint; its cross-entropy x ``identity_weight`` too.
+(``identity.classes`` subjects) whose output is the recalled training canonical image; its templates are
+filled from the training data at fit start and saved in the checkpoint; its cross-entropy x ``identity.weight`` too.
 
-``net.head="warp"`` (:mod:`lit3d.canonical.warp`) moves the posed pixels instead of redrawing them (``"splat"``,
-:mod:`lit3d.canonical.splat`: pushes them by a forward flow); its terms (:data:`WARP_TERMS`,
-:mod:`lit3d.canonical.warp_loss`) times their ``<term>_weight`` join the loss, the flow and visibility where
-the batch has flow targets (``data.flow_targets``), paid where ``flow_on`` and ``vis_on`` say.
+Checkpoints of the flat layout before these nodes load through
+:func:`lit3d.canonical.checkpoint_upgrade.upgrade_checkpoint`.
 
 Logged: ``train/loss|depth_loss|mask_loss|alpha|beta`` (``identity_loss`` with the classifier, ``contrastive_loss``;
 ``flow_loss|vis_loss|smooth_loss`` and ``val/flow_epe`` in pixels with the warp head); ``val/`` and ``test/`` ``depth_mse``
@@ -47,17 +54,18 @@ data and losses).
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import lightning.pytorch as pl
 import torch
 
 from lit3d.callbacks.nonfinite import guard_step, validate_mode
+from lit3d.canonical.checkpoint_upgrade import EVALUATION_LEGACY, upgrade_checkpoint
 from lit3d.canonical.contrastive import ContrastiveEmbedder, supervised_contrastive
 from lit3d.canonical.figures import validation_panel
 from lit3d.canonical.loss_phases import THESIS_FRACTIONS, LossPhases
 from lit3d.canonical.factory import build_canonical_net, summarize
 from lit3d.canonical.recall import RecallTemplates
+from lit3d.canonical.settings import (ContrastiveObjective, IdentityObjective, OptimizerSettings, PanelSettings,
+                                      PhaseSettings, PhenotypeObjective, WarpObjective, parse)
 from lit3d.canonical.losses import canonical_loss, flow_loss
 from lit3d.canonical.warp import require_warp_head
 from lit3d.canonical.warp_loss import check_choices, flow_targets, warp_terms
@@ -65,7 +73,6 @@ from lit3d.metrics.depth import MaskedDepthMSE, MaskIoU
 from lit3d.metrics.gathered import GatheredTensors, compute_if_updated
 from lit3d.metrics.retrieval import mask_retrieval
 from lit3d.utils.checkpoints import load_checkpoint
-from lit3d.utils.evaluation import legacy_settings
 from lit3d.utils.log_images import log_image, media_loggers
 
 METRICS = ("depth_mse", "iou", "depth_mse_input", "iou_input")
@@ -76,13 +83,6 @@ WARP_TERMS = ("flow", "vis", "smooth", "offset_smooth", "depth_grad")
 # "index": the item's place in the test set, so the evaluator sees the items in one order under DDP too
 TEST_OUTPUTS = ("pred_depth", "pred_mask", "depth", "mask", "canon_depth", "canon_mask", "subject_idx", "pose", "view",
                 "index")
-
-# the evaluator's settings (the config's ``evaluation`` node, :func:`lit3d.canonical.evaluator.protocol`) that
-# checkpoints written before that node hold among the task's hyper-parameters, with the defaults the
-# constructor had for them then (what such a checkpoint without the key was evaluated with)
-EVALUATION_LEGACY = {"retrieval": None, "retrieval_min_subjects": 2, "chance_trials": 100, "ceiling_jitter_deg": 0.0,
-                     "mesh_baselines": None, "baseline_max_vertices": None, "baseline_smacof_eps": 1e-4,
-                     "baseline_landmarks": 300}
 
 # per validation item: the prediction's mask (at mask_threshold) and the posed input's ((N, 1, S, S) bool), subject
 VAL_OUTPUTS = ("pred_mask", "mask", "subject_idx")
@@ -105,96 +105,62 @@ def validation_retrieval(gathered: dict[str, torch.Tensor]) -> dict[str, float]:
     return out
 
 
-LR_SCHEDULES = ("constant", "cosine")  # task.lr_schedule
-
-
 class CanonicalTask(pl.LightningModule):
     """Posed depth+mask -> canonical depth+mask (CanonicalNet; a plain U-Net with ``arch="unet"``; the
     closed-set recall net with ``arch="recall"``)."""
 
     evaluation_legacy = EVALUATION_LEGACY  # read by lit3d-eval for checkpoints saved before the evaluation node
 
-    def __init__(
-        self,
-        net: dict | None = None,
-        arch: str = "canonical",
-        use_lfe: bool = True,
-        use_msfe: bool = True,
-        lr: float = 1e-3,
-        betas: Sequence[float] = (0.9, 0.999),
-        lr_schedule: str = "constant",
-        use_phases: bool = True,
-        phases: Sequence[dict] | None = None,
-        phase_unit: str = "fraction",
-        alpha: float = 1000.0,
-        beta: float = 100.0,
-        mask_loss: str = "mse",
-        mask_threshold: float = 0.5,
-        image_every_n_epochs: int = 1,
-        n_panel: int = 4,
-        on_nonfinite: str = "raise",
-        identity_weight: float = 0.0,
-        identity_classes: int = 0,
-        init_weights: str | None = None,
-        flow_weight: float = 0.0,
-        flow_on: str = "visible",
-        flow_power: float = 1.0,
-        vis_on: str = "foreground",
-        vis_weight: float = 0.0,
-        smooth_weight: float = 0.0,
-        offset_smooth_weight: float = 0.0,
-        depth_grad_weight: float = 0.0,
-        phenotype_weight: float = 0.0,
-        phenotype_dims: int = 0,
-        contrastive_weight: float = 0.0,
-        contrastive_on: str = "latent",
-        contrastive_temperature: float = 0.1,
-        contrastive_dim: int = 0,
-        contrastive_channels: Sequence[int] = (),
-        unet_baseline: bool = False,
-        **legacy_evaluation,
-    ):
-        """``legacy_evaluation``: the evaluation settings (:data:`EVALUATION_LEGACY`) that checkpoints written
-        before they got their own config node hold among these hyper-parameters; accepted and ignored
-        (``lit3d-eval`` reads them from the checkpoint), any other keyword is a ValueError."""
+    def __init__(self, net: dict | None = None, arch: str = "canonical", optimizer: dict | None = None,
+                 phases: dict | None = None, mask_loss: str = "mse", mask_threshold: float = 0.5,
+                 warp: dict | None = None, identity: dict | None = None, phenotype: dict | None = None,
+                 contrastive: dict | None = None, panels: dict | None = None, on_nonfinite: str = "raise",
+                 init_weights: str | None = None):
+        """``net``: the net's config (its parts ``lfe``, ``msfe``, ``reconstruction``, ``head``: :func:`build_canonical_net`);
+        ``optimizer``, ``phases``, ``warp``, ``identity``, ``phenotype``, ``contrastive``, ``panels``: the nodes of
+        :mod:`lit3d.canonical.settings` (None: every default, the objectives off)."""
         super().__init__()
-        if unet_baseline:
-            raise ValueError("unet_baseline was removed: train the plain U-Net as a run of its own "
-                             "(task.arch=unet) and merge its rows with python -m studies.canonical.report RUN_DIR "
-                             "--unet UNET_RUN_DIR")
-        legacy_settings(type(self).__name__, legacy_evaluation, EVALUATION_LEGACY)
-        # unet_baseline: accepted (false) from older checkpoints only; the evaluation settings are not the module's
-        self.save_hyperparameters(ignore=["unet_baseline", *legacy_evaluation])
+        self.save_hyperparameters()
         validate_mode(on_nonfinite)
-        if lr_schedule not in LR_SCHEDULES:
-            raise ValueError(f"unknown task.lr_schedule '{lr_schedule}' ({', '.join(LR_SCHEDULES)})")
-        check_choices(flow_on, vis_on)
+        self.optimizer_settings = parse(OptimizerSettings, optimizer, "optimizer")
+        self.phases = parse(PhaseSettings, phases, "phases")
+        self.warp = parse(WarpObjective, warp, "warp")
+        self.identity = parse(IdentityObjective, identity, "identity")
+        self.phenotype = parse(PhenotypeObjective, phenotype, "phenotype")
+        self.contrastive = parse(ContrastiveObjective, contrastive, "contrastive")
+        self.panels = parse(PanelSettings, panels, "panels")
+        check_choices(self.warp.flow_on, self.warp.vis_on)
         cfg = dict(net or {})
         cfg["kind"] = arch
-        if arch == "canonical":
-            cfg.update(use_lfe=use_lfe, use_msfe=use_msfe)
         if arch == "recall":  # closed-set recall row: the net is the subject classifier (lit3d.canonical.recall)
-            cfg["n_subjects"] = identity_classes
+            cfg["n_subjects"] = self.identity.classes
+        msfe = dict(cfg.get("msfe") or {})
+        use_msfe = bool(msfe.get("use", True))
         self.net = build_canonical_net(cfg)
-        require_warp_head(self.net, offset_smooth_weight=offset_smooth_weight, depth_grad_weight=depth_grad_weight)
-        self.identity_head = None  # subject classifier on the MSFE latent (identity_weight > 0)
-        if identity_weight > 0 and arch != "recall":
-            if arch != "canonical" or not use_msfe or identity_classes < 2:
-                raise ValueError("identity_weight > 0 needs arch=canonical with the MSFE and identity_classes >= 2 "
-                                 f"(the number of training subjects); got arch={arch}, use_msfe={use_msfe}, "
-                                 f"identity_classes={identity_classes}")
-            self.identity_head = torch.nn.Linear(int(cfg.get("fuser_out", 500)), int(identity_classes))
-        self.phenotype_head = None  # body-shape regression on the MSFE latent (phenotype_weight > 0)
-        if phenotype_weight > 0:
-            if arch != "canonical" or not use_msfe or phenotype_dims < 1:
-                raise ValueError("phenotype_weight > 0 needs arch=canonical with the MSFE and phenotype_dims >= 1 "
-                                 f"(Anny: 6); got arch={arch}, use_msfe={use_msfe}, phenotype_dims={phenotype_dims}")
-            self.phenotype_head = torch.nn.Linear(int(cfg.get("fuser_out", 500)), int(phenotype_dims))
-        self.contrastive_head = None  # poses of one subject pull together (contrastive_weight > 0)
-        if contrastive_weight > 0:
-            self.contrastive_head = ContrastiveEmbedder(contrastive_on, int(cfg.get("fuser_out", 500)),
-                                                        int(contrastive_dim), contrastive_channels)
-        self.loss_alpha, self.loss_beta = float(alpha), float(beta)  # LossPhases sets them each epoch, if on
+        require_warp_head(self.net, offset_smooth_weight=self.warp.offset_smooth_weight,
+                          depth_grad_weight=self.warp.depth_grad_weight)
+        latent = int(msfe.get("fuser_out", 500))
+        self.identity_head = None  # subject classifier on the MSFE latent (identity.weight > 0)
+        ident = self.identity
+        if ident.weight > 0 and arch != "recall":
+            if arch != "canonical" or not use_msfe or ident.classes < 2:
+                raise ValueError("task.identity.weight > 0 needs arch=canonical with the MSFE and task.identity.classes "
+                                 f">= 2 (the number of training subjects); got arch={arch}, use_msfe={use_msfe}, "
+                                 f"classes={ident.classes}")
+            self.identity_head = torch.nn.Linear(latent, int(ident.classes))
+        self.phenotype_head = None  # body-shape regression on the MSFE latent (phenotype.weight > 0)
+        pheno = self.phenotype
+        if pheno.weight > 0:
+            if arch != "canonical" or not use_msfe or pheno.dims < 1:
+                raise ValueError("task.phenotype.weight > 0 needs arch=canonical with the MSFE and task.phenotype.dims "
+                                 f">= 1 (Anny: 6); got arch={arch}, use_msfe={use_msfe}, dims={pheno.dims}")
+            self.phenotype_head = torch.nn.Linear(latent, int(pheno.dims))
+        self.contrastive_head = None  # poses of one subject pull together (contrastive.weight > 0)
+        con = self.contrastive
+        if con.weight > 0:
+            self.contrastive_head = ContrastiveEmbedder(con.embed, latent, int(con.dim), con.channels)
+        # LossPhases sets them each epoch, if on
+        self.loss_alpha, self.loss_beta = float(self.phases.alpha), float(self.phases.beta)
         self.val_metrics = self._image_metrics(mask_threshold)
         self.test_metrics = self._image_metrics(mask_threshold)
         self.test_outputs = GatheredTensors(TEST_OUTPUTS)  # read by lit3d.canonical.evaluator.protocol
@@ -216,7 +182,7 @@ class CanonicalTask(pl.LightningModule):
         """Start from the net of another canonical checkpoint ``path`` (pretraining, e.g. on Anny
         bodies): its ``net.*`` weights, every one present with the same shape, else one ValueError
         naming the file and the first mismatch. The optimiser starts afresh."""
-        state = load_checkpoint(path).get("state_dict", {})
+        state = upgrade_checkpoint(load_checkpoint(path)).get("state_dict", {})
         net = {k[len("net."):]: v for k, v in state.items() if k.startswith("net.")}
         own = self.net.state_dict()
         for k, v in own.items():
@@ -234,17 +200,18 @@ class CanonicalTask(pl.LightningModule):
             self.load_initial_weights(self.hparams.init_weights)
 
     def configure_callbacks(self):
-        """The loss phases (``use_phases``) and, for ``arch=recall``, the templates from the training data."""
+        """The loss phases (``phases.use``) and, for ``arch=recall``, the templates from the training data."""
         callbacks = [RecallTemplates()] if self.hparams.arch == "recall" else []
-        if self.hparams.use_phases:
-            callbacks.append(LossPhases(self.hparams.phases or THESIS_FRACTIONS, unit=self.hparams.phase_unit))
+        if self.phases.use:
+            callbacks.append(LossPhases(list(self.phases.weights or THESIS_FRACTIONS), unit=self.phases.unit))
         return callbacks
 
     def configure_optimizers(self):
-        """Adam at ``lr``; ``lr_schedule="cosine"``: the rate falls along a half cosine to 0 over the run's
-        training steps (updated every step)."""
-        opt = torch.optim.Adam(self.parameters(), lr=self.hparams.lr, betas=tuple(self.hparams.betas))
-        if self.hparams.get("lr_schedule", "constant") == "constant":
+        """Adam at ``optimizer.lr``; ``optimizer.schedule="cosine"``: the rate falls along a half cosine to 0 over
+        the run's training steps (updated every step)."""
+        o = self.optimizer_settings
+        opt = torch.optim.Adam(self.parameters(), lr=o.lr, betas=tuple(o.betas))
+        if o.schedule == "constant":
             return opt
         steps = max(int(self.trainer.estimated_stepping_batches), 1)
         sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=steps)
@@ -257,22 +224,22 @@ class CanonicalTask(pl.LightningModule):
                                 self.loss_alpha, self.loss_beta, self.hparams.mask_loss, out.mask_logits)
         # the weighted total too: finite terms times a huge alpha/beta can still overflow to Inf
         terms = {"depth": losses["depth"], "mask": losses["mask"], "loss": losses["loss"]}
-        if self.hparams.identity_weight > 0:  # the MSFE's identity head, or the recall net's own logits
+        if self.identity.weight > 0:  # the MSFE's identity head, or the recall net's own logits
             terms["identity"] = self._identity_loss(out.latent, batch["subject_idx"])
-            terms["loss"] = terms["loss"] + self.hparams.identity_weight * terms["identity"]
+            terms["loss"] = terms["loss"] + self.identity.weight * terms["identity"]
         if self.phenotype_head is not None:
             terms["phenotype"] = self._phenotype_error(out.latent, batch).pow(2).mean()
-            terms["loss"] = terms["loss"] + self.hparams.phenotype_weight * terms["phenotype"]
+            terms["loss"] = terms["loss"] + self.phenotype.weight * terms["phenotype"]
         if self.contrastive_head is not None:
             subjects = torch.as_tensor(batch["subject_idx"])  # (B,); the loss moves it to the embeddings' device
             terms["contrastive"] = supervised_contrastive(self.contrastive_head(out), subjects,
-                                                          self.hparams.contrastive_temperature)
-            terms["loss"] = terms["loss"] + self.hparams.contrastive_weight * terms["contrastive"]
+                                                          self.contrastive.temperature)
+            terms["loss"] = terms["loss"] + self.contrastive.weight * terms["contrastive"]
         if out.flow is not None:  # the warp head: each of its terms times its weight
-            hp = self.hparams
-            terms.update(warp := warp_terms(out, batch, hp.flow_on, hp.offset_smooth_weight > 0, hp.depth_grad_weight > 0,
-                                            hp.vis_on, hp.flow_power))
-            terms["loss"] = terms["loss"] + sum(self.hparams[f"{k}_weight"] * v for k, v in warp.items())
+            w = self.warp
+            terms.update(warp := warp_terms(out, batch, w.flow_on, w.offset_smooth_weight > 0, w.depth_grad_weight > 0,
+                                            w.vis_on, w.flow_power))
+            terms["loss"] = terms["loss"] + sum(getattr(w, f"{k}_weight") * v for k, v in warp.items())
         where = f"step {self.global_step} (epoch {self.current_epoch}, batch {batch_idx})"
         if not guard_step(self, terms, where, self.hparams.on_nonfinite):
             return None  # no backward, no optimizer step
@@ -282,7 +249,7 @@ class CanonicalTask(pl.LightningModule):
         for k in ("identity", "phenotype", "contrastive", *WARP_TERMS):
             if k in terms:
                 self.log(f"train/{k}_loss", terms[k], on_step=False, on_epoch=True, batch_size=bs)
-        if not self.hparams.use_phases:
+        if not self.phases.use:
             self.log_dict({"train/alpha": self.loss_alpha, "train/beta": self.loss_beta},
                           on_step=False, on_epoch=True, batch_size=bs)
         return terms["loss"]
@@ -294,20 +261,20 @@ class CanonicalTask(pl.LightningModule):
         target = torch.as_tensor(subject_idx, device=latent.device).long()
         n = self.net.n_subjects if self.identity_head is None else self.identity_head.out_features
         if target.min() < 0 or target.max() >= n:
-            raise ValueError(f"subject index {int(target.max())} outside identity_classes={n}: set "
-                             "task.identity_classes to the number of subjects of the data")
+            raise ValueError(f"subject index {int(target.max())} outside identity.classes={n}: set "
+                             "task.identity.classes to the number of subjects of the data")
         logits = latent.float() if self.identity_head is None else self.identity_head(latent.float())
         return torch.nn.functional.cross_entropy(logits, target)
 
     def _phenotype_error(self, latent: torch.Tensor, batch: dict) -> torch.Tensor:
-        """Predicted minus true phenotypes ``(B, phenotype_dims)`` (the head on the MSFE latent ``(B, fuser_out)``;
+        """Predicted minus true phenotypes ``(B, phenotype.dims)`` (the head on the MSFE latent ``(B, fuser_out)``;
         targets ``batch["phenotype"]`` in [0, 1]); ValueError when the batch has none or another width."""
         if "phenotype" not in batch:
-            raise ValueError("phenotype_weight > 0 needs phenotype targets in the batch: data.phenotype_targets=true "
-                             "(data.source=anny)")
+            raise ValueError("task.phenotype.weight > 0 needs phenotype targets in the batch: data.phenotype_targets=true "
+                             "(data.source.kind=anny)")
         target = batch["phenotype"].float()
         if target.shape[-1] != self.phenotype_head.out_features:
-            raise ValueError(f"the data has {target.shape[-1]} phenotypes, task.phenotype_dims="
+            raise ValueError(f"the data has {target.shape[-1]} phenotypes, task.phenotype.dims="
                              f"{self.phenotype_head.out_features}")
         return self.phenotype_head(latent.float()) - target
 
@@ -336,8 +303,8 @@ class CanonicalTask(pl.LightningModule):
         if self.phenotype_head is not None and "phenotype" in batch:  # new people's body shape, mean |error|
             self.log("val/phenotype_mae", self._phenotype_error(out.latent, batch).abs().mean(), on_epoch=True,
                      batch_size=bs)
-        if batch_idx == 0 and self.hparams.image_every_n_epochs and \
-                self.current_epoch % self.hparams.image_every_n_epochs == 0:
+        every = self.panels.every_n_epochs
+        if batch_idx == 0 and every and self.current_epoch % every == 0:
             self._log_panels(batch, out)
 
     def on_validation_epoch_end(self) -> None:
@@ -373,7 +340,7 @@ class CanonicalTask(pl.LightningModule):
         loggers = media_loggers(self.loggers)  # W&B and TensorBoard (lit3d.utils.log_images)
         if not loggers or self.trainer.sanity_checking:
             return
-        image = validation_panel(batch, out, self.hparams.n_panel, self.hparams.mask_threshold)
+        image = validation_panel(batch, out, self.panels.n, self.hparams.mask_threshold)
         log_image(loggers, "val/panels", image, self.global_step, caption="input | predicted | true canonical | error")
 
     # ------------------------------------------------------------------ state
@@ -389,8 +356,6 @@ class CanonicalTask(pl.LightningModule):
         """Per-component rows for ``lit3d-summary`` (built on the meta device by the caller)."""
         cfg = dict(kwargs.get("net") or {})
         cfg["kind"] = kwargs.get("arch", "canonical")
-        if cfg["kind"] == "canonical":
-            cfg.update(use_lfe=kwargs.get("use_lfe", True), use_msfe=kwargs.get("use_msfe", True))
         net = build_canonical_net(cfg)
         rows = summarize(net, int(cfg.get("image_size", 128)))
         return [{"name": r["component"], "params": r["params"], "output_shape": r["output"]} for r in rows]

@@ -28,6 +28,8 @@ import torch.nn.functional as F
 from lit3d.canonical.outputs import CanonicalOutput, OutputHead
 from lit3d.canonical.splat import SplatHead
 from lit3d.canonical.warp import WarpHead
+from lit3d.canonical.net_settings import HeadSettings, LFESettings, MSFESettings, ReconstructionSettings
+from lit3d.canonical.settings import parse
 
 UP_KERNELS = (5, 3, 5, 2, 2)
 UP_STRIDES = (1, 1, 2, 2, 2)  # three stride-2 ups undo the three 2x max-pools
@@ -155,57 +157,47 @@ class MSFE(nn.Module):
         return self.decode(self.encode(x), x.shape[-2:])
 
 
-HEADS = ("redraw", "warp", "splat")
-RECONSTRUCTIONS = ("downup", "unet")
-
-
 class CanonicalNet(nn.Module):
     """LFE -> MSFE -> reconstruction (thesis Fig. 5.1), with ablation switches.
 
-    ``use_lfe=False`` drops the LFE (the MSFE and the reconstruction see depth+mask only);
-    ``use_msfe=False`` drops the MSFE. Reconstruction input = [depth, mask, Y_LFE, Y_MSFE].
-    ``head``: ``redraw`` (the thesis: a 1x1 conv draws depth and mask) or ``warp``
-    (:class:`~lit3d.canonical.warp.WarpHead`: moves the posed pixels, ``warp_hidden`` channels; its
-    coarse flow comes from the MSFE's fused latent; ``warp_parts`` > 0: its flow starts from that many
-    rigid parts, :class:`~lit3d.canonical.warp.PartFlow`; ``warp_refine_steps``: refinement steps of its
-    flow; ``warp_attend_grid`` > 0: a coarse flow found by attention over the posed cells,
-    :class:`~lit3d.canonical.warp.AttendFlow`; ``warp_depth``/``warp_affine_cell``: how the moved depth
-    becomes the canonical depth).
+    The parts are the nodes of :mod:`lit3d.canonical.net_settings` (mappings or their dataclasses):
+    ``lfe.use=False`` drops the LFE (the MSFE and the reconstruction see depth+mask only);
+    ``msfe.use=False`` drops the MSFE. Reconstruction input = [depth, mask, Y_LFE, Y_MSFE].
+    ``head.kind``: ``redraw`` (the thesis: a 1x1 conv draws depth and mask) or ``warp``
+    (:class:`~lit3d.canonical.warp.WarpHead`: moves the posed pixels, ``head.hidden`` channels; its
+    coarse flow comes from the MSFE's fused latent; ``head.parts`` > 0: its flow starts from that many
+    rigid parts, :class:`~lit3d.canonical.warp.PartFlow`; ``head.refine_steps``: refinement steps of its
+    flow; ``head.attend_grid`` > 0: a coarse flow found by attention over the posed cells,
+    :class:`~lit3d.canonical.warp.AttendFlow`; ``head.depth``/``head.affine_cell``: how the moved depth
+    becomes the canonical depth) or ``splat`` (:class:`~lit3d.canonical.splat.SplatHead`).
     """
 
-    def __init__(self, image_size: int, lfe_channels: Sequence[int], lfe_out: int, msfe_channels: Sequence[int],
-                 msfe_grid: int, fuser_hidden: int, fuser_out: int, msfe_dec_channels: Sequence[int], msfe_out: int,
-                 rec_channels: Sequence[int], use_lfe: bool = True, use_msfe: bool = True, head: str = "redraw",
-                 warp_hidden: int | None = None, warp_normalise_depth: bool = False, warp_depth: str = "offset",
-                 warp_affine_cell: int = 8, reconstruction: str = "downup", warp_parts: int = 0,
-                 warp_refine_steps: int = 1, warp_attend_grid: int = 0):
+    def __init__(self, image_size: int, lfe: dict | LFESettings, msfe: dict | MSFESettings,
+                 reconstruction: dict | ReconstructionSettings, head: dict | HeadSettings | None = None):
         super().__init__()
-        if reconstruction not in RECONSTRUCTIONS:
-            raise ValueError(f"unknown canonical reconstruction '{reconstruction}' ({', '.join(RECONSTRUCTIONS)})")
-        if head not in HEADS:
-            raise ValueError(f"unknown canonical net head '{head}' ({', '.join(HEADS)})")
-        if head in ("warp", "splat") and warp_hidden is None:
-            raise ValueError(f"the {head} head needs its width: set task.net.warp_hidden")
+        lfe, msfe = parse(LFESettings, lfe, "net.lfe"), parse(MSFESettings, msfe, "net.msfe")
+        rec = parse(ReconstructionSettings, reconstruction, "net.reconstruction")
+        head = parse(HeadSettings, head, "net.head")
         self.image_size = image_size
-        self.lfe = LFE(2, lfe_out, lfe_channels) if use_lfe else None
-        c = 2 + (lfe_out if use_lfe else 0)
-        self.msfe = MSFE(c, msfe_out, msfe_channels, msfe_grid, fuser_hidden, fuser_out, msfe_dec_channels,
-                         image_size) if use_msfe else None
-        c += msfe_out if use_msfe else 0
-        if reconstruction == "unet":  # skip connections: full-resolution features for the flow
-            self.reconstruction = UNetTrunk(c, rec_channels)
+        self.lfe = LFE(2, lfe.out, lfe.channels) if lfe.use else None
+        c = 2 + (lfe.out if lfe.use else 0)
+        self.msfe = MSFE(c, msfe.out, msfe.channels, msfe.grid, msfe.fuser_hidden, msfe.fuser_out, msfe.dec_channels,
+                         image_size) if msfe.use else None
+        c += msfe.out if msfe.use else 0
+        if rec.kind == "unet":  # skip connections: full-resolution features for the flow
+            self.reconstruction = UNetTrunk(c, rec.channels)
             hidden = self.reconstruction.out_channels
         else:
-            hidden = max(rec_channels[0] // 2, 4)
-            self.reconstruction = DownUp(c, hidden, rec_channels, up_act="leaky", final_act=True)
+            hidden = max(rec.channels[0] // 2, 4)
+            self.reconstruction = DownUp(c, hidden, rec.channels, up_act="leaky", final_act=True)
         # the input is given to the head again (skip link)
-        latent = fuser_out if use_msfe else 0
-        if head == "warp":
-            self.head = WarpHead(hidden + 2, warp_hidden, latent, normalise_depth=warp_normalise_depth,
-                                 depth_model=warp_depth, affine_cell=warp_affine_cell, parts=warp_parts,
-                                 refine_steps=warp_refine_steps, attend_grid=warp_attend_grid)
-        elif head == "splat":
-            self.head = SplatHead(hidden + 2, warp_hidden, latent, depth_model=warp_depth, affine_cell=warp_affine_cell)
+        latent = msfe.fuser_out if msfe.use else 0
+        if head.kind == "warp":
+            self.head = WarpHead(hidden + 2, head.hidden, latent, normalise_depth=head.normalise_depth,
+                                 depth_model=head.depth, affine_cell=head.affine_cell, parts=head.parts,
+                                 refine_steps=head.refine_steps, attend_grid=head.attend_grid)
+        elif head.kind == "splat":
+            self.head = SplatHead(hidden + 2, head.hidden, latent, depth_model=head.depth, affine_cell=head.affine_cell)
         else:
             self.head = OutputHead(hidden + 2)
 

@@ -10,7 +10,7 @@ prediction (``model`` or ``unet``), the posed input depth and the true canonical
 mesh rows. Without run dirs the Hydra overrides after ``--`` compose the data, task and evaluation config (as
 ``lit3d-train`` would) and the items are every item some fold holds out
 (:meth:`datamodules.canonical.CanonicalDataModule.held_out_records`): the posed-input and true
-canonical depth rows plus the mesh rows, and with ``data.flow_targets=true`` the warp oracle
+canonical depth rows plus the mesh rows, and with ``data.render.flow_targets=true`` the warp oracle
 (:func:`warp_oracle`: the true canonical where the posed input sees it, the mean body elsewhere). Mesh rows (one per held-out subject x pose, full
 resolution): the non-learned canonical forms ``evaluation.mesh_baselines`` (landmark geodesics,
 :mod:`lit3d.geometry.canonical_forms`), ShapeDNA of the posed full mesh (the intrinsic ceiling,
@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from datamodules.canonical import CanonicalDataModule
+from datamodules.canonical.flat_config import upgrade_data_config
 from datamodules.canonical.dataset import CanonicalPairDataset
 from lit3d.canonical.baselines import mesh_rows
 from lit3d.canonical.heldout import HELDOUT_FILE, pool, settings_of
@@ -251,14 +252,25 @@ def compose(overrides: list[str]):
 
 
 def build_datamodule(data: dict):
-    data = {k: v for k, v in data.items() if k != "_target_"}
+    """The DataModule of a data config (either layout: :func:`upgrade_data_config`)."""
+    data = {k: v for k, v in upgrade_data_config(data).items() if k != "_target_"}
     return CanonicalDataModule(**data)
+
+
+def data_summary(data: dict) -> dict:
+    """The data settings that a pooled result names (source, root, image size, views, split, folds, seed)."""
+    data = upgrade_data_config(data)
+    render, split = data.get("render") or {}, data.get("split") or {}
+    return {"source": (data.get("source") or {}).get("kind"), "root": data.get("root"),
+            "image_size": data.get("image_size"), "azimuths": render.get("azimuths", [0.0]),
+            "view_mode": render.get("view_mode", "fixed"), "split": split.get("mode", "subject_pose"),
+            "n_folds": split.get("n_folds", 3), "seed": data.get("seed")}
 
 
 def run(run_dirs, seeds, out_dir, overrides=(), rows=None, strict: bool = True, mesh_baselines=None,
         fold_test: bool = False, depth_rows: dict | None = None, smooth_px: float | None = None) -> Path:
     """Pool (or, without run dirs, take every held-out item of the composed config; ``fold_test``: only
-    the test split of its ``data.fold``), score, write ``pooled_results.md`` and ``pooled.json`` into
+    the test split of its ``data.split.fold``), score, write ``pooled_results.md`` and ``pooled.json`` into
     ``out_dir``; returns the .md path. ``mesh_baselines``: the canonical-form rows (default: the runs'
     ``evaluation.mesh_baselines``); ``depth_rows``: ``{row: folder}`` more depth rows (:func:`folder_depths`);
     ``smooth_px``: smooth the prediction row as ``evaluation.prediction_smooth_px`` would have (:func:`with_smoothing`)."""
@@ -282,7 +294,7 @@ def run(run_dirs, seeds, out_dir, overrides=(), rows=None, strict: bool = True, 
         ds = CanonicalPairDataset(records, dm.cache, dm.subject_index)
         its = [ds[i] for i in range(len(ds))]
         items = {k: np.stack([it[k][0].numpy() for it in its]) for k in ("depth", "mask", "canon_depth", "canon_mask")}
-        if all(it["has_flow"] for it in its):  # flow targets (data.flow_targets=true): the warp oracle row
+        if all(it["has_flow"] for it in its):  # flow targets (data.render.flow_targets=true): the warp oracle row
             items["vis"] = np.stack([it["vis"][0].numpy() for it in its])
         items.update(subject=np.array([it["subject"] for it in its]), pose=np.array([it["pose"] for it in its]))
         meta = {"overrides": list(overrides)}
@@ -294,8 +306,7 @@ def run(run_dirs, seeds, out_dir, overrides=(), rows=None, strict: bool = True, 
     if extra:
         meta["depth_rows"] = {row: str(folder) for row, folder in depth_rows.items()}
     result = study(items, dm, settings, seeds, rows, extra)
-    result.update(meta, data={k: data.get(k) for k in ("source", "root", "image_size", "azimuths", "view_mode",
-                                                       "split", "n_folds", "seed")},
+    result.update(meta, data=data_summary(data),
                   settings=settings, wall_seconds=time.perf_counter() - t0)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -315,7 +326,7 @@ except ImportError:  # pragma: no cover
 
 
 class PooledResults(_HydraCallback):
-    """Hydra callback (``sweeps/canonical_cv.yaml``): when the multirun over ``data.fold`` ends, pool
+    """Hydra callback (``sweeps/canonical_cv.yaml``): when the multirun over ``data.split.fold`` ends, pool
     its jobs' held-out items and write ``pooled_results.md`` into the sweep dir."""
 
     def __init__(self, seeds=(0, 1, 2, 3, 4), rows=None, mesh_baselines=None):

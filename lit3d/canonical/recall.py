@@ -36,7 +36,7 @@ class SubjectRecallNet(nn.Module):
     def __init__(self, n_subjects: int, image_size: int, channels: Sequence[int]):
         super().__init__()
         if int(n_subjects) < 2:
-            raise ValueError(f"the recall net needs n_subjects >= 2 (got {n_subjects}): set task.identity_classes")
+            raise ValueError(f"the recall net needs n_subjects >= 2 (got {n_subjects}): set task.identity.classes")
         layers, prev = [], 2
         for ch in channels:
             layers += [nn.Conv2d(prev, ch, 3, padding=1), nn.BatchNorm2d(ch), nn.ReLU(), nn.MaxPool2d(2)]
@@ -57,7 +57,7 @@ class SubjectRecallNet(nn.Module):
         for name, t in (("depth", depth), ("mask", mask)):
             if tuple(t.shape) != want:
                 raise ValueError(f"recall templates: {name} has shape {tuple(t.shape)}, expected {want} "
-                                 "(one canonical image per subject, identity_classes subjects, image_size)")
+                                 "(one canonical image per subject, identity.classes subjects, image_size)")
         self.template_depth.copy_(depth)
         self.template_mask.copy_(mask)
 

@@ -55,7 +55,7 @@ def retrieval_rows(metrics: dict) -> list[list[str]]:
 
 
 def _dataset_from_run_dir(out_dir: Path) -> str | None:
-    """``data.source`` from the run dir's config.yaml (written by lit3d-train / lit3d-eval), if any; an
+    """``data.source.kind`` from the run dir's config.yaml (written by lit3d-train / lit3d-eval), if any; an
     evaluation's staging folder (:data:`lit3d.utils.io.STAGE_PREFIX`) reads its run dir's."""
     out_dir = Path(out_dir)
     run_dir = out_dir.parent if out_dir.name.startswith(STAGE_PREFIX) else out_dir
@@ -66,7 +66,8 @@ def _dataset_from_run_dir(out_dir: Path) -> str | None:
         import yaml
 
         cfg = yaml.safe_load(path.read_text()) or {}
-        return (cfg.get("data") or {}).get("source")
+        source = (cfg.get("data") or {}).get("source")
+        return source.get("kind") if isinstance(source, dict) else source  # a config of either layout
     except Exception:
         return None
 
@@ -75,7 +76,7 @@ def write_results(metrics: dict, out_dir: Path, dataset: str | None = None) -> P
     """results.md: image metrics (model, U-Net, posed input) and retrieval rows (model, U-Net, posed
     input, true canonical, non-learned mesh baselines, chance) beside thesis tables 5.1-5.3; table 5.4.
 
-    ``dataset`` (data.source: synth, tosca, shrec14; default: read from ``out_dir/config.yaml``) puts
+    ``dataset`` (data.source.kind: synth, tosca, shrec14; default: read from ``out_dir/config.yaml``) puts
     our rows into the matching thesis table only (synth/SHREC'14 -> 5.1, TOSCA -> 5.3); unknown ->
     our rows in every table."""
     m = metrics
@@ -209,7 +210,7 @@ def write_figures(task, datamodule, out_dir: Path, n: int = 4, evaluation=None) 
         sheet.save(buf, format="PNG")
         paths.append(atomic_write_bytes(out_dir / f"canonical_{subject}.png", buf.getvalue()))
     mpath = out_dir / "metrics.json"
-    source = getattr(getattr(datamodule, "hparams", None), "get", lambda k: None)("source")
+    source = getattr(datamodule, "source_kind", None)  # synth, tosca, ... (a DataModule without one: None)
     if mpath.is_file() and source:
         write_results(json.loads(mpath.read_text()), out_dir, dataset=source)
     return paths

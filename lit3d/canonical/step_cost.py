@@ -33,9 +33,10 @@ def _measure(task, size: int, batch: int) -> dict:
         loss = canonical_loss(out.depth, out.mask, b["canon_depth"], b["canon_mask"], task.loss_alpha, task.loss_beta,
                               hp.mask_loss, out.mask_logits)["loss"]
         if out.flow is not None:
-            warp = warp_terms(out, b, hp.flow_on, hp.offset_smooth_weight > 0, hp.depth_grad_weight > 0, hp.vis_on,
-                              hp.flow_power)
-            loss = loss + sum(hp[f"{k}_weight"] * v for k, v in warp.items())
+            w = task.warp
+            warp = warp_terms(out, b, w.flow_on, w.offset_smooth_weight > 0, w.depth_grad_weight > 0, w.vis_on,
+                              w.flow_power)
+            loss = loss + sum(getattr(w, f"{k}_weight") * v for k, v in warp.items())
         peak = saved.peak
         loss.backward()
     task.zero_grad(set_to_none=True)
@@ -48,8 +49,7 @@ def canonical_step_cost(task, size: int) -> dict:
     (FLOPs and saved bytes: the slope between batch 1 and 2; ops: kernel-like aten ops of one step)."""
     if any(p.device.type != "meta" for p in task.parameters()):
         raise ValueError("step cost: build the task on the meta device (with torch.device('meta'): ...)")
-    hp = task.hparams
-    extra = [k for k in ("identity_weight", "phenotype_weight", "contrastive_weight") if hp.get(k, 0) > 0]
+    extra = [f"{k}.weight" for k in ("identity", "phenotype", "contrastive") if getattr(task, k).weight > 0]
     if extra:
         raise ValueError(f"canonical step cost counts the net, depth/mask and warp terms only; {extra} > 0")
     one, two = _measure(task, size, 1), _measure(task, size, 2)

@@ -247,7 +247,7 @@ class WarpHead(PixelMover):
                  attend_grid: int = 0):
         super().__init__(latent_dim, coarse, depth_model, affine_cell)
         if parts and not latent_dim:
-            raise ValueError("warp_parts > 0 needs the MSFE's latent (task.use_msfe=true)")
+            raise ValueError("task.net.head.parts > 0 needs the MSFE's latent (task.net.msfe.use=true)")
         if refine_steps < 1:
             raise ValueError(f"warp_refine_steps must be >= 1 (got {refine_steps})")
         self.part_flow = PartFlow(hidden, latent_dim, parts) if parts else None
@@ -301,10 +301,10 @@ class WarpHead(PixelMover):
 
 
 def require_warp_head(net: nn.Module, **weights: float) -> None:
-    """ValueError naming the ``task.<weight>`` that is > 0 where ``net``'s head moves no pixels (neither a
+    """ValueError naming the ``task.warp.<weight>`` that is > 0 where ``net``'s head moves no pixels (neither a
     :class:`WarpHead` nor :class:`lit3d.canonical.splat.SplatHead`): those terms (offset smoothness,
     depth slope) exist only with them."""
     on = [k for k, w in weights.items() if w > 0]
     if on and not getattr(getattr(net, "head", None), "moves_pixels", False):
-        raise ValueError(f"task.{on[0]}={weights[on[0]]:g} needs the warp head (task.arch=canonical, "
-                         "task.net.head=warp or splat); set it to 0 with this net")
+        raise ValueError(f"task.warp.{on[0]}={weights[on[0]]:g} needs the warp head (task.arch=canonical, "
+                         "task.net.head.kind=warp or splat); set it to 0 with this net")

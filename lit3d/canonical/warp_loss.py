@@ -1,6 +1,6 @@
 """The warp head's loss terms (:mod:`lit3d.canonical.warp`), from a net output and a batch.
 
-Batch keys (``datamodules.canonical`` with ``data.flow_targets=true``): ``flow`` ``(B, 2, H, W)`` in
+Batch keys (``datamodules.canonical`` with ``data.render.flow_targets=true``): ``flow`` ``(B, 2, H, W)`` in
 pixels, ``vis`` ``(B, 1, H, W)`` (backward, at canonical pixels: the warp head's), ``fflow``, ``fvis``
 (forward, at posed pixels: the splat head's, :mod:`lit3d.canonical.splat`), ``has_flow`` ``(B,)`` bool,
 ``mask``, ``canon_depth``, ``canon_mask`` ``(B, 1, H, W)``. "Foreground" below is that of the flow's own
@@ -33,10 +33,10 @@ VIS_ON = ("foreground", "image")
 
 
 def check_choices(flow_on: str, vis_on: str) -> None:
-    """ValueError naming ``task.flow_on`` or ``task.vis_on`` when it is not one of its choices."""
+    """ValueError naming ``task.warp.flow_on`` or ``task.warp.vis_on`` when it is not one of its choices."""
     for name, value, choices in (("flow_on", flow_on, FLOW_ON), ("vis_on", vis_on, VIS_ON)):
         if value not in choices:
-            raise ValueError(f"task.{name} must be one of {choices}, got '{value}'")
+            raise ValueError(f"task.warp.{name} must be one of {choices}, got '{value}'")
 
 
 def escape_flow(flow: np.ndarray, canon_mask: np.ndarray, posed_mask: np.ndarray) -> np.ndarray:
@@ -71,8 +71,8 @@ def flow_targets(out, batch: dict) -> tuple[torch.Tensor, torch.Tensor, torch.Te
     and ``vis``; ``posed``, the forward ``fflow`` and ``fvis``); zeros and False when the batch has none."""
     f_name, v_name = ("fflow", "fvis") if out.flow_frame == "posed" else ("flow", "vis")
     if f_name == "fflow" and "flow" in batch and "fflow" not in batch:
-        raise ValueError("the splat head learns a forward flow: its data need data.forward_flow=true (and "
-                         "data.flow_targets=true)")
+        raise ValueError("the splat head learns a forward flow: its data need data.render.forward_flow=true (and "
+                         "data.render.flow_targets=true)")
     if batch.get("has_flow") is None or f_name not in batch:
         has = torch.zeros(out.flow.shape[0], dtype=torch.bool, device=out.flow.device)
         return torch.zeros_like(out.flow), torch.zeros_like(out.mask), has

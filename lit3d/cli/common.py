@@ -35,6 +35,7 @@ from omegaconf import DictConfig, OmegaConf
 from lit3d.cli.about import EXIT_USER, about_flags
 from lit3d.cli.config_checks import ConfigValueError, check_config_values, config_problem
 from lit3d.cli.eval_settings import override_problem, stale_task_keys
+from lit3d.cli.key_hints import instantiation_problem, misspelt_key
 from lit3d.cli.evaluation import run_evaluation, scalar_metrics  # noqa: F401  (re-exported)
 from lit3d.cli.rundir import claim_run_dir, hold_output_dir
 from lit3d.utils import quiet
@@ -143,7 +144,8 @@ def read_checkpoint(ckpt_path: str | Path) -> tuple[dict, dict]:
     """``(checkpoint dict, its lit3d metadata)`` (task, data config, W&B id).
 
     Loads with ``weights_only=True`` (see :func:`lit3d.utils.checkpoints.load_checkpoint`): a
-    checkpoint that pickles arbitrary objects is refused, never executed.
+    checkpoint that pickles arbitrary objects is refused, never executed. A canonical checkpoint comes in
+    today's config layout (:func:`lit3d.canonical.checkpoint_upgrade.upgrade_checkpoint`).
     """
     from lit3d.utils.checkpoints import META_KEY, load_checkpoint
 
@@ -151,7 +153,11 @@ def read_checkpoint(ckpt_path: str | Path) -> tuple[dict, dict]:
     meta = ckpt.get(META_KEY) if isinstance(ckpt, dict) else None
     if not isinstance(meta, dict):
         raise UserError(f"{Path(ckpt_path)}: not a lit3d checkpoint (no '{META_KEY}' metadata)")
-    return ckpt, meta
+    if (meta.get("task") or {}).get("name") == "canonical":  # maybe written before its settings were nodes
+        from lit3d.canonical.checkpoint_upgrade import upgrade_checkpoint  # (imports its DataModule: only here)
+
+        ckpt = upgrade_checkpoint(ckpt)
+    return ckpt, ckpt[META_KEY]
 
 
 def read_checkpoint_meta(ckpt_path: str | Path) -> dict:
@@ -233,6 +239,9 @@ def check_composes(args: Sequence[str], config_name: str, conf_dir: str = CONF_D
         moved = override_problem(args, lambda rest: compose_config(config_name, rest, conf_dir=conf_dir))
         if moved:  # a task.KEY that is an evaluation setting now, or evaluation.* without a task
             raise UserError(moved) from exc
+        misspelt = misspelt_key(str(exc), args, lambda rest: compose_config(config_name, rest, conf_dir=conf_dir))
+        if misspelt:  # trainer.max_epoch=3: trainer.max_epochs named, not Hydra's "+trainer.max_epoch"
+            raise UserError(misspelt) from exc
         lines = [ln.strip() for ln in str(exc).strip().splitlines() if ln.strip()]
         raise UserError("; ".join(ln.rstrip(".") for ln in lines[:2]) or type(exc).__name__) from exc
     stale = stale_task_keys(composed)  # an experiment that still sets an evaluation setting under task:
@@ -385,6 +394,9 @@ def run_cli(fn: Callable[[DictConfig], Any], cfg: DictConfig) -> Any:
         stopped_early()
     except Exception as exc:
         code = exit_code_for(exc)
+        refused = instantiation_problem(exc) if code is None else None
+        if refused and not _debug_requested():  # +trainer.max_epoch=3: the Trainer has no such argument
+            fail(UserError(refused), EXIT_USER)
         if code is None or _debug_requested():
             raise
         if isinstance(exc, MissingMandatoryValue):

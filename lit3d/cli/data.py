@@ -2,7 +2,9 @@
 
 Generates the synthetic set (or indexes and converts a real one) into
 ``paths.data_dir``, prints counts per split and category, sizes and the
-manifest hash; ``--show N`` writes a PNG of N samples into the run dir. A ``data_dir`` holding
+manifest hash as JSON, and writes the same JSON to ``data_summary.json`` in the run dir; ``--show N``
+writes a PNG of N samples into the run dir. stdout holds the JSON alone (log and console lines go to
+stderr while it runs), so ``lit3d-data ... > summary.json`` is valid JSON too. A ``data_dir`` holding
 data of another config is refused (nothing deleted); ``--rebuild`` deletes it and prepares it
 again (the only command that deletes prepared data; see docs/resuming.md). Ctrl-C or SIGTERM stops
 the preparation at the next item, exit 143 with one line; the same command again resumes
@@ -10,8 +12,11 @@ the preparation at the next item, exit 143 with one line; the same command again
 """
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import hydra
@@ -19,20 +24,45 @@ from omegaconf import DictConfig
 
 from lit3d.cli.common import CONF_DIR, build_datamodule, cli_main, run_cli
 from lit3d.cli.stops import preparing
+from lit3d.utils.io import write_json
+
+SUMMARY = "data_summary.json"  # in the run dir: the printed JSON
+
+
+@contextlib.contextmanager
+def console_on_stderr() -> Iterator[None]:
+    """Point the root logger's stdout handlers (Hydra's console handler) at stderr for the block, so
+    that stdout keeps the one JSON document; restored afterwards."""
+    moved = [h for h in logging.getLogger().handlers
+             if isinstance(h, logging.StreamHandler) and getattr(h, "stream", None) is sys.stdout]
+    for handler in moved:
+        handler.setStream(sys.stderr)
+    try:
+        yield
+    finally:
+        for handler in moved:
+            handler.setStream(sys.stdout)
 
 
 def prepare(cfg: DictConfig) -> dict:
-    dm = build_datamodule(cfg.data)
-    with preparing(dm.data_dir):  # Ctrl-C: stop at the next item
-        dm.prepare_data()
-    dm.setup("fit")
-    info = dm.describe()
-    print(json.dumps(info, indent=2, sort_keys=True, default=str))
-    n_show = int(cfg.get("show", 0) or 0)
-    if n_show > 0:
-        path = Path(cfg.paths.output_dir) / f"{cfg.task_info.name}_samples.png"
-        dm.show(n_show, path)
-        print(f"wrote {path}")
+    """Prepare ``cfg.data``; print its description (JSON, stdout) and write it to the run dir's
+    ``data_summary.json``; ``show`` samples to ``<task>_samples.png`` there."""
+    out_dir = Path(cfg.paths.output_dir)
+    with console_on_stderr():
+        dm = build_datamodule(cfg.data)
+        with preparing(dm.data_dir):  # Ctrl-C: stop at the next item
+            dm.prepare_data()
+        dm.setup("fit")
+        info = json.loads(json.dumps(dm.describe(), default=str))
+        write_json(out_dir / SUMMARY, info)
+        n_show = int(cfg.get("show", 0) or 0)
+        if n_show > 0:
+            path = out_dir / f"{cfg.task_info.name}_samples.png"
+            dm.show(n_show, path)
+            print(f"wrote {path} and {out_dir / SUMMARY}", file=sys.stderr)
+        else:
+            print(f"wrote {out_dir / SUMMARY}", file=sys.stderr)
+    print(json.dumps(info, indent=2, sort_keys=True), flush=True)
     return info
 
 

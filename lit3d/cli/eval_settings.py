@@ -83,7 +83,7 @@ def checkpoint_settings(ckpt: Mapping, meta: Mapping, task_cls) -> tuple[dict, s
     if isinstance(saved, Mapping):
         return dict(saved), "the checkpoint's (saved by lit3d-train)"
     moved = dict(getattr(task_cls, "evaluation_legacy", {}) or {})
-    hp = ckpt.get("hyper_parameters") or meta.get("task") or {}
+    hp = {**(meta.get("task") or {}), **(ckpt.get("hyper_parameters") or {})}  # an upgraded checkpoint: in the task config
     settings = legacy_settings(getattr(task_cls, "__name__", "task"), {k: hp[k] for k in moved if k in hp}, moved)
     return settings, "the checkpoint's task hyper-parameters (saved before evaluation settings had their own node)"
 

@@ -79,7 +79,10 @@ def _evaluate(cfg: DictConfig, out_dir: Path) -> dict[str, float]:
     torch.set_float32_matmul_precision(cfg.matmul_precision)
     task_cfg = meta["task"]
     task_cls = import_object(task_cfg["_target_"])
-    task = task_cls.load_from_checkpoint(cfg.ckpt_path, map_location="cpu", weights_only=True)
+    # the hyper-parameters as read (a canonical checkpoint's in today's layout: lit3d.canonical.checkpoint_upgrade)
+    # over the file's; keys the constructor lacks are left out by Lightning
+    task = task_cls.load_from_checkpoint(cfg.ckpt_path, map_location="cpu", weights_only=True,
+                                         **(ckpt.get("hyper_parameters") or {}))
     settings = eval_settings.resolve(cfg, ckpt, meta, task_cls)  # the checkpoint's; the command line's win
     del ckpt
     data_cfg = to_plain(cfg.data) if cfg.get("data") is not None else dict(meta["data"])

@@ -3,7 +3,7 @@ protocol, and its files written into the run dir as one set.
 
 :func:`run_evaluation` writes ``metrics.json``, ``results.md``, the artefacts, the figures (and the
 caller's own files, ``lit3d-eval``'s ``config.yaml``) into a hidden staging folder of the run dir
-(``.evaluation.<pid>.<random>.tmp/``), and only when every one is complete moves them into the run dir
+(``.evaluation.<pid>-<host>.<random>.tmp/``), and only when every one is complete moves them into the run dir
 with :func:`lit3d.utils.io.write_file_set`, ``metrics.json`` last. A run stopped before (Ctrl-C,
 SIGTERM, an error, a full disk) writes none of them, and the files of an earlier evaluation in the
 same run dir stay as they were: a folder with a ``metrics.json`` holds a whole evaluation. A run
@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import os
 import shutil
 import tempfile
 from collections.abc import Callable, Iterator, Mapping
@@ -22,7 +21,9 @@ from pathlib import Path
 
 from lit3d.cli.registry import evaluator_module
 from lit3d.utils.io import STAGE_PREFIX, TMP_SUFFIX, atomic_write_text, repair_sets, write_file_set, write_json
+from lit3d.utils.kill_points import kill_point
 from lit3d.utils.stops import check_stop, shielded
+from lit3d.utils.temp_names import temp_prefix
 
 log = logging.getLogger("lit3d")
 
@@ -46,7 +47,7 @@ def staged_outputs(out_dir: Path, last: str = METRICS) -> Iterator[Path]:
     out_dir.mkdir(parents=True, exist_ok=True)
     for note in repair_sets(out_dir):  # a set an earlier, killed evaluation left half renamed
         log.info(note)
-    stage = Path(tempfile.mkdtemp(dir=out_dir, prefix=f"{STAGE_PREFIX}{os.getpid()}.", suffix=TMP_SUFFIX))
+    stage = Path(tempfile.mkdtemp(dir=out_dir, prefix=temp_prefix(STAGE_PREFIX.strip(".")), suffix=TMP_SUFFIX))
     try:
         try:
             yield stage
@@ -57,6 +58,7 @@ def staged_outputs(out_dir: Path, last: str = METRICS) -> Iterator[Path]:
             raise OSError(exc.errno, exc.strerror, str(out_dir / name.relative_to(stage))) from exc
         check_stop()  # a Ctrl-C while the files were written: none is moved
         names = sorted((p.name for p in stage.iterdir() if p.is_file()), key=lambda n: (n == last, n))
+        kill_point("evaluation:staged")
         with shielded():  # the renames are finished together (a second Ctrl-C waits for them)
             write_file_set(out_dir, {n: (stage / n).read_bytes() for n in names})
     finally:
@@ -65,7 +67,8 @@ def staged_outputs(out_dir: Path, last: str = METRICS) -> Iterator[Path]:
 
 def run_evaluation(trainer, task, datamodule, task_name: str, out_dir: Path, *, ckpt_path: str | None = None,
                    validate: bool = False, n_figures: int = 0, extra: dict | Callable[[], dict] | None = None,
-                   files: dict[str, str] | None = None, settings: Mapping | None = None) -> dict[str, float]:
+                   files: dict[str, str] | None = None, settings: Mapping | None = None,
+                   measured: Mapping[str, float] | None = None) -> dict[str, float]:
     """Test ``task`` (after validating it when ``validate``: the completion threshold is chosen there),
     run the task room's evaluator on the result with the evaluation ``settings`` (the config's
     ``evaluation`` node, :mod:`lit3d.cli.eval_settings`), and on rank 0 write ``metrics.json``, ``results.md``,
@@ -73,11 +76,13 @@ def run_evaluation(trainer, task, datamodule, task_name: str, out_dir: Path, *, 
     (:func:`staged_outputs`). Used by ``lit3d-eval`` and, after fitting, by ``lit3d-train``.
     ``extra``: entries written first into ``metrics.json`` (not returned), or a function returning
     them (called after the test: the data's manifest is known then); ``files``: more files of the
-    set (name -> text). Between the steps and after every batch (:mod:`lit3d.utils.stops`) a Ctrl-C
+    set (name -> text); ``measured``: ``val/`` numbers of the tested weights already known (``lit3d-train``:
+    the monitored value of the best checkpoint, :func:`lit3d.cli.train.tested_validation`), kept in the
+    metrics as a validation here would. Between the steps and after every batch (:mod:`lit3d.utils.stops`) a Ctrl-C
     or SIGTERM under :func:`lit3d.utils.stops.on_signals` stops it, before anything is written."""
     evaluator = evaluator_module(task_name)
     settings = dict(settings or {})
-    metrics: dict[str, float] = {}
+    metrics: dict[str, float] = {k: float(v) for k, v in (measured or {}).items() if k.startswith("val/")}
     if validate:
         trainer.validate(task, datamodule=datamodule, ckpt_path=ckpt_path, weights_only=True)
         metrics.update({k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("val/")})

@@ -229,7 +229,29 @@ def _one(args, path: Path, name: str, completer, mapper, scorer, protected) -> d
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_argparse_cli("lit3d-reconstruct", _parser(), _run, argv)
+    return run_argparse_cli("lit3d-reconstruct", _parser(), _run_leaving_no_empty_out, argv)
+
+
+def _run_leaving_no_empty_out(args) -> int:
+    """:func:`_run`; the ``--out`` folders that this run created (``--out`` and any missing parents) and
+    left empty (a refused checkpoint, every image failing, a stop before the first set) are removed
+    again, so a failed run leaves nothing behind."""
+    out = Path(args.out).absolute()
+    made = []  # the folders that do not exist yet, --out first
+    for folder in (out, *out.parents):
+        if os.path.lexists(folder):
+            break
+        made.append(folder)
+    try:
+        return _run(args)
+    finally:
+        for folder in made:
+            if not folder.is_dir() or folder.is_symlink():
+                break
+            try:
+                folder.rmdir()  # only an empty folder: an OSError otherwise, and it stays with its parents
+            except OSError:
+                break
 
 
 def _report(exc: Exception, prefix: str = "") -> int:

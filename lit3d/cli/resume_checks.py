@@ -31,7 +31,7 @@ log = logging.getLogger("lit3d")
 ALLOW_KEY = "resume.allow_changes"
 # what a resume must keep from the checkpoint (dotted keys of cfg.task / cfg.data; fnmatch patterns)
 COMPARED = ("data.*", "task._target_", "task.arch", "task.net", "task.net.*", "task.nets", "task.nets.*",
-            "task.use_lfe", "task.use_msfe", "task.features", "task.identity_classes")
+            "task.net.lfe.use", "task.net.msfe.use", "task.features", "task.identity.classes")
 # data keys that change how the data is loaded or where it lies, not which items it holds
 LOADING = ("data.num_workers", "data.pin_memory", "data.progress", "data.prepare_workers", "data.feature_workers",
            "data.persistent_workers", "data.data_dir")

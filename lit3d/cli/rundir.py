@@ -5,7 +5,8 @@ Before Hydra writes anything into the run dir (``.hydra/``, ``train.log``), :fun
 - gives a timestamped run dir (the default ``hydra.run.dir``, ``.../runs/<time>``) that another
   run started in the same second already made a suffix: ``<time>_2``, ``<time>_3`` ... (an atomic
   ``mkdir``; the claimed dir is handed to Hydra as ``hydra.run.dir=...``);
-- takes the run dir's lock (``flock`` on ``<run dir>/.lit3d.lock``) for the whole process. A
+- takes the run dir's lock (``flock`` on ``<run dir>/.lit3d.lock``) for the whole process, and
+  clears what killed runs left in it and in the run dirs beside it (:mod:`lit3d.cli.run_leftovers`). A
   second run into a busy dir is refused with one line naming the holder (pid, host, start
   time), or waits for it with ``wait_for_run_dir=true``. The system frees the lock when the
   holder exits, SIGKILL included.
@@ -31,10 +32,10 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
+from lit3d.cli.run_leftovers import LOCK_FILE, clear_run_dirs
 from lit3d.utils.io import OutputError
 from lit3d.utils.locks import HeldLock, hold
 
-LOCK_FILE = ".lit3d.lock"
 RUN_DIR_KEY = "hydra.run.dir"
 WAIT_KEY = "wait_for_run_dir"
 _PLAIN = re.compile(r"[\w./:+@%~-]+")
@@ -74,6 +75,9 @@ def lock_run_dir(run_dir: str | os.PathLike, wait: bool = False) -> HeldLock:
 
     lock = hold(run_dir / LOCK_FILE, _busy(run_dir), wait=wait, on_wait=on_wait)
     lock.waited = bool(waited)
+    if lock.owner:  # what killed runs left here and beside it (lit3d.cli.run_leftovers)
+        for note in clear_run_dirs(run_dir):
+            print(f"note: {note}", file=sys.stderr, flush=True)
     return lock
 
 
@@ -139,14 +143,24 @@ def _override_value(path: Path) -> str:
     return "'" + text.replace("\\", "\\\\").replace("'", "\\'") + "'"
 
 
+def _multirun(cfg: DictConfig) -> bool:
+    """A config that makes Hydra sweep without ``-m`` (``hydra.mode: MULTIRUN``, as the Optuna
+    ``hparams_search`` configs set): its jobs run in the sweep dir, never in ``hydra.run.dir``."""
+    try:
+        return str(OmegaConf.select(cfg, "hydra.mode", default="") or "").rsplit(".", 1)[-1] == "MULTIRUN"
+    except Exception:  # an interpolation only Hydra's runtime can resolve
+        return False
+
+
 def claim_run_dir(cfg: DictConfig | None, args: list[str],
                   command: str = "train") -> tuple[list[str], contextlib.AbstractContextManager]:
     """``(args, lock)``: the command line to hand to Hydra (plus ``hydra.run.dir=<claimed dir>``
     where the run dir is a fresh timestamped one) and the held lock of the run dir (release it by
     leaving ``with lock:``). ``cfg``: the composed config with its ``hydra`` node, or None
-    (multirun, ``--cfg`` ...: nothing claimed here; :func:`hold_output_dir` locks each job's dir).
+    (multirun, ``--cfg`` ...: nothing claimed here; :func:`hold_output_dir` locks each job's dir); a
+    config with ``hydra.mode: MULTIRUN`` (an Optuna search without ``-m``) claims nothing either.
     ``command`` (``train``, ``eval``, ``data``, ``summary``): after a wait, :func:`check_waited`."""
-    if cfg is None or _other_rank():
+    if cfg is None or _other_rank() or _multirun(cfg):
         return args, contextlib.nullcontext()
     try:
         raw = str(OmegaConf.to_container(cfg.hydra.run, resolve=False).get("dir", ""))

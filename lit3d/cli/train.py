@@ -214,8 +214,8 @@ def train(cfg: DictConfig) -> float | None:
             with testing_after_fit(output_dir, best or str(output_dir / "checkpoints" / "last.ckpt")):
                 log.info("testing %s", best or "the last weights")
                 run_evaluation(trainer, task, datamodule, cfg.task_info.name, output_dir, ckpt_path=best or None,
-                               n_figures=int(cfg.get("n_figures", 0)),
-                               extra=run_info, settings=settings)
+                               n_figures=int(cfg.get("n_figures", 0)), extra=run_info, settings=settings,
+                               measured=tested_validation(trainer, cfg.task_info.monitor, fit_metrics))
         elif trainer.is_global_zero:
             write_json(output_dir / "metrics.json", run_info)
         if trainer.is_global_zero:
@@ -223,6 +223,16 @@ def train(cfg: DictConfig) -> float | None:
         return monitored
     finally:
         finish_wandb(loggers)
+
+
+def tested_validation(trainer, monitor: str, metrics: dict[str, float]) -> dict[str, float]:
+    """The validation numbers of the weights that the test after fitting loads: the best checkpoint's
+    monitored value (``{monitor: best score}``, when the monitor is a ``val/`` metric), or, with no best
+    checkpoint, the last validation's ``val/`` entries of ``metrics`` (those of the last weights)."""
+    cb = trainer.checkpoint_callback
+    if cb is not None and cb.best_model_path and cb.best_model_score is not None:
+        return {monitor: float(cb.best_model_score)} if monitor.startswith("val/") else {}
+    return {k: float(v) for k, v in metrics.items() if k.startswith("val/")}
 
 
 def _monitored_value(trainer, monitor: str, metrics: dict[str, float]) -> float | None:

@@ -9,7 +9,9 @@ Batches are dicts from ``datamodules.completion``:
 One training step = ``critic_steps`` critic updates, then one generator update
 (generator + auxiliary classifier share the generator optimiser). The critic's gradient penalty
 runs on every ``gp_every``-th critic update, weighted ``gp_every`` times (1 = every update);
-``critic_concat`` scores real and fake shapes in one critic pass. The parts of the step
+``critic_concat`` scores real and fake shapes in one critic pass; ``gp_precision`` runs the penalty's
+critic pass in bf16 (:func:`lit3d.completion.losses.gradient_penalty`); ``compile_step`` runs the critic and
+generator objectives through ``torch.compile`` (:mod:`lit3d.completion.compiled_step`). The parts of the step
 (:meth:`CompletionTask.critic_objective`, :meth:`CompletionTask.generator_objective`) are what
 :mod:`lit3d.completion.step_cost` counts.
 
@@ -32,7 +34,8 @@ import lightning.pytorch as pl
 import torch
 import torch.nn.functional as F
 
-from lit3d.completion.losses import resolve_loss_scale
+from lit3d.completion.compiled_step import CompiledStep
+from lit3d.completion.losses import PENALTY_PRECISIONS, resolve_loss_scale
 from lit3d.completion.objectives import CompletionObjectives
 from lit3d.metrics.voxel import VoxelSweepMetrics, best_threshold, default_thresholds
 from lit3d.completion.nets import build_completion_nets, validate_net_config
@@ -87,6 +90,8 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
         gp_lambda: float = 10.0,
         gp_every: int = 1,
         critic_concat: bool = False,
+        gp_precision: str = "fp32",
+        compile_step: bool = False,
         stage_weight: float = 0.0,
         adversarial: bool = True,
         adversarial_start_epoch: int = 0,
@@ -108,6 +113,8 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
         validate_mode(on_nonfinite)
         if int(gp_every) < 1:
             raise ValueError(f"task.gp_every={gp_every}: the gradient penalty runs every N >= 1 critic updates")
+        if gp_precision not in PENALTY_PRECISIONS:
+            raise ValueError(f"task.gp_precision={gp_precision!r}: one of {', '.join(PENALTY_PRECISIONS)}")
         self.automatic_optimization = False
         nets = dict(nets)
         if nets.pop("preset", None) is not None:  # checkpoints written before that change name one beside every size
@@ -138,6 +145,7 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
         self.generator_steps = 0
         self.critic_updates = 0  # counts the critic updates (the lazy gradient penalty's schedule)
         self.skipped_steps = 0
+        self._compiled: CompiledStep | None = None  # task.compile_step: built on the first training step (its device)
         self.loss_scale = resolve_loss_scale(loss_scale, res)
 
     def _metric_modules(self) -> None:
@@ -234,8 +242,17 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
         opts = self.optimizers()
         return (opts[0], opts[1]) if isinstance(opts, list) else (opts, None)
 
+    def _objective(self, name: str):
+        """``self.<name>`` (``critic_objective``, ``generator_objective``), through torch.compile with ``compile_step``."""
+        if not self.hparams.compile_step:
+            return getattr(self, name)
+        if self._compiled is None:
+            self._compiled = CompiledStep(self)
+        return lambda *args: self._compiled(name, *args)
+
     def training_step(self, batch: dict, batch_idx: int) -> None:
         hp = self.hparams
+        critic_objective, generator_objective = self._objective("critic_objective"), self._objective("generator_objective")
         x, y = self._fmt(batch["input"]), self._fmt(batch["target"])
         opt_g, opt_d = self._optimizers()
         if self.current_epoch < hp.adversarial_start_epoch:
@@ -244,7 +261,7 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
         if opt_d is not None:
             for _ in range(hp.critic_steps):
                 with self.toggled_optimizer(opt_d):
-                    loss_d, critic_logs = self.critic_objective(x, y, self.critic_updates % hp.gp_every == 0)
+                    loss_d, critic_logs = critic_objective(x, y, self.critic_updates % hp.gp_every == 0)
                     if self._check_finite(critic=loss_d):
                         opt_d.zero_grad(set_to_none=True)
                         self.manual_backward(loss_d)
@@ -252,7 +269,7 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
                 self.critic_updates += 1
                 logs.update(critic_logs)
         with self.toggled_optimizer(opt_g):
-            loss_g, terms, out = self.generator_objective(x, y, batch["label"], opt_d is not None)
+            loss_g, terms, out = generator_objective(x, y, batch["label"], opt_d is not None)
             if self._check_finite(generator=loss_g, **terms):
                 opt_g.zero_grad(set_to_none=True)
                 self.manual_backward(loss_g)

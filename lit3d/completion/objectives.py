@@ -8,7 +8,7 @@ model (:mod:`lit3d.completion.step_cost` counts them on the meta device, so its 
     generator update: generator_objective (generator, BCE, critic's adversarial term, classifier)
 
 The mixin reads ``self.generator``, ``self.critic``, ``self.classifier`` and ``self.hparams``
-(``gamma``, ``alpha``, ``zeta``, ``gp_lambda``, ``gp_every``, ``critic_concat``, ``stage_weight``).
+(``gamma``, ``alpha``, ``zeta``, ``gp_lambda``, ``gp_every``, ``critic_concat``, ``gp_precision``, ``stage_weight``).
 Shapes: partial inputs ``x`` ``(B, 1, r, r, r)``, shapes ``(B, 1, R, R, R)``.
 """
 from __future__ import annotations
@@ -40,9 +40,11 @@ class CompletionObjectives:
         d = self.critic(torch.cat([x, x]), torch.cat([real, fake]))
         return d[: x.shape[0]], d[x.shape[0]:]
 
+    @torch.compiler.disable  # a double backward: eager under task.compile_step (lit3d.completion.compiled_step)
     def critic_penalty(self, x: torch.Tensor, real: torch.Tensor, fake: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """WGAN-GP penalty of the critic and the mean gradient norm (:func:`lit3d.completion.losses.gradient_penalty`)."""
-        return gradient_penalty(self.critic, x, real, fake)
+        """WGAN-GP penalty of the critic and the mean gradient norm (:func:`lit3d.completion.losses.gradient_penalty`),
+        its critic pass in ``task.gp_precision`` (fp32 or bf16 autocast; the norm and the penalty in fp32)."""
+        return gradient_penalty(self.critic, x, real, fake, precision=self.hparams.gp_precision)
 
     def critic_objective(self, x: torch.Tensor, y: torch.Tensor, with_penalty: bool = True) -> tuple[torch.Tensor, dict]:
         """The loss of one critic update and its logged terms.

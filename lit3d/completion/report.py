@@ -58,8 +58,10 @@ def write_results(metrics: dict, out_dir: Path, methods=OURS, intro: str | None 
     """Write results.md: one table per thesis table, thesis rows beside ours, then the surface
     metrics per split. ``methods``: our rows as ``(label, key suffix)`` (default the model and its
     baselines); ``intro``: replaces the threshold line (e.g. for another method's predictions)."""
+    val_iou = metrics.get("val/iou")
     threshold_line = (f"Threshold chosen on validation: {fmt(metrics.get('test/threshold'), 2)} "
-                      f"(validation IoU {fmt(metrics.get('val/iou'))}).")
+                      + (f"(validation IoU {fmt(val_iou)})." if val_iou is not None
+                         else "(no validation IoU was measured for these weights: no validation batch ran)."))
     parts = [
         "# Shape completion results",
         "",

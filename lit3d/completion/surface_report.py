@@ -11,8 +11,10 @@ from lit3d.utils.tables import fmt, markdown_table
 
 NOTE = ("Surfaces: marching cubes of the thresholded prediction and of the target grid, points sampled by area "
         "with a fixed seed, nearest neighbours both ways (docs/results_completion.md#surface-metrics). "
-        "Chamfer-L1 in units of the grid side (lower is better); F-score at a fraction of the target's "
-        "bounding-box diagonal; normal consistency = mean |cos| between nearest points' normals. "
+        "Conventions (docs/api.md#metrics): Chamfer-L1 = mean of unsquared nearest distances, the two "
+        "directions averaged (not PyTorch3D's squared and added), in units of the grid side (lower is better); "
+        "F-score@f with the threshold f x the target's bounding-box diagonal (not Tatarchenko et al.'s "
+        "f x the volume side); normal consistency = mean |cos| between nearest points' normals, both directions. "
         "IoU is the per-sample mean of the tables above. 'empty': predictions with no occupied voxel "
         "(scored Chamfer sqrt(3), F 0, normals 0).")
 

@@ -237,6 +237,14 @@ class _Now:
         return self.value
 
 
+def view_worker_count(workers: int, device=None) -> int:
+    """How many threads :func:`view_workers` runs calls on (1: every call at once in the caller): ``workers``, or
+    ``torch.get_num_threads()`` for 0, on CPU; 1 on other devices. Read it before entering :func:`view_workers`
+    (which sets the caller's intra-op threads to 1)."""
+    on_cpu = device is None or torch.device(device).type == "cpu"
+    return (workers if workers > 0 else torch.get_num_threads()) if on_cpu else 1
+
+
 @contextmanager
 def view_workers(workers: int, device=None) -> Iterator[Callable[..., Any]]:
     """``submit(fn, *args)`` -> an object with ``result()``, for measuring whole views in parallel.
@@ -249,7 +257,7 @@ def view_workers(workers: int, device=None) -> Iterator[Callable[..., Any]]:
     caller. On exit the pool is drained and the caller's thread count restored.
     """
     on_cpu = device is None or torch.device(device).type == "cpu"
-    n = (workers if workers > 0 else torch.get_num_threads()) if on_cpu else 1
+    n = view_worker_count(workers, device)
     prev = torch.get_num_threads()
     pool = None
     if on_cpu:

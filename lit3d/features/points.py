@@ -44,6 +44,7 @@ from lit3d.features.common import (
     pair_measures,
     read_cached_table,
     view_crop,
+    view_worker_count,
     view_workers,
     write_cached_table,
 )
@@ -51,7 +52,7 @@ from lit3d.metrics.image import PSNR_MAX_DB
 from lit3d.metrics.image.colour_measures import PIQ_MIN_SIZE, ciede2000, piq_measures
 from lit3d.metrics.pcqm import pcqm
 from lit3d.metrics.pointssim import pointssim
-from lit3d.metrics.pointcloud import pointcloud_baselines
+from lit3d.metrics.pointcloud import kd_tree, pointcloud_baselines
 from lit3d.render.colour_styles import apply_colour_styles
 from lit3d.render.points import PointShape, load_points, local_frames
 from lit3d.render.splat import point_frame, render_point_gbuffers
@@ -70,8 +71,9 @@ _FRAMES_LOCK = threading.Lock()  # guards _FRAMES and _FRAMES_PENDING
 _FRAMES_PENDING: dict[str, Future] = {}  # key -> the frames being computed by another thread
 
 
-def cached_frames(shape: PointShape, key: str) -> dict[str, np.ndarray]:
-    """:func:`lit3d.render.points.local_frames` of ``shape``, memoised for the last few clouds.
+def cached_frames(shape: PointShape, key: str, workers: int = -1) -> dict[str, np.ndarray]:
+    """:func:`lit3d.render.points.local_frames` of ``shape`` (its KD-tree query on ``workers`` threads; the
+    frames do not depend on them), memoised for the last few clouds.
 
     Thread-safe: the look-up, the insertion and the eviction of :data:`_FRAMES` run under
     :data:`_FRAMES_LOCK`; the frames themselves are computed outside it (two clouds' frames
@@ -89,7 +91,7 @@ def cached_frames(shape: PointShape, key: str) -> dict[str, np.ndarray]:
     if not owner:
         return pending.result()
     try:
-        lf = local_frames(shape.points)
+        lf = local_frames(shape.points, workers=workers)
     except BaseException as exc:
         with _FRAMES_LOCK:
             del _FRAMES_PENDING[key]
@@ -189,11 +191,27 @@ def point_feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_di
         cfg: feature configuration (render size, styles, measures, shadings, workers).
         cache_dir: folder of cached JSON tables (None: no caching).
         device: torch device for the measures (default CPU).
+
+    Order of work (on the worker threads; every value is that of computing the parts one after the
+    other): each cloud's local frames then its render, as one task per cloud; without a cache folder
+    the reference's task starts while the distorted cloud is still being parsed (parsing holds the
+    GIL, the KD-tree query does not). PointSSIM and PCQM need only the points: they start with the
+    renders, on one KD-tree per cloud that both use (:func:`_point_metrics`). The D1/D2/Y-PSNR
+    baselines need the smooth normals, the image measures the renders: they start when those are there.
+    With several workers each of these tasks runs on one thread (the workers already fill the cores;
+    more threads per task only contend for them); with one, the KD-tree queries, PointSSIM and PCQM
+    use every core. Neither changes a value.
     """
     cfg = cfg or FeatureConfig()
+    inner = 1 if view_worker_count(cfg.workers, device) > 1 else -1  # threads of one task's own work
     with view_workers(cfg.workers, device) as submit:  # one intra-op thread, whole views per worker
-        pa, pb = load_points(ref), load_points(dist)  # one after the other: parsing holds the GIL
-        ha, hb = pa.content_hash(), pb.content_hash()
+        pa = load_points(ref)  # one after the other: parsing holds the GIL
+        ha = pa.content_hash()
+        frame = point_frame(pa.points)
+        # no cache to look up: nothing can make the reference's frames and render wasted work
+        task_a = submit(_frames_and_render, pa, ha, cfg, frame, inner) if cache_dir is None else None
+        pb = load_points(dist)
+        hb = pb.content_hash()
         key = content_key(f"points{POINT_PATH_VERSION}:{ha}", f"points{POINT_PATH_VERSION}:{hb}", cfg)
         path = cache_path(cache_dir, key)
         cached = read_cached_table(path, key)
@@ -201,14 +219,12 @@ def point_feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_di
             return cached
         names = cfg.resolved_styles()
         colour = pa.colours is not None and pb.colours is not None
-        # both clouds' frames, then both renders (every shading at once), side by side on the workers
-        frame = point_frame(pa.points)
-        fa, fb = submit(cached_frames, pa, ha), submit(cached_frames, pb, hb)
-        fa, fb = fa.result(), fb.result()
-        ga, gb = (submit(render_point_gbuffers, s, cfg.render, frame=frame, frames=f) for s, f in ((pa, fa), (pb, fb)))
-        ga, gb = ga.result(), gb.result()
-        base = submit(_baselines, pa, pb, fa, fb, frame, colour, cfg) if cfg.mesh_measures or cfg.point_measures \
-            else None
+        if task_a is None:
+            task_a = submit(_frames_and_render, pa, ha, cfg, frame, inner)
+        task_b = submit(_frames_and_render, pb, hb, cfg, frame, inner)
+        metrics = submit(_point_metrics, pa, pb, frame, colour, cfg, inner) if cfg.point_measures else None
+        (fa, ga), (fb, gb) = task_a.result(), task_b.result()
+        base = submit(_baselines, pa, pb, fa, fb, frame, colour, inner) if cfg.mesh_measures else None
         pending = []
         for i, shading in enumerate(cfg.render.shadings):
             sa, sb = ga[shading], gb[shading]
@@ -225,21 +241,43 @@ def point_feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_di
             for shading in cfg.render.shadings[1:]:  # unlit colour: the same images under every shading
                 per[name[: -len(first)] + shading] = per[name]
         baselines = base.result() if base is not None else {}
+        baselines.update(metrics.result() if metrics is not None else {})
     feats = {k: float(np.mean(v)) for k, v in per.items()}
     feats.update(baselines)
     write_cached_table(path, key, cfg, feats)
     return FeatureTable(feats, key, cached=False, per_view={k: np.asarray(v) for k, v in per.items()})
 
 
-def _baselines(pa: PointShape, pb: PointShape, fa, fb, frame, colour: bool, cfg: FeatureConfig) -> dict[str, float]:
-    """The point-cloud baselines of the pair in the reference's normalised frame: D1/D2/Y-PSNR, Hausdorff and
-    Chamfer (``cfg.mesh_measures``), PointSSIM and PCQM (``cfg.point_measures``; PCQM needs colour)."""
+def _frames_and_render(shape: PointShape, key: str, cfg: FeatureConfig, frame, workers: int = -1):
+    """``(local frames, {shading: PointGBuffer})`` of one cloud: its (memoised) frames, then its splats."""
+    lf = cached_frames(shape, key, workers)
+    return lf, render_point_gbuffers(shape, cfg.render, frame=frame, frames=lf)
+
+
+def _normalised(pa: PointShape, pb: PointShape, frame, colour: bool):
+    """Both clouds' positions in the reference's normalised frame and their colours (None without colour)."""
     c, s = frame
-    a, b = (pa.points - c) * s, (pb.points - c) * s
-    ca, cb = (pa.colours, pb.colours) if colour else (None, None)
-    out = pointcloud_baselines(a, b, fa["smooth"], fb["smooth"], ca, cb) if cfg.mesh_measures else {}
-    if "pointssim" in cfg.point_measures:
-        out.update(pointssim(a, b, ca, cb))
-    if "pcqm" in cfg.point_measures and colour:
-        out.update(pcqm(a, b, ca, cb))
+    return (pa.points - c) * s, (pb.points - c) * s, *((pa.colours, pb.colours) if colour else (None, None))
+
+
+def _baselines(pa: PointShape, pb: PointShape, fa, fb, frame, colour: bool, workers: int = -1) -> dict[str, float]:
+    """The point-cloud baselines of the pair in the reference's normalised frame: D1/D2/Y-PSNR, Hausdorff and
+    Chamfer (the table's ``mesh_measures``; D2 with the clouds' smooth normals)."""
+    a, b, ca, cb = _normalised(pa, pb, frame, colour)
+    return pointcloud_baselines(a, b, fa["smooth"], fb["smooth"], ca, cb, workers=workers)
+
+
+def _point_metrics(pa: PointShape, pb: PointShape, frame, colour: bool, cfg: FeatureConfig,
+                   workers: int = -1) -> dict[str, float]:
+    """The field's metrics of ``cfg.point_measures`` in the reference's normalised frame: PointSSIM and PCQM
+    (PCQM needs colour), on one KD-tree per cloud (:func:`lit3d.metrics.pointcloud.kd_tree`) that both search
+    (the scores are those of each metric building its own)."""
+    a, b, ca, cb = _normalised(pa, pb, frame, colour)
+    want_ssim, want_pcqm = "pointssim" in cfg.point_measures, "pcqm" in cfg.point_measures and colour
+    if not (want_ssim or want_pcqm):
+        return {}
+    trees = (kd_tree(a), kd_tree(b)) if want_ssim and want_pcqm else None
+    out = pointssim(a, b, ca, cb, trees=trees, workers=workers) if want_ssim else {}
+    if want_pcqm:
+        out.update(pcqm(a, b, ca, cb, trees=trees, workers=workers))
     return out

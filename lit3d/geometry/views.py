@@ -11,7 +11,7 @@ the axis of least extent. It needs only the shape in front of the camera, so at 
 camera (or a person) can be placed the same way for a posed subject; the canonical target is
 rendered by the same rule from the canonical shape. The sign of the axis (which of the two
 broad sides) is fixed by the skew of the surface along it; a mirror view remains possible,
-which is what left-right flip augmentation (``data.flip_lr``) covers.
+which is what left-right flip augmentation (``data.training.flip_lr``) covers.
 """
 from __future__ import annotations
 

@@ -102,6 +102,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from lit3d.metrics.pointcloud import checked_tree, kd_tree
 from lit3d.metrics.quadric import K_MIN_CURVATURE, K_PROJECTION, local_surface, quadric_fit  # noqa: F401 (re-exported)
 
 RADIUS_FACTOR = 0.004  # reference -r: curvature radius / largest bounding-box dimension
@@ -164,7 +165,7 @@ def _check(points: np.ndarray, colours: np.ndarray, label: str) -> tuple[np.ndar
 
 
 def pcqm(points_a, points_b, colours_a, colours_b, *, radius_factor: float | None = None,
-         workers: int = -1) -> dict[str, float]:
+         workers: int = -1, trees=None) -> dict[str, float]:
     """PCQM error of distorted cloud ``b`` against reference ``a`` (module doc).
 
     Args:
@@ -175,13 +176,13 @@ def pcqm(points_a, points_b, colours_a, colours_b, *, radius_factor: float | Non
             statistics radius is ``STATS_RADIUS_FACTOR`` times larger.
         workers: threads for the KD-tree builds and queries and the vectorised chunks (-1: every CPU
             this process may use).
+        trees: ``(tree_a, tree_b)``, the clouds' :func:`lit3d.metrics.pointcloud.kd_tree` if already built
+            (e.g. for :func:`lit3d.metrics.pointssim.pointssim` too; the same result as without), or None.
 
     Returns:
         ``{"pcqm": fused error, "pcqm_<feature>": mean error of each of ``FEATURES``}`` (floats;
         0 for identical clouds, higher = worse).
     """
-    from scipy.spatial import cKDTree
-
     a, ca = _check(points_a, colours_a, "reference")
     b, cb = _check(points_b, colours_b, "distorted")
     factor = RADIUS_FACTOR if radius_factor is None else float(radius_factor)
@@ -195,7 +196,11 @@ def pcqm(points_a, points_b, colours_a, colours_b, *, radius_factor: float | Non
     threads = (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1) \
         if workers < 0 else max(1, int(workers))
     with ThreadPoolExecutor(threads) as pool:
-        tree_a, tree_b = pool.map(lambda p: cKDTree(p, balanced_tree=False), (a, b))
+        if trees is None:
+            tree_a, tree_b = pool.map(kd_tree, (a, b))
+        else:
+            tree_a = checked_tree(trees[0], a, "the reference")
+            tree_b = checked_tree(trees[1], b, "the distorted cloud")
         rank = np.empty(len(a), dtype=np.int64)
         rank[tree_a.indices] = np.arange(len(a))  # leaf order: neighbouring queries run several times faster
         seeds, dist, nbr, mask = _seed_neighbourhoods(tree_a, a, stats_radius, threads)

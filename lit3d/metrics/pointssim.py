@@ -76,6 +76,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from lit3d.metrics.pointcloud import checked_tree, kd_tree
 from lit3d.render.points import smallest_eigenvalue, smallest_eigenvector
 
 EPS = float(np.finfo(np.float64).eps)  # the reference's CONST = eps(1)
@@ -127,10 +128,8 @@ class _Cloud:
     ``dist``/``idx (N, k)`` the ``k`` nearest neighbours (column 0: the point itself).
     """
 
-    def __init__(self, points: np.ndarray, k: int, workers: int):
-        from scipy.spatial import cKDTree
-
-        self.tree = cKDTree(points, balanced_tree=False)  # sliding midpoint: builds faster, queries as fast
+    def __init__(self, points: np.ndarray, k: int, workers: int, tree=None):
+        self.tree = kd_tree(points) if tree is None else tree  # sliding midpoint: builds faster, queries as fast
         self.order = self.tree.indices
         self.inverse = np.empty_like(self.order)
         self.inverse[self.order] = np.arange(len(self.order))
@@ -172,7 +171,8 @@ class _Cloud:
 
 
 def pointssim(points_a, points_b, colours_a=None, colours_b=None, *, normals_a=None, normals_b=None,
-              k: int = 12, estimator: str = "variance", pooling: str = "mean", workers: int = -1) -> dict[str, float]:
+              k: int = 12, estimator: str = "variance", pooling: str = "mean", workers: int = -1,
+              trees=None) -> dict[str, float]:
     """Symmetric PointSSIM scores of two point clouds, one per attribute (1: identical, higher is better).
 
     Args:
@@ -187,6 +187,8 @@ def pointssim(points_a, points_b, colours_a=None, colours_b=None, *, normals_a=N
         pooling: pooling of the similarity map, one of :data:`POOLINGS` (reference: ``"mean"``).
         workers: SciPy KD-tree query threads (-1: all cores); with 1 the two clouds are also
             processed one after the other instead of in two threads.
+        trees: ``(tree_a, tree_b)``, the clouds' :func:`lit3d.metrics.pointcloud.kd_tree` if already built
+            (e.g. for :func:`lit3d.metrics.pcqm.pcqm` too; the same scores as without), or None.
 
     Returns:
         ``{"pointssim_geometry", "pointssim_normal", "pointssim_curvature"}`` and, when both
@@ -209,14 +211,17 @@ def pointssim(points_a, points_b, colours_a=None, colours_b=None, *, normals_a=N
         raise ValueError(f"PointSSIM needs neighbourhoods of at least 3 points: k={k}, clouds of {len(a)} and {len(b)}")
     with_colour = colours_a is not None and colours_b is not None
     feature, pool = ESTIMATORS[estimator], POOLINGS[pooling]
+    tree_a, tree_b = (None, None) if trees is None else (checked_tree(trees[0], a, "points_a"),
+                                                         checked_tree(trees[1], b, "points_b"))
 
-    def features(points, colours, normals) -> tuple[_Cloud, dict[str, np.ndarray]]:
-        cloud = _Cloud(points, k, workers)
+    def features(points, colours, normals, tree) -> tuple[_Cloud, dict[str, np.ndarray]]:
+        cloud = _Cloud(points, k, workers, tree)
         with np.errstate(invalid="ignore", divide="ignore"):
             return cloud, {name: feature(q) for name, q in cloud.quantities(colours, normals).items()}
 
     # The two clouds in two threads: KD-tree queries and most NumPy loops release the GIL.
-    jobs = [(a, colours_a if with_colour else None, normals_a), (b, colours_b if with_colour else None, normals_b)]
+    jobs = [(a, colours_a if with_colour else None, normals_a, tree_a),
+            (b, colours_b if with_colour else None, normals_b, tree_b)]
     if workers == 1:
         (cloud_a, feat_a), (cloud_b, feat_b) = (features(*job) for job in jobs)
     else:

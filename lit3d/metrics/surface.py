@@ -10,13 +10,17 @@ For a prediction and a target in one grid frame:
    with ``R`` the grid's largest side;
 2. ``n`` points are sampled on each surface, uniformly by area, with one fixed seed (so identical
    shapes give identical samples and score perfectly), each with its face's unit normal;
-3. nearest neighbours both ways (:func:`lit3d.metrics.pointcloud.nearest`, SciPy KD-trees) give
-   ``d_pt`` (each predicted point to the target's samples) and ``d_tp`` (the reverse):
+3. nearest neighbours both ways (:func:`lit3d.metrics.pointcloud.nearest`, SciPy KD-trees, a target's
+   tree built once) give ``d_pt`` (each predicted point to the target's samples) and ``d_tp`` (the
+   reverse), and the formulas of :mod:`lit3d.metrics.clouds` (the point-cloud library; one
+   implementation) give:
 
-   - Chamfer-L1 = ``(mean d_pt + mean d_tp) / 2``, the mean of unsquared distances (Occupancy
-     Networks' "L1"), in units of the grid side;
+   - Chamfer-L1 = ``(mean d_pt + mean d_tp) / 2``, the mean of unsquared distances, the two directions
+     averaged (Occupancy Networks' "L1"; ``convention="l1"``), in units of the grid side;
    - F-score@f = ``2 P R / (P + R)``, precision ``P = mean(d_pt <= tau)``, recall
-     ``R = mean(d_tp <= tau)``, ``tau = f x`` the diagonal of the target surface's bounding box;
+     ``R = mean(d_tp <= tau)``, ``tau = f x`` the diagonal of the target surface's bounding box (of its
+     mesh's vertices; ``threshold_mode="bbox_diagonal"``; not Tatarchenko et al.'s share of the
+     volume side, which is ``tau = f`` in this frame);
    - normal consistency = mean over both directions of ``|n . n_nearest|`` (unoriented; 1 = parallel).
 
 A prediction with no occupied voxel (or an empty mesh) has no surface: Chamfer-L1 = sqrt(3)
@@ -34,6 +38,8 @@ import torch
 from scipy.spatial import cKDTree
 from torchmetrics import Metric
 
+from lit3d.metrics.clouds import (CHAMFER_CONVENTIONS, chamfer_from_distances, consistency_from_neighbours,
+                                  precision_recall_fscore)
 from lit3d.metrics.pointcloud import nearest
 
 if TYPE_CHECKING:
@@ -134,12 +140,12 @@ def sample_grids(grids: torch.Tensor | np.ndarray, n: int, seed: int) -> list[Su
 
 def fscores(d_pt: np.ndarray, d_tp: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(precision, recall, fscore)``, each ``(T,)``, at distance thresholds ``tau (T,)`` from the nearest
-    distances ``d_pt`` (each predicted point to the target) and ``d_tp`` (the reverse); F 0 where P + R = 0."""
-    tau = np.asarray(tau, dtype=np.float64)
-    precision = (np.asarray(d_pt)[:, None] <= tau).mean(0)
-    recall = (np.asarray(d_tp)[:, None] <= tau).mean(0)
-    denom = precision + recall
-    return precision, recall, np.where(denom > 0, 2 * precision * recall / np.where(denom > 0, denom, 1), 0.0)
+    distances ``d_pt`` (each predicted point to the target) and ``d_tp`` (the reverse); F 0 where P + R = 0
+    (:func:`lit3d.metrics.clouds.precision_recall_fscore` on one cloud)."""
+    out = precision_recall_fscore(torch.from_numpy(np.asarray(d_pt, np.float64))[None],
+                                  torch.from_numpy(np.asarray(d_tp, np.float64))[None],
+                                  torch.as_tensor(np.asarray(tau, np.float64)))
+    return tuple(v[0].numpy() for v in out)
 
 
 def surface_scores(pred: SurfaceSample | None, target: SurfaceSample, fractions: Sequence[float]) -> dict:
@@ -157,10 +163,13 @@ def surface_scores(pred: SurfaceSample | None, target: SurfaceSample, fractions:
     d_pt, i_pt = nearest(pred.points, target.points, target.tree(), workers=1)
     d_tp, i_tp = nearest(target.points, pred.points, pred.tree(), workers=1)
     precision, recall, fscore = fscores(d_pt, d_tp, np.asarray(fractions, dtype=np.float64) * target.diagonal)
-    nc_pt = np.abs(np.einsum("ij,ij->i", pred.normals, target.normals[i_pt])).mean()
-    nc_tp = np.abs(np.einsum("ij,ij->i", target.normals, pred.normals[i_tp])).mean()
-    return {"chamfer_l1": float(0.5 * (d_pt.mean() + d_tp.mean())), "fscore": fscore, "precision": precision,
-            "recall": recall, "normal_consistency": float(0.5 * (nc_pt + nc_tp)), "empty": False}
+    chamfer = chamfer_from_distances(torch.from_numpy(d_pt)[None], torch.from_numpy(d_tp)[None],
+                                     **CHAMFER_CONVENTIONS["l1"]._asdict())
+    consistency = consistency_from_neighbours(torch.from_numpy(pred.normals)[None], torch.from_numpy(target.normals)[None],
+                                              torch.from_numpy(np.asarray(i_pt, np.int64))[None],
+                                              torch.from_numpy(np.asarray(i_tp, np.int64))[None])
+    return {"chamfer_l1": float(chamfer), "fscore": fscore, "precision": precision, "recall": recall,
+            "normal_consistency": float(consistency), "empty": False}
 
 
 class SurfaceMetrics(Metric):

@@ -33,6 +33,7 @@ from lit3d.utils.files import path_problem
 DEPTH_SUFFIXES = (".png", ".tif", ".tiff", ".npy", ".npz", ".exr")
 MASK_SUFFIXES = (".png", ".tif", ".tiff", ".npy", ".npz", ".bmp", ".jpg")
 FAR_BACKGROUND = 1e4
+MAX_MEDIAN_METRES = 100.0  # an object or a person this far is a unit mistake (float millimetres read as metres)
 
 
 class InputError(Lit3dError, ValueError):
@@ -148,7 +149,8 @@ def depth_from_array(raw: np.ndarray, label: str | os.PathLike,
     """A 2-D depth array -> ``(H, W) float32`` metres by its type, the one rule of the files and the
     Python API: integer = units times ``depth_scale`` metres (millimetres by default), the type's
     maximum = "no reading" (background); float = metres; bool (a mask?) and other types refused.
-    Then :func:`check_depth` (NaN/inf, negative, all background). Returns ``(depth, info)``, the
+    Then :func:`check_depth` (NaN/inf, negative, all background), and a median depth over
+    :data:`MAX_MEDIAN_METRES` is refused as a unit mistake (float millimetres read as metres). Returns ``(depth, info)``, the
     ``info`` of :func:`read_depth_info`."""
     raw = np.asarray(raw)
     if raw.dtype == np.bool_ or raw.dtype.kind not in "fiu":
@@ -169,7 +171,16 @@ def depth_from_array(raw: np.ndarray, label: str | os.PathLike,
     if info["no_reading_pixels"] and not (depth > 0).any():
         raise InputError(f"{label}: all background (every depth pixel is 0 or {np.iinfo(raw.dtype).max}, "
                          "the sensor's 'no reading')")
-    return check_depth(depth, label), info
+    depth = check_depth(depth, label)
+    median = float(np.median(depth[depth > 0]))
+    if median > MAX_MEDIAN_METRES:  # before: float millimetres fitted a person 2.8 km away, with a "poor fit"
+        read = ("float depth is read as metres" if raw.dtype.kind == "f"
+                else f"integer depth times depth_scale {depth_scale:g} m")
+        fix = ("float depth must be metres: divide by 1000, or save integer millimetres (a uint16 PNG or .npy)"
+               if raw.dtype.kind == "f" else "check depth_scale (--depth-scale: metres per unit, 0.001 for millimetres)")
+        raise InputError(f"{label}: {read}, and the depth's median is {median:.6g} m, more than {MAX_MEDIAN_METRES:g} m "
+                         f"(millimetres?); {fix}")
+    return depth, info
 
 
 def check_depth(depth: np.ndarray, label: str | os.PathLike) -> np.ndarray:

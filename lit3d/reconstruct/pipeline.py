@@ -68,7 +68,10 @@ def load_task(path: str | Path, device: str, want: str):
     if want == "completion":
         from lit3d.completion.module import CompletionTask as cls
     else:
+        from lit3d.canonical.checkpoint_upgrade import upgrade_checkpoint
         from lit3d.canonical.module import CanonicalTask as cls
+
+        ckpt = upgrade_checkpoint(ckpt)  # one written before the canonical settings were nodes, as today's
     task = cls(**ckpt["hyper_parameters"])
     task.on_load_checkpoint(ckpt)
     load_state(task, ckpt)  # a zoo file may be slim: fp16, training-only parts left out (lit3d.zoo.slim)

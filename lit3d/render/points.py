@@ -265,9 +265,12 @@ def local_frames(points: np.ndarray, workers: int = -1) -> dict[str, np.ndarray]
     dist, idx = cKDTree(p).query(p, k=k, workers=workers)
     out: dict[str, np.ndarray] = {"spacing": dist[:, 1:1 + K_SPACING].mean(1).astype(np.float32)}
     p32 = (p - p.mean(0)).astype(np.float32)
-    nb = p32[idx] - p32[:, None, :]  # (N, k, 3) offsets from the centre point
+    # (N, k) offsets from the centre point, one coordinate at a time (gathering the columns is cheaper
+    # than gathering (N, k, 3) rows and splitting them)
+    cols = [np.ascontiguousarray(p32[:, i])[idx] - p32[:, i, None] for i in range(3)]
     for name, kk in (("flat", min(K_FLAT, k)), ("smooth", k)):
-        out[name] = smallest_eigenvector(neighbour_covariance(nb[:, :kk]))
+        out[name] = smallest_eigenvector(column_covariance([c if kk == k else np.ascontiguousarray(c[:, :kk])
+                                                            for c in cols]))
     return out
 
 
@@ -277,15 +280,28 @@ def neighbour_covariance(x: np.ndarray) -> np.ndarray:
     The six distinct entries as row-wise dot products (``sum x_i x_j - k m_i m_j``): several
     times faster than a batched ``(3, k) @ (k, 3)`` matmul of 300k tiny matrices.
     """
-    k = x.shape[1]
-    m = x.mean(1, dtype=np.float64)
-    cols = [np.ascontiguousarray(x[..., i]) for i in range(3)]
-    c = np.empty((len(x), 3, 3), dtype=np.float64)
+    return column_covariance([np.ascontiguousarray(x[..., i]) for i in range(3)])
+
+
+def column_covariance(cols: list[np.ndarray]) -> np.ndarray:
+    """:func:`neighbour_covariance` of the offsets given as three contiguous ``(N, k)`` coordinate columns.
+
+    The mean is summed over the ``k`` neighbours in order (as NumPy reduces the middle axis of ``(N, k, 3)``,
+    so both forms give the same bits); the products in float64.
+    """
+    k = cols[0].shape[1]
+    m = []
+    for c in cols:
+        total = c[:, 0].astype(np.float64)
+        for j in range(1, k):
+            total = total + c[:, j]
+        m.append(total / k)
+    out = np.empty((len(cols[0]), 3, 3), dtype=np.float64)
     for i in range(3):
         for j in range(i, 3):
-            c[:, i, j] = np.einsum("nk,nk->n", cols[i], cols[j], dtype=np.float64) - k * m[:, i] * m[:, j]
-            c[:, j, i] = c[:, i, j]
-    return c
+            out[:, i, j] = np.einsum("nk,nk->n", cols[i], cols[j], dtype=np.float64) - k * m[i] * m[j]
+            out[:, j, i] = out[:, i, j]
+    return out
 
 
 def smallest_eigenvalue(cov: np.ndarray, p_floor: float = 1e-300) -> np.ndarray:

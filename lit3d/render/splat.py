@@ -5,9 +5,9 @@ No meshing: every point is a screen-aligned disc splat of its local spacing
 to its 8 nearest neighbours, at least its own pixel, at most ``MAX_RADIUS_PX``), seen
 from the same 12 orthographic dodecahedron cameras as meshes
 (:mod:`lit3d.render.views`, half-width ``extent``, image row 0 at the top). Visibility
-is a z-buffer in torch: each splat pixel carries the key ``depth * N + index`` and one
-``scatter_reduce(amin)`` per radius keeps the nearest point, so the winner's PCA normal,
-depth and colour fill the pixel. Shadings: ``flat`` uses normals from 8 neighbours,
+is a z-buffer in torch (:func:`nearest_splats`): each splat pixel carries the key
+``depth * N + index`` and ``scatter_reduce(amin)`` keeps the nearest point, so the winner's PCA
+normal, depth and colour fill the pixel. Shadings: ``flat`` uses normals from 8 neighbours,
 ``smooth`` from 16 (a wider, smoother PCA); each normal is turned to face its camera.
 
 Both clouds of a pair are placed in one frame (:func:`point_frame` of the reference:
@@ -61,6 +61,49 @@ def _disc(r: int) -> torch.Tensor:
     return torch.stack([dy[keep], dx[keep]], 1)
 
 
+EMPTY = torch.iinfo(torch.int64).max  # z-buffer value of a pixel no splat covers
+
+
+def nearest_splats(row: torch.Tensor, col: torch.Tensor, key: torch.Tensor, radius: torch.Tensor,
+                   size: int) -> torch.Tensor:
+    """Z-buffer ``(V, size * size) int64`` of disc splats: each pixel's smallest ``key`` among the splats covering
+    it (:data:`EMPTY` where none does).
+
+    Args:
+        row, col: ``(V, N) int64`` pixel of each point's centre in each view (any value: off-image centres too).
+        key: ``(V, N) int64`` per point and view (quantised depth x N + index: the nearest point wins).
+        radius: ``(N,) int64`` disc radius of each point in pixels, ``0..MAX_RADIUS_PX`` (:func:`_disc`).
+        size: image side.
+
+    The splat pixels are scattered (``scatter_reduce`` ``amin``, which does not depend on the order) into
+    each view's canvas grown by a margin of ``2 MAX_RADIUS_PX`` pixels, where the pixels of discs that reach
+    the image but overhang it land (cropped off at the end), and discs that cannot reach the image go to a
+    sink: no splat pixel needs a bounds test. The points are grouped by radius with one gather.
+    """
+    v, s = row.shape[0], int(size)
+    pad = 2 * MAX_RADIUS_PX
+    w = s + 2 * pad
+    span = MAX_RADIUS_PX * (w + 1)  # largest |dy w + dx| of a disc offset
+    buf = torch.full((v * w * w + 2 * span + 1,), EMPTY, dtype=torch.int64)
+    sink = v * w * w + span
+    vbase = (torch.arange(v) * (w * w) + pad * w + pad)[:, None]
+    order = torch.argsort(radius, stable=True)
+    counts = torch.bincount(radius, minlength=MAX_RADIUS_PX + 1).tolist()
+    rows, cols, keys = (t.index_select(1, order) for t in (row, col, key))
+    start = 0
+    for r, cnt in enumerate(counts):
+        if cnt == 0:
+            continue
+        rr, cc, kk = (t[:, start:start + cnt] for t in (rows, cols, keys))
+        start += cnt
+        near = (rr >= -r) & (rr < s + r) & (cc >= -r) & (cc < s + r)  # a disc of radius r reaching the image
+        base = torch.where(near, vbase + rr * w + cc, sink).flatten()
+        kk = kk.flatten()
+        for dy, dx in _disc(r).tolist():
+            buf.scatter_reduce_(0, base + (dy * w + dx), kk, "amin")
+    return buf[:v * w * w].view(v, w, w)[:, pad:pad + s, pad:pad + s].reshape(v, s * s)
+
+
 def render_point_gbuffers(shape: PointShape, config: RenderConfig | None = None, *,
                           frame: tuple[np.ndarray, float] | None = None,
                           frames: dict[str, np.ndarray] | None = None,
@@ -96,20 +139,8 @@ def render_point_gbuffers(shape: PointShape, config: RenderConfig | None = None,
     spacing = np.minimum(lf["spacing"], OUTLIER_SPACING * float(np.median(lf["spacing"])))
     radius_px = torch.from_numpy(spacing * (SPLAT_SCALE * scale * s / (2 * e)))
     r_int = radius_px.round().clamp(0, MAX_RADIUS_PX).long()
-    vbase = (torch.arange(v) * (s * s))[:, None]
-    big = torch.iinfo(torch.int64).max
-    buf = torch.full((v * s * s + 1,), big, dtype=torch.int64)  # last slot: off-image splat pixels
-    dump = v * s * s
-    for r in torch.unique(r_int).tolist():
-        sel = (r_int == r).nonzero().squeeze(1)
-        rr, cc, kk = row[:, sel], col[:, sel], key[:, sel]
-        base = vbase + rr * s + cc
-        for dy, dx in _disc(int(r)).tolist():
-            y, x = rr + dy, cc + dx
-            ok = (y >= 0) & (y < s) & (x >= 0) & (x < s)
-            buf.scatter_reduce_(0, torch.where(ok, base + (dy * s + dx), dump).flatten(), kk.flatten(), "amin")
-    buf = buf[:dump]
-    mask = buf != big
+    buf = nearest_splats(row, col, key, r_int, s).view(-1)
+    mask = buf != EMPTY
     idx = torch.where(mask, buf % n, torch.zeros_like(buf)).view(v, s * s)
     mask = mask.view(v, s * s)
     dep = torch.where(mask, torch.gather(depth, 1, idx), torch.zeros(()))

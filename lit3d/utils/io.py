@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import glob
 import hashlib
 import json
 import os
@@ -22,8 +23,9 @@ from pathlib import Path
 from typing import Any, BinaryIO
 
 from lit3d.utils.errors import Lit3dError
+from lit3d.utils.kill_points import kill_point
+from lit3d.utils.temp_names import TMP_SUFFIX, temp_prefix, writer, writer_gone
 
-TMP_SUFFIX = ".tmp"
 STAGE_PREFIX = ".evaluation."  # an evaluation's staging folder inside its run dir (lit3d.cli.evaluation.staged_outputs)
 
 
@@ -66,17 +68,34 @@ def atomic_file(path: str | os.PathLike) -> Iterator[BinaryIO]:
     path, tmp = Path(path), None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=TMP_SUFFIX)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=temp_prefix(path.name), suffix=TMP_SUFFIX)
         with os.fdopen(fd, "wb") as f:
             os.fchmod(f.fileno(), file_mode())
             yield f
+        kill_point(f"write:{path.name}")
         os.replace(tmp, path)
+        tmp = None
+        remove_left_temps(path)
     except BaseException as exc:
         if tmp is not None:
             Path(tmp).unlink(missing_ok=True)
         if isinstance(exc, OSError) and exc.errno is not None and exc.filename in (None, tmp):
             raise OSError(exc.errno, exc.strerror or os.strerror(exc.errno), str(path)) from exc
         raise
+
+
+def remove_left_temps(path: str | os.PathLike) -> list[Path]:
+    """Remove the temp files of ``path`` (``.<name>.<pid>-<host>.*.tmp`` beside it) whose writer was
+    killed (:func:`lit3d.utils.temp_names.writer_gone`: this host, a pid that no longer runs); the
+    temps of running writers and of other hosts stay. Returns the removed paths."""
+    path, removed = Path(path), []
+    with contextlib.suppress(OSError):
+        for p in path.parent.glob(f".{glob.escape(path.name)}.*{TMP_SUFFIX}"):
+            w = writer(p.name)
+            if w is not None and w.name == path.name and writer_gone(p.name, with_host=True) and p.is_file():
+                p.unlink(missing_ok=True)
+                removed.append(p)
+    return removed
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
@@ -154,7 +173,7 @@ def check_output_dir(path: str | os.PathLike, option: str = "--out") -> Path:
             break
     try:
         p.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(dir=p, prefix=".lit3d-probe.", suffix=TMP_SUFFIX)
+        fd, probe = tempfile.mkstemp(dir=p, prefix=temp_prefix("lit3d-probe"), suffix=TMP_SUFFIX)
         os.close(fd)
         os.unlink(probe)
     except OSError as exc:
@@ -174,7 +193,7 @@ def check_writable(path: str | os.PathLike, option: str, need_write: bool = True
         raise OutputError(f"{p}: {option} lies under {anc}, which is a file, not a folder")
     if need_write and anc is not None:
         try:  # a real probe (a temp file, removed again): access() ignores sysfs and some mounts
-            fd, probe = tempfile.mkstemp(dir=anc, prefix=".lit3d-probe.", suffix=TMP_SUFFIX)
+            fd, probe = tempfile.mkstemp(dir=anc, prefix=temp_prefix("lit3d-probe"), suffix=TMP_SUFFIX)
             os.close(fd)
             os.unlink(probe)
         except OSError as exc:
@@ -255,7 +274,7 @@ def write_file_set(out_dir: str | os.PathLike, files: dict[str, bytes],
     check_targets([out / name for name in names], protected)
     try:
         out.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(dir=out, prefix=f".{next(iter(files), 'set')}.{os.getpid()}.", suffix=TMP_SUFFIX))
+        tmp = Path(tempfile.mkdtemp(dir=out, prefix=temp_prefix(next(iter(files), "set")), suffix=TMP_SUFFIX))
     except OSError as exc:
         raise output_error(out, exc) from None
     committed = False
@@ -271,6 +290,7 @@ def write_file_set(out_dir: str | os.PathLike, files: dict[str, bytes],
         except OSError as exc:
             raise output_error(out / names[0], exc) from None
         committed = True
+        kill_point("file-set:committed")
         _move_set(tmp, out, names)
     except KeyboardInterrupt:
         if committed:  # the staged set is whole: finish it rather than leave a mix
@@ -309,43 +329,37 @@ def _remove_set(out: Path, names: Sequence[str]) -> None:
         (out / name).unlink(missing_ok=True)
 
 
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-def _staging_pid(folder: Path) -> int | None:
-    """The pid in a staging folder's name (``.<name>.<pid>.<random>.tmp``); None for other names."""
-    parts = folder.name[: -len(TMP_SUFFIX)].rsplit(".", 2)
-    return int(parts[1]) if len(parts) == 3 and parts[1].isdigit() else None
-
-
-def repair_sets(out_dir: str | os.PathLike) -> list[str]:
+def repair_sets(out_dir: str | os.PathLike, idle: bool = False) -> list[str]:
     """Settle what writers that are gone left in ``out_dir``: a staging folder with its journal (the
     process died during the renames) has its renames finished; one without (it died while
-    staging) is removed. Staging folders of running processes are left alone. Returns one note
-    per folder handled."""
+    staging) is removed. Staging folders of running processes (and of other hosts) are left alone.
+    ``idle``: no process writes into ``out_dir`` (its run dir lock is held by this process, or its
+    holder is gone): every staging folder and temp file there is a leftover, those of other hosts too.
+    Temp files (``.<name>.<pid>-<host>.<random>.tmp``) of writers that are gone are removed as well.
+    Returns one note per folder or file handled."""
     out, notes = Path(out_dir), []
     if not out.is_dir():
         return notes
-    for folder in sorted(out.glob(f".*{TMP_SUFFIX}")):
-        pid = _staging_pid(folder)
-        if not folder.is_dir() or (pid is not None and pid != os.getpid() and _alive(pid)):
+    for entry in sorted(out.glob(f".*{TMP_SUFFIX}")):
+        w = writer(entry.name)
+        if not idle and w is not None and not writer_gone(entry.name) and w.pid != os.getpid():
+            continue  # a running writer's, or another host's
+        if entry.is_file():  # only the names this project writes (with the writer's pid)
+            if w is not None and (idle or writer_gone(entry.name, with_host=True)):
+                entry.unlink(missing_ok=True)
+                notes.append(f"{entry}: removed the temp file of an interrupted write")
+            continue
+        if not entry.is_dir():
             continue
         try:
-            journal = json.loads((folder / SET_JOURNAL).read_text("utf-8"))
+            journal = json.loads((entry / SET_JOURNAL).read_text("utf-8"))
         except (OSError, ValueError):
             journal = None
         if isinstance(journal, dict) and isinstance(journal.get("files"), list):
-            _settle(folder, out, [str(n) for n in journal["files"]])
+            _settle(entry, out, [str(n) for n in journal["files"]])
             notes.append(f"{out}: finished the set {', '.join(map(str, journal['files']))} "
                          "that an interrupted run had left half renamed")
         else:
-            notes.append(f"{folder}: removed the staging folder of an interrupted run")
-        shutil.rmtree(folder, ignore_errors=True)
+            notes.append(f"{entry}: removed the staging folder of an interrupted run")
+        shutil.rmtree(entry, ignore_errors=True)
     return notes

@@ -2,9 +2,9 @@
 ``body_fit`` row beyond FAUST: held-out Anny people, TOSCA's humans).
 
     python -m studies.body.body_fit_rows --out DIR [--init REGRESSOR_CKPT] [--worker I --workers K] \\
-        -- experiment=canonical_humans data.data_dir=... data.pose_draw=per_subject
+        -- experiment=canonical_humans data.data_dir=... data.source.pose_draw=per_subject
     python -m studies.canonical.pooled --fold-test --rows input body_fit chance --depth-row body_fit=DIR \\
-        --seeds 0 1 2 3 4 --out POOLED -- experiment=canonical_humans data.data_dir=... data.pose_draw=per_subject
+        --seeds 0 1 2 3 4 --out POOLED -- experiment=canonical_humans data.data_dir=... data.source.pose_draw=per_subject
 
 The Hydra overrides after ``--`` compose the canonical data as ``lit3d-train`` would
 (:func:`lit3d.canonical.pooled.compose`); every (subject, pose) of its test split (``--all``: every

@@ -3,7 +3,7 @@
 
     python -m studies.canonical.pooled RUN_DIR... --seeds 0 1 2 3 4 --out DIR
     python -m studies.canonical.pooled --seeds 0 1 2 3 4 --out DIR -- experiment=canonical_tosca \\
-        data.root=../shared/data/tosca8k data.view_mode=broadside        # non-learned rows only
+        data.root=../shared/data/tosca8k data.render.view_mode=broadside        # non-learned rows only
 
 Run dirs: the folds' ``heldout.npz`` pooled; without them, the Hydra overrides after ``--`` compose the
 data and the rows are the non-learned ones. Writes ``DIR/pooled_results.md`` and ``DIR/pooled.json``.
@@ -31,7 +31,7 @@ def main(argv: list[str] | None = None) -> None:
                         help="canonical-form rows (cmds smacof nmds gps posed; default: evaluation.mesh_baselines)")
     parser.add_argument("--allow-partial", action="store_true", help="score folds that do not cover every item")
     parser.add_argument("--fold-test", action="store_true",
-                        help="without run dirs: only the test split of data.fold (not every fold's held-out items)")
+                        help="without run dirs: only the test split of data.split.fold (not every fold's held-out items)")
     parser.add_argument("--depth-row", action="append", default=[], metavar="ROW=DIR",
                         help="one more depth row: DIR/<subject>_pose<pose>_body_canonical_depth.npy per item")
     parser.add_argument("--smooth-px", type=float, default=None, metavar="SIGMA",

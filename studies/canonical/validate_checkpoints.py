@@ -4,7 +4,7 @@
         --all-val --out val.json [--heldout DIR]
 
 Each checkpoint's run folder (``RUN/config.yaml``, written by lit3d-train) gives the data; the task is
-loaded from the checkpoint. ``--all-val``: every validation item (``data.max_val_items=null``), not the
+loaded from the checkpoint. ``--all-val``: every validation item (``data.split.max_val_items=null``), not the
 training run's subset. Prints one JSON line per checkpoint (``val/...`` metrics, e.g. the canonical
 task's ``val/retrieval_nn``: validation subjects retrieved by mask IoU) and writes them all to ``--out``.
 Use it to compare settings on people never tested with checkpoints trained before a metric
@@ -25,6 +25,7 @@ from pathlib import Path
 import lightning.pytorch as pl
 from omegaconf import OmegaConf
 
+from datamodules.canonical.flat_config import upgrade_data_config
 from lit3d.canonical.evaluator import prediction_source, scored_outputs
 from lit3d.canonical.heldout import heldout_arrays, item_ids, save_heldout, settings_of
 from lit3d.cli.common import build_datamodule, import_object, read_checkpoint
@@ -39,11 +40,13 @@ def validate(ckpt: Path, all_val: bool, heldout: Path | None = None) -> dict[str
     """``{metric: value}`` of ``ckpt`` on the validation split of its run's data config; with ``heldout``
     (a folder) the validation predictions are written there as ``heldout.npz``."""
     cfg = OmegaConf.load(ckpt.parent.parent / "config.yaml")
-    if all_val and "max_val_items" in cfg.data:
-        cfg.data.max_val_items = None
-    dm = build_datamodule(cfg.data)
+    data = upgrade_data_config(OmegaConf.to_container(cfg.data, resolve=True))  # a run config of either layout
+    if all_val:
+        data["split"] = {**(data.get("split") or {}), "max_val_items": None}
+    dm = build_datamodule(data)
     task_cls = import_object(cfg.task._target_)
-    task = task_cls.load_from_checkpoint(str(ckpt), map_location="cpu")
+    hparams = read_checkpoint(ckpt)[0]["hyper_parameters"]  # in today's layout
+    task = task_cls.load_from_checkpoint(str(ckpt), map_location="cpu", **hparams)
     metrics = {k: round(float(v), 4) for k, v in _trainer().validate(task, dm, verbose=False)[0].items()}
     if heldout is not None:
         write_validation_heldout(task, dm, ckpt, task_cls, heldout)

@@ -5,7 +5,7 @@ fill each replaced by the truth, on the items of a split.
                                              [--picture FILE.png]
 
 The data are the checkpoint's own (its data config; ``--data-dir`` reads a cache elsewhere), with flow
-targets (``data.flow_targets=true``). Per item and row, the mask IoU (at 0.5) against the true
+targets (``data.render.flow_targets=true``). Per item and row, the mask IoU (at 0.5) against the true
 canonical mask; the table gives the means. The "true fill" is the target itself (depth and mask), the
 "true visibility" the cached one (0 on the canonical background, so there the fill is taken). Also:
 the model's missed and extra pixels (a share of the true area), and the flow's end-point error in
@@ -26,6 +26,7 @@ import numpy as np
 import torch
 
 from datamodules.canonical import CanonicalDataModule
+from lit3d.canonical.checkpoint_upgrade import upgrade_checkpoint
 from lit3d.canonical.module import CanonicalTask
 from lit3d.canonical.warp import WarpHead, pixels_to_grid, warp_compose, warp_image
 from lit3d.metrics.depth import per_sample_mask_iou
@@ -55,7 +56,7 @@ def predict(net, batch: dict) -> dict[str, torch.Tensor]:
     ``coeffs``, ``vis_logits``, ``fill_depth``, ``fill_mask``), with ``vis`` (the visibility probability)
     and ``mask`` (the output's mask probability, ``(B, 1, H, W)``). ValueError without a warp head."""
     if not isinstance(getattr(net, "head", None), WarpHead):
-        raise ValueError("the breakdown needs a warp head (task.net.head=warp)")
+        raise ValueError("the breakdown needs a warp head (task.net.head.kind=warp)")
     p = net.head.parts(*net.features(batch["depth"], batch["mask"]))
     p["vis"] = torch.sigmoid(p["vis_logits"])
     p["mask"] = warp_compose(batch["depth"], batch["mask"], p["flow"], p["coeffs"], p["vis"], p["fill_depth"],
@@ -149,10 +150,11 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     try:
         check_targets([p for p in (args.out, args.picture) if p], protected=[args.ckpt])
-        ckpt = load_checkpoint(args.ckpt, ValueError)
-        data = {k: v for k, v in dict(ckpt.get(META_KEY, {}).get("data") or {}).items() if k != "_target_"}
-        if not data.get("flow_targets"):
-            raise ValueError(f"{args.ckpt}: its data have no flow targets (data.flow_targets=true is needed)")
+        ckpt = upgrade_checkpoint(load_checkpoint(args.ckpt, ValueError))
+        data = dict(ckpt.get(META_KEY, {}).get("data") or {})
+        data.pop("_target_", None)
+        if not (data.get("render") or {}).get("flow_targets"):
+            raise ValueError(f"{args.ckpt}: its data have no flow targets (data.render.flow_targets=true is needed)")
         if args.data_dir:
             data["data_dir"] = args.data_dir
         task = CanonicalTask(**ckpt["hyper_parameters"])

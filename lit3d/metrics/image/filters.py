@@ -26,8 +26,15 @@ def gaussian_kernel1d(window_size: int = 11, sigma: float = 1.5) -> torch.Tensor
     """Normalised 1-D Gaussian ``(window_size,) float64`` centred on the middle tap.
 
     ``kornia.filters.get_gaussian_kernel1d`` in float64 (bit-identical to
-    ``exp(-x^2 / 2 sigma^2) / sum``, checked in the tests).
+    ``exp(-x^2 / 2 sigma^2) / sum``, checked in the tests). Made once per ``(window_size, sigma)``
+    (kornia builds it from a dozen small tensor operations, and the feature table asks for it a few
+    hundred times per pair); each call returns a copy.
     """
+    return _gaussian_kernel1d(int(window_size), float(sigma)).clone()
+
+
+@functools.lru_cache(maxsize=64)
+def _gaussian_kernel1d(window_size: int, sigma: float) -> torch.Tensor:
     return get_gaussian_kernel1d(window_size, sigma, dtype=torch.float64)[0]
 
 

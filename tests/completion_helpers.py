@@ -1,0 +1,26 @@
+"""Tiny completion nets and grids shared by the step-cost, options and step-switch tests."""
+from __future__ import annotations
+
+import torch
+
+from lit3d.completion.module import CompletionTask
+
+
+def tiny_nets(demo: dict) -> dict:
+    """The demo nets shrunk: 8^3 -> 32^3, small latent, 4-layer critic (attention at 8^3)."""
+    return {**demo, "in_res": 8, "out_res": 32, "enc_channels": [8, 16], "latent_dim": 64, "k": 16,
+            "fixed_latent_dim": 64, "critic_channels": [8, 8, 8, 8], "critic_attention_res": 8}
+
+
+def grid_pair(batch: int = 2, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(partial (B, 1, 8, 8, 8), target (B, 1, 32, 32, 32))`` float occupancy: a random target and its
+    4x max-pooled input."""
+    g = torch.Generator().manual_seed(seed)
+    y = (torch.rand(batch, 1, 32, 32, 32, generator=g) < 0.2).float()
+    return torch.nn.functional.max_pool3d(y, 4), y
+
+
+def tiny_task(nets: dict, **kw) -> CompletionTask:
+    """A :class:`CompletionTask` of :func:`tiny_nets` (``nets``: the demo's node), seeded."""
+    torch.manual_seed(0)
+    return CompletionTask(nets=tiny_nets(nets), **kw)
