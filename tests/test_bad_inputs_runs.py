@@ -15,7 +15,8 @@ import pytest
 from datamodules.quality.mos import MosDataError
 from lit3d.cli.common import run_cli
 from lit3d.render.convert import ShapeError
-from test_bad_inputs import BIN, REPO, Ctx, data_cli, eval_cli, train_cli, write_depth_cache
+from bad_input_writers import write_depth_cache
+from test_bad_inputs import BIN, REPO, Ctx, data_cli, eval_cli, train_cli
 from test_mos_readers import liris_epfl  # the MOS dataset writer (published layout)
 from test_output_writer import readonly_dir  # noqa: F401  (the fixture: a real read-only folder)
 

@@ -52,7 +52,7 @@ def _prepare(tmp_path: Path, *extra: str) -> subprocess.CompletedProcess:
 
 
 def _described(res: subprocess.CompletedProcess) -> dict:
-    """The JSON that lit3d-data prints (Hydra's log lines come first on stdout)."""
+    """The JSON that lit3d-data prints on stdout (its log lines go to stderr)."""
     lines = res.stdout.splitlines()
     return json.loads("\n".join(lines[lines.index("{"):]))
 
@@ -73,7 +73,7 @@ def test_another_configs_cache_is_refused_by_every_entry_point(tmp_path):
                     "data.data_dir to another folder")
     assert _snapshot(cache) == before, "a refused run changed the cache"
     res = _prepare(tmp_path, "seed=7", "--rebuild")
-    assert "--rebuild: deleting the prepared items" in res.stdout  # Hydra's log lines go to stdout
+    assert "--rebuild: deleting the prepared items" in res.stderr  # log lines go to stderr: stdout holds the JSON summary alone
     assert json.loads((cache / MANIFEST).read_text())["config"]["seed"] == 7
 
 
@@ -89,7 +89,7 @@ def test_hand_edited_manifest_and_truncated_item_are_found_and_repaired(tmp_path
     with pytest.raises(DataError, match=r"manifest.json was edited: its items no longer match its manifest_hash"):
         dm.setup()  # loading without preparing: named, not trusted
     res = _prepare(tmp_path)
-    assert "manifest.json was edited" in res.stdout and "repairing" in res.stdout
+    assert "manifest.json was edited" in res.stderr and "repairing" in res.stderr
     again = _described(res)
     assert again["split_sizes"] == first["split_sizes"] and again["manifest_hash"] == first["manifest_hash"]
 
@@ -97,7 +97,7 @@ def test_hand_edited_manifest_and_truncated_item_are_found_and_repaired(tmp_path
     good = victim.read_bytes()
     victim.write_bytes(good[: len(good) // 2])
     res = _prepare(tmp_path)
-    assert f"{train[0]['file']}: {len(good) // 2} bytes, the manifest says {len(good)}" in res.stdout
+    assert f"{train[0]['file']}: {len(good) // 2} bytes, the manifest says {len(good)}" in res.stderr
     assert victim.read_bytes() == good and _described(res)["manifest_hash"] == first["manifest_hash"]
 
 

@@ -24,7 +24,6 @@ from __future__ import annotations
 import importlib
 import logging
 import os
-import signal
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -33,14 +32,15 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from lit3d.cli.about import EXIT_USER, about_flags
+from lit3d.cli.compose import (  # noqa: F401  (re-exported)
+    CONF_DIR, check_composes, check_group_overrides, compose_config, config_groups)
 from lit3d.cli.config_checks import ConfigValueError, check_config_values, config_problem
-from lit3d.cli.eval_settings import override_problem, stale_task_keys
-from lit3d.cli.key_hints import instantiation_problem, misspelt_key
+from lit3d.cli.errors import EXIT_SIGTERM, Interrupted, UserError  # noqa: F401  (re-exported)
+from lit3d.cli.key_hints import instantiation_problem
 from lit3d.cli.evaluation import run_evaluation, scalar_metrics  # noqa: F401  (re-exported)
 from lit3d.cli.rundir import claim_run_dir, hold_output_dir
 from lit3d.utils import quiet
 from lit3d.utils.checkpoints import first_line
-from lit3d.utils.config_dir import config_dir
 from lit3d.utils.errors import Lit3dError
 from lit3d.utils.io import OutputError
 from lit3d.utils.stops import start_up
@@ -48,20 +48,7 @@ from lit3d.utils.stops import start_up
 log = logging.getLogger("lit3d")
 
 
-CONF_DIR = str(config_dir())
-# keys of a task config read by the CLI and not passed to the LightningModule
 EXIT_DIVERGED = 1    # training stopped on a NaN/Inf loss
-EXIT_SIGTERM = 128 + signal.SIGTERM
-
-
-class UserError(Lit3dError):
-    """A problem the user can fix (bad path, missing option): printed as one line."""
-
-
-class Interrupted(Exception):
-    """Training was stopped by a signal after saving ``last.ckpt``; the message says how to resume."""
-
-    exit_code = EXIT_SIGTERM
 
 
 # checkpoints written before the one-room-per-task layout name their module by its old path
@@ -166,36 +153,6 @@ def read_checkpoint_meta(ckpt_path: str | Path) -> dict:
 
 
 # ------------------------------------------------------------------ command line
-def config_groups(conf_dir: str = CONF_DIR) -> dict[str, list[str]]:
-    """Config groups of ``conf/`` (Hydra's own ``hydra/`` excluded) -> their option names."""
-    groups = {}
-    for d in sorted(Path(conf_dir).iterdir()):
-        if d.is_dir() and d.name != "hydra":
-            groups[d.name] = sorted(p.stem for p in d.glob("*.yaml"))
-    return groups
-
-
-def check_group_overrides(args: Sequence[str], conf_dir: str = CONF_DIR) -> None:
-    """Raise :class:`UserError` when an override picks an option a config group does not have.
-
-    ``experiment=nope`` -> ``experiment=nope: no such experiment config; known: ...``. Sweep
-    lists (``task=a,b``) are checked item by item; sweep functions (``choice(...)``,
-    ``glob(...)``), interpolations and ``null`` are left to Hydra.
-    """
-    groups = config_groups(conf_dir)
-    for arg in args:
-        if arg.startswith("-") or "=" not in arg:
-            continue
-        key, value = arg.split("=", 1)
-        key = key.lstrip("+~").split("@", 1)[0]
-        if key not in groups or value in ("", "null") or any(c in value for c in "()*[]{}$"):
-            continue
-        for option in value.split(","):
-            if option not in groups[key]:
-                known = ", ".join(groups[key]) or "(none)"
-                raise UserError(f"{key}={option}: no such {key} config (conf/{key}/{option}.yaml); known: {known}")
-
-
 def _debug_requested() -> bool:
     return os.environ.get("HYDRA_FULL_ERROR") == "1"
 
@@ -204,50 +161,6 @@ def fail(exc: BaseException, code: int) -> None:
     """Print ``error: <first line of exc>`` on stderr and exit with ``code``."""
     print(f"error: {first_line(exc, type(exc).__name__)}", file=sys.stderr, flush=True)
     sys.exit(code)
-
-
-def compose_config(config_name: str, overrides=(), return_hydra_config: bool = False, conf_dir=None):
-    """``conf/<config_name>.yaml`` composed with Hydra ``overrides`` outside a Hydra run (a fresh
-    global Hydra, cleared again after), from :data:`CONF_DIR` unless ``conf_dir`` is given.
-    Hydra's errors (a key not in the config ...) propagate."""
-    from hydra import compose, initialize_config_dir
-    from hydra.core.global_hydra import GlobalHydra
-
-    GlobalHydra.instance().clear()
-    try:
-        with initialize_config_dir(config_dir=str(conf_dir or CONF_DIR), version_base="1.3"):
-            return compose(config_name, overrides=list(overrides), return_hydra_config=return_hydra_config)
-    finally:
-        GlobalHydra.instance().clear()
-
-
-def check_composes(args: Sequence[str], config_name: str, conf_dir: str = CONF_DIR) -> DictConfig | None:
-    """Raise :class:`UserError` when the overrides do not compose (e.g. a key that is not in the
-    config: ``trainer.max_epoch=3``), with Hydra's first two lines as the message (a moved evaluation
-    setting, ``task.mesh_baselines=[]``: one line naming ``evaluation.mesh_baselines``,
-    :mod:`lit3d.cli.eval_settings`); else return the composed config (with its ``hydra`` node).
-
-    Skipped for multiruns and Hydra's own flags (``-m``, ``--cfg`` ...): Hydra reports those.
-    """
-    if any(a.startswith("-") for a in args):
-        return None
-    from hydra.errors import HydraException
-
-    try:
-        composed = compose_config(config_name, args, return_hydra_config=True, conf_dir=conf_dir)
-    except HydraException as exc:
-        moved = override_problem(args, lambda rest: compose_config(config_name, rest, conf_dir=conf_dir))
-        if moved:  # a task.KEY that is an evaluation setting now, or evaluation.* without a task
-            raise UserError(moved) from exc
-        misspelt = misspelt_key(str(exc), args, lambda rest: compose_config(config_name, rest, conf_dir=conf_dir))
-        if misspelt:  # trainer.max_epoch=3: trainer.max_epochs named, not Hydra's "+trainer.max_epoch"
-            raise UserError(misspelt) from exc
-        lines = [ln.strip() for ln in str(exc).strip().splitlines() if ln.strip()]
-        raise UserError("; ".join(ln.rstrip(".") for ln in lines[:2]) or type(exc).__name__) from exc
-    stale = stale_task_keys(composed)  # an experiment that still sets an evaluation setting under task:
-    if stale:
-        raise UserError(stale)
-    return composed
 
 
 def check_output_paths(cfg: DictConfig | None) -> None:
