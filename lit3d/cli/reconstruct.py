@@ -36,11 +36,8 @@ import time
 from pathlib import Path
 
 from lit3d.cli.about import report_error, run_argparse_cli, version_line
-
-# the zoo models used when no checkpoint is given (lit3d.zoo)
-ZOO_COMPLETION = "completion-furniture"
-ZOO_CANONICAL = "canonical-people"
-
+from lit3d.cli.reconstruct_setup import (  # noqa: F401  (ZOO_*: re-exported)
+    ZOO_CANONICAL, ZOO_COMPLETION, Scorer, camera_source, check_args, intrinsics, mask_for, resolve_models, say)
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="lit3d-reconstruct", description=__doc__.split("\n\n")[0],
@@ -86,96 +83,6 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _say(msg: str) -> None:
-    print(f"lit3d-reconstruct: {msg}", file=sys.stderr, flush=True)
-
-
-def _intrinsics(args, width: int, height: int, label: str):
-    from lit3d.reconstruct.backproject import RECGAN_FOV_DEG, Intrinsics
-
-    given = [getattr(args, k) for k in ("fx", "fy", "cx", "cy")]
-    if any(v is not None for v in given):
-        return Intrinsics(*given).check(width, height, label)
-    fov = RECGAN_FOV_DEG if args.fov is None else args.fov  # --fov 0 is refused, never the default
-    return Intrinsics.from_fov(fov, width, height).check(width, height, label)
-
-
-def _camera_source(args) -> str:
-    """Where the intrinsics came from (written to the JSON: a unit assumed is a unit stated)."""
-    from lit3d.reconstruct.backproject import RECGAN_FOV_DEG
-
-    if args.fx is not None:
-        return "--fx --fy --cx --cy (pixels)"
-    if args.fov is not None:
-        return f"--fov {args.fov:g} deg, principal point at the centre"
-    return f"default: the 3D-RecGAN++ camera, fov {RECGAN_FOV_DEG:g} deg across width and height, centred"
-
-
-def _check_args(args) -> None:
-    from lit3d.reconstruct.depth_io import InputError
-
-    given = [getattr(args, k) for k in ("fx", "fy", "cx", "cy")]
-    if any(v is not None for v in given) and not all(v is not None for v in given):
-        raise InputError("--fx --fy --cx --cy: give all four intrinsics (or --fov)")
-    if args.fov is not None and any(v is not None for v in given):
-        raise InputError("--fov and --fx/--fy/--cx/--cy: give one camera, not both")
-    if args.fov is not None and not 0 < args.fov < 180:
-        raise InputError(f"--fov {args.fov:g}: expected a field of view in (0, 180) degrees")
-    if not args.depth_scale > 0 or args.depth_scale != args.depth_scale or args.depth_scale == float("inf"):
-        raise InputError(f"--depth-scale {args.depth_scale:g}: expected a positive number of metres per unit")
-    if args.body and (args.ckpt or args.canonical or args.reference):
-        raise InputError("--body (Anny fit) goes without --ckpt, --canonical and --reference")
-    if (args.body_init and not args.body) or (args.body_refine_poor and str(args.body_init).lower() == "none"):
-        raise InputError("--body-init CKPT: needs --body, and --body-refine-poor N needs a regressor, not none")
-    if args.quality_ckpt and not args.reference:
-        raise InputError("--quality-ckpt needs --reference (the shape to score against)")
-    if not 64 <= args.size <= 2048:
-        raise InputError(f"--size {args.size}: expected 64..2048 pixels")
-    if args.near is not None and args.far is not None and args.near >= args.far:
-        raise InputError(f"--near {args.near} >= --far {args.far}: empty depth range")
-
-
-def _mask_for(args, depth_path: Path, shape):
-    """``(mask (H, W) bool, its file)`` for ``depth_path`` (``(None, None)`` without --mask); a
-    mask folder is paired by exact stem (:func:`lit3d.reconstruct.depth_io.find_mask`)."""
-    from lit3d.reconstruct.depth_io import find_mask, read_mask
-
-    if not args.mask:
-        return None, None
-    m = find_mask(args.mask, depth_path)
-    return read_mask(m, shape), m
-
-
-class _Scorer:
-    """``--reference``/``--quality-ckpt``: lit3d-score's rendering-based features of (REF, result)."""
-
-    def __init__(self, args):
-        from lit3d.cli.score import DEFAULT_SIZE, _model_features
-        from lit3d.features.table import FeatureConfig
-        from lit3d.render.convert import to_mesh
-
-        self.ref = to_mesh(args.reference)
-        self.cfg = FeatureConfig.rendered(DEFAULT_SIZE)
-        self.predictor, self.notes = None, []
-        if args.quality_ckpt:
-            ns = argparse.Namespace(ckpt=args.quality_ckpt, size=None, styles=None)
-            self.predictor, self.cfg, self.notes = _model_features(ns, self.cfg)
-        self.args = args
-
-    def score(self, mesh) -> dict:
-        from lit3d.features.table import feature_table
-
-        table = feature_table(self.ref, mesh, self.cfg, cache_dir=None, device=self.args.device)
-        out = {"reference": str(self.args.reference), "overall_score_mean_mask_ssim": table.overall_score(),
-               "chamfer": table.features.get("chamfer"), "hausdorff": table.features.get("hausdorff"),
-               "notes": list(self.notes)}
-        if self.predictor is not None:
-            pred = self.predictor.predict(table.features)
-            out.update(predicted_score=pred.pop("score"), quality_ckpt=str(self.args.quality_ckpt),
-                       score_source=pred)
-        return out
-
-
 def _one(args, path: Path, name: str, completer, mapper, scorer, protected) -> dict:
     from lit3d.reconstruct.depth_io import read_depth_info
     from lit3d.reconstruct.figure import figure_png
@@ -189,11 +96,11 @@ def _one(args, path: Path, name: str, completer, mapper, scorer, protected) -> d
     if units["no_reading_pixels"]:
         notes.append(f"{path}: {units['no_reading_pixels']} pixels at the {units['dtype']} maximum taken as "
                      "'no reading' (background)")
-        _say(f"note: {notes[-1]}")
+        say(f"note: {notes[-1]}")
     t_read = time.perf_counter() - t0
     h, w = depth.shape
-    intr = _intrinsics(args, w, h, str(path))
-    mask, mask_file = _mask_for(args, path, depth.shape)
+    intr = intrinsics(args, w, h, str(path))
+    mask, mask_file = mask_for(args, path, depth.shape)
     opts = Options(mask=mask, near=args.near, far=args.far,
                    remove_plane=args.remove_plane, largest_cluster=args.largest_cluster, fuse_input=not args.no_fuse)
     res = reconstruct(depth, intr, completer, opts, label=str(path), canonical=mapper)
@@ -207,7 +114,7 @@ def _one(args, path: Path, name: str, completer, mapper, scorer, protected) -> d
         files[".png"] = figure_png(depth, res.keep, res.points, res.mesh, title, args.size)
         timings["figure"] = time.perf_counter() - t0
     summary = {
-        "input": str(path), "image_size": [w, h], "intrinsics": intr.as_dict(), "camera": _camera_source(args), "depth_scale": units["depth_scale_applied"],
+        "input": str(path), "image_size": [w, h], "intrinsics": intr.as_dict(), "camera": camera_source(args), "depth_scale": units["depth_scale_applied"],
         "depth_units": units["units"], "depth_dtype": units["dtype"], "no_reading_pixels": units["no_reading_pixels"],
         "checkpoint": completer.path, "threshold": completer.threshold, "device": args.device,
         "geometry": completer.geometry.as_dict(), "placement": res.placement.as_dict(),
@@ -279,7 +186,7 @@ def _plan_outputs(args, inputs: list[Path]) -> tuple[list[str], list[Path]]:
     _check_out_is_no_input_folder(args)
     names, notes = unique_names(inputs)
     for note in notes:
-        _say(f"note: {note}")
+        say(f"note: {note}")
     protected = _protected(args, inputs)
     out = Path(args.out)
     planned = [out / f for n in names for f in planned_files(args, n)]
@@ -308,37 +215,23 @@ def _dedupe(inputs: list[Path]) -> list[Path]:
     for p in inputs:
         key = p.resolve() if p.exists() else p
         if key in seen:
-            _say(f"note: {p}: given more than once; reconstructed once")
+            say(f"note: {p}: given more than once; reconstructed once")
             continue
         seen.add(key)
         out.append(p)
     return out
 
 
-def _resolve_models(args) -> None:
-    """Zoo names (and the defaults: no ``--ckpt`` -> ``completion-furniture``) become files; says which."""
-    from lit3d.zoo import resolve
-
-    if not args.body:
-        path, label = resolve(args.ckpt or ZOO_COMPLETION)
-        args.ckpt = str(path)
-        _say(f"completion model: {label}")
-    if args.canonical:
-        path, label = resolve(args.canonical)
-        args.canonical = str(path)
-        _say(f"canonical model: {label}")
-
-
 def _run(args) -> int:
     from lit3d.reconstruct.depth_io import list_inputs
 
-    _check_args(args)
-    _resolve_models(args)
+    check_args(args)
+    resolve_models(args)
     inputs = _dedupe(list_inputs(args.depth))  # a missing folder or file list is answered before the imports
     names, protected = _plan_outputs(args, inputs)
     todo = _to_do(args, inputs, names)
     if not todo:
-        _say(f"{len(inputs)} of {len(inputs)} image(s) already reconstructed into {args.out} with the same input "
+        say(f"{len(inputs)} of {len(inputs)} image(s) already reconstructed into {args.out} with the same input "
              "and options: nothing to do (--overwrite redoes them)")
         return 0
     from tqdm import tqdm
@@ -350,13 +243,13 @@ def _run(args) -> int:
     regressor = start_regressor(args.body_init) if args.body else None  # a bad file: one line, exit 2
     body = functools.cache(Body) if args.body else None  # anny loads at the first image that gets to the fit
     for note in [f"start: {start_label(regressor)}"] if args.body else completer.notes:
-        _say(f"note: {note}")
+        say(f"note: {note}")
     mapper = None
     if args.canonical:
         from lit3d.reconstruct.canonical import load_canonical
 
         mapper = load_canonical(args.canonical, args.device)
-    scorer = _Scorer(args) if args.reference else None
+    scorer = Scorer(args) if args.reference else None
     failed = 0
     status = 0
     skipped = len(inputs) - len(todo)
@@ -368,16 +261,16 @@ def _run(args) -> int:
             current = (k, path, name)
             try:
                 if body is not None:
-                    s = body_one(args, path, name, body, protected, lambda w, h, lb: _intrinsics(args, w, h, lb),
-                                 _camera_source(args), _say, regressor)
+                    s = body_one(args, path, name, body, protected, lambda w, h, lb: intrinsics(args, w, h, lb),
+                                 camera_source(args), say, regressor)
                 else:
                     s = _one(args, path, name, completer, mapper, scorer, protected)
                 done.append(name)
                 if len(inputs) < 2 and body is not None:
-                    _say(f"wrote {Path(args.out) / name}_body{{.{args.format},_canonical.{args.format},"
+                    say(f"wrote {Path(args.out) / name}_body{{.{args.format},_canonical.{args.format},"
                          f"_canonical_depth.npy,.png,.json}} ({s['timings_s']['total']:.1f} s)")
                 elif len(inputs) < 2:
-                    _say(f"wrote {Path(args.out) / name}.{{{args.format},png,json}} and "
+                    say(f"wrote {Path(args.out) / name}.{{{args.format},png,json}} and "
                          f"{name}_occupancy.npz ({s['timings_s']['total']:.1f} s)")
             except Exception as exc:
                 if args.debug:
@@ -396,7 +289,7 @@ def _run(args) -> int:
         bar.close()
         raise _stopped(args, exc, len(inputs), done, current, skipped) from None
     if len(inputs) > 1 or skipped:
-        _say(f"{len(inputs) - failed} of {len(inputs)} images reconstructed into {args.out}"
+        say(f"{len(inputs) - failed} of {len(inputs)} images reconstructed into {args.out}"
              + (f"; {failed} failed (see above)" if failed else "")
              + (f"; {skipped} already there skipped (--overwrite redoes them)" if skipped else ""))
     return status
@@ -435,7 +328,7 @@ def _to_do(args, inputs: list[Path], names: list[str]) -> list[tuple[Path, str]]
     from lit3d.utils.io import repair_sets
 
     for note in repair_sets(args.out):
-        _say(f"note: {note}")
+        say(f"note: {note}")
     if args.overwrite:
         return list(zip(inputs, names))
     return [(p, n) for p, n in zip(inputs, names)
