@@ -60,13 +60,14 @@ def load(path: str | Path, device: str = "cpu") -> Model:
       :func:`lit3d.score`.
 
     ``path`` may also name a model of the zoo (:func:`lit3d.models`, :mod:`lit3d.zoo`) where no such file
-    exists: ``body-regressor`` loads as :class:`lit3d.body.regressor.Regressor`, ``cpcd2-phil-fusion`` as
+    exists: ``completion-furniture`` loads as a :class:`Completer`, ``body-regressor`` as
+    :class:`lit3d.body.regressor.Regressor`, ``cpcd2-phil-fusion`` as
     :class:`lit3d.quality.shipped.ShippedQualityModel`.
 
     The completion and canonical nets go to :func:`lit3d.export`.
     """
     if isinstance(path, str) and path in ZOO and not Path(path).exists():
-        return load_zoo(path)
+        return load_zoo(path, device)
     task = checkpoint_task(path)
     if task == "completion":
         return load_completer(path, device)
@@ -75,12 +76,16 @@ def load(path: str | Path, device: str = "cpu") -> Model:
     return load_predictor(path)
 
 
-def load_zoo(name: str):
+def load_zoo(name: str, device: str = "cpu"):
     """The zoo model ``name`` loaded as its task uses it (see :func:`load`); a :class:`lit3d.zoo.ZooError` line
     for a name that is not there."""
     model = zoo_model(name)
     if model.task == "body":
         return load_regressor(model.path)
+    if model.task == "completion":
+        return load_completer(model.path, device)
+    if model.task == "canonical":
+        return load_canonical(str(model.path), device)
     return load_model_file(model.path)
 
 

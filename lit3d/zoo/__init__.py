@@ -4,8 +4,8 @@
     lit3d.load("body-regressor")        # a zoo name as well as a checkpoint path
 
 Each entry names its file (package data beside this module, or the quality task's shipped model),
-the data it was trained on (only data whose licence allows shipping the weights: Anny and procedural
-people, CPCD2 phil), the command that remakes it and its card under ``docs/models/``. The CLIs
+the data it was trained on (only data whose licence allows shipping the weights: Sweet Home 3D and the
+Debian catalogues, Anny and procedural shapes, CPCD2 phil), the command that remakes it and its card under ``docs/models/``. The CLIs
 use these as defaults: ``lit3d-reconstruct --body`` starts from ``body-regressor`` unless
 ``--body-init none``; ``lit3d-score`` scores coloured point clouds with ``cpcd2-phil-fusion``.
 ``lit3d-reconstruct IMAGE`` completes with ``completion-furniture`` when no ``--ckpt`` is given, and
@@ -46,6 +46,14 @@ class ZooModel:
 
 
 ZOO: dict[str, ZooModel] = {m.name: m for m in (
+    ZooModel("completion-furniture", "completion", "zoo/completion-furniture.pt",
+             "data=completion_installed: real furniture of the installed catalogues (Sweet Home 3D, Minetest "
+             "homedecor) for bench, chair, couch and table, 120 models in 1,800 views rendered in 3D-RecGAN++'s "
+             "geometry (the Debian game catalogues' cars, firearms and planes only in its unseen test split); "
+             "30 epochs, seed 42, 66 min on one CPU thread (shared)",
+             "OUT=logs/zoo_completion SEED=42 bash studies/zoo/remake_completion_furniture.sh "
+             "(lit3d-train experiment=completion_furniture)",
+             "docs/models/completion_furniture.md"),
     ZooModel("body-regressor", "body", "zoo/body-regressor.pt",
              "Anny people drawn and rendered on the fly (adult shape distribution, the 'varied' pose mix: upright, "
              "turned, folded, lying, upside down), seed 7, one hour on one CPU thread",
