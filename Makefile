@@ -25,6 +25,7 @@ demo: $(STAMP)
 
 test: $(STAMP) $(EXTRAS)
 	$(BIN)/lint-imports
+	$(BIN)/ruff check lit3d datamodules studies benchmarks tests
 	$(BIN)/python -m pytest -q
 
 test-all: $(STAMP) $(EXTRAS)
@@ -32,6 +33,7 @@ test-all: $(STAMP) $(EXTRAS)
 
 lint: $(STAMP)
 	$(BIN)/lint-imports
+	$(BIN)/ruff check lit3d datamodules studies benchmarks tests
 
 bench: $(STAMP) $(EXTRAS)
 	$(BIN)/python -m benchmarks.run
