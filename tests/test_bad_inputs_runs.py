@@ -82,7 +82,7 @@ HYDRA_MAINS = {"lit3d-train": train_cli, "lit3d-eval": eval_cli, "lit3d-data": d
 @pytest.mark.parametrize("fault", ["run-dir-under-a-file", "run-dir-is-a-file", "run-dir-read-only",
                                    "data-dir-is-a-file", "data-dir-read-only"])
 @pytest.mark.parametrize("prog", sorted(HYDRA_MAINS))
-def test_unwritable_run_or_data_dir_is_one_line_before_any_work(prog, fault, tmp_path, readonly_dir, capsys,
+def test_unwritable_run_or_data_dir_is_one_line_before_any_work(prog, fault, tmp_path, readonly_dir, capsys,  # noqa: F811
                                                                  monkeypatch):
     """hydra.run.dir / data.data_dir that is a file, lies under one, or is read-only: exit 2 and
     one line naming the path, before Hydra creates anything; the file is left as it was."""

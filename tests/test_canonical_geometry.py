@@ -49,7 +49,7 @@ def test_shape_dna_of_a_sphere_matches_the_analytic_spectrum():
     Tolerance: 3% relative at 642 vertices (measured 2.6%; 0.7% at 2562 vertices)."""
     r = 2.0
     s = trimesh.creation.icosphere(subdivisions=3, radius=r)
-    ref = np.concatenate([[l * (l + 1) / r ** 2] * (2 * l + 1) for l in range(1, 5)])
+    ref = np.concatenate([[deg * (deg + 1) / r ** 2] * (2 * deg + 1) for deg in range(1, 5)])
     vals = shape_dna(s.vertices, s.faces, k=24, normalise=False)
     assert np.abs(vals / ref - 1).max() < 0.03
     # area-normalised: scale-free (area 4 pi r^2 times l(l+1)/r^2)

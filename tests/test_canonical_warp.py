@@ -354,7 +354,7 @@ def test_part_flow_blends_rigid_motions_by_part():
         flow_net.motion.weight.zero_()
         flow_net.motion.bias.copy_(motion.view(-1))
     flow = flow_net(feats, torch.ones(1, 1), grid)[0].detach()
-    left, right = grid[0, :, :8], grid[0, :, 8:]
+    right = grid[0, :, 8:]
     assert torch.allclose(flow[0, :, :8], torch.full((16, 8), 0.2), atol=1e-4)
     assert torch.allclose(flow[1, :, :8], torch.full((16, 8), -0.1), atol=1e-4)
     turned_x = c * right[..., 0] - s * right[..., 1]

@@ -17,7 +17,7 @@ CUBE_QUADS = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 
 
 def ac_object(name: str, verts, surfaces, kids: int = 0, extra: str = "", flags: str = "0x10") -> str:
     """One AC3D OBJECT block (surfaces: vertex index tuples, one SURF each)."""
-    out = [f"OBJECT poly", f'name "{name}"', *([extra] if extra else []), f"numvert {len(verts)}"]
+    out = ["OBJECT poly", f'name "{name}"', *([extra] if extra else []), f"numvert {len(verts)}"]
     out += [" ".join(str(c) for c in v) for v in verts]
     out.append(f"numsurf {len(surfaces)}")
     for s in surfaces:

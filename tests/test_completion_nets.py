@@ -25,14 +25,14 @@ def _partial(b=2, r=16, seed=0):
 def test_selector_keeps_exactly_k_in_place(mode):
     torch.manual_seed(0)
     sel = LatentSelector(64, 10, mode)
-    l = torch.randn(5, 64)
-    out, mask = sel(l)
-    assert out.shape == l.shape and mask.shape == l.shape
+    latent = torch.randn(5, 64)
+    out, mask = sel(latent)
+    assert out.shape == latent.shape and mask.shape == latent.shape
     assert ((out != 0).sum(1) == 10).all()
     assert (mask.sum(1) == 10).all()
     # kept entries keep value and position; they are the top-K of the weight net
-    assert torch.equal(out, l * mask)
-    w = sel.weight_net(l)
+    assert torch.equal(out, latent * mask)
+    w = sel.weight_net(latent)
     top = torch.topk(w, 10, dim=1).indices
     assert torch.equal(mask.gather(1, top), torch.ones(5, 10))
 
@@ -42,16 +42,16 @@ def test_selector_straight_through_vs_literal_gradients():
     st = LatentSelector(32, 4, "straight_through")
     lit = LatentSelector(32, 4, "literal")
     lit.load_state_dict(st.state_dict())
-    l = torch.randn(3, 32, requires_grad=True)
+    latent = torch.randn(3, 32, requires_grad=True)
     target = torch.randn(3, 32)
     for sel in (st, lit):
-        out, _ = sel(l)
+        out, _ = sel(latent)
         ((out - target) ** 2).sum().backward()
     st_grad = sum(p.grad.abs().sum() for p in st.weight_net.parameters())
     assert st_grad > 0
     assert all(p.grad is None or p.grad.abs().sum() == 0 for p in lit.weight_net.parameters())
     # same forward value in both modes
-    assert torch.equal(st(l)[0], lit(l)[0])
+    assert torch.equal(st(latent)[0], lit(latent)[0])
 
 
 # ---------------------------------------------------------------- generator

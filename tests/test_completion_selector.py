@@ -113,14 +113,14 @@ def test_normalised_selector_survives_a_grown_latent():
     weight net's gradient vanishes; with it the mask depends on the latent's direction only and the
     gradient stays. A latent of RMS 400 gives |z| ~ 100 with these untrained weights."""
     torch.manual_seed(0)
-    l = torch.randn(4, 256)
+    latent = torch.randn(4, 256)
     rms = {}
     for norm in (False, True):
         torch.manual_seed(1)
         sel = LatentSelector(256, 16, "straight_through", normalize=norm)
         if norm:
-            assert torch.equal(sel(l)[1], sel(400 * l)[1])
-        big = (400 * l).requires_grad_(True)
+            assert torch.equal(sel(latent)[1], sel(400 * latent)[1])
+        big = (400 * latent).requires_grad_(True)
         out, _ = sel(big)
         out.pow(2).sum().backward()
         rms[norm] = group_stats(list(sel.weight_net.parameters()))["grad_rms"]

@@ -55,7 +55,9 @@ def test_ctrl_c_while_testing_exits_with_one_line_and_writes_nothing(tmp_path, c
     run, log = tmp_path / "run", tmp_path / "eval"
     proc = _start(["lit3d-eval", f"ckpt_path={checkpoint}", f"hydra.run.dir={run}"], log)
     # the Trainer is built (its first log line): the handlers are in place, validation comes next
-    started = lambda: "GPU available" in ((run / "evaluate.log").read_text() if (run / "evaluate.log").is_file() else "")
+    def started():
+        return "GPU available" in ((run / "evaluate.log").read_text() if (run / "evaluate.log").is_file() else "")
+
     rc = signal_when(proc, started, log, [signal.SIGINT])
     assert stop_line(log, rc) == _expected(run, "SIGINT (Ctrl-C)")
     assert _results(run) == [], "a stopped evaluation left files in its run dir"
@@ -111,7 +113,9 @@ def test_ctrl_c_while_testing_after_training_keeps_the_training_and_says_how_to_
     proc = _start(["lit3d-train", "experiment=completion_demo", *TINY_NETS, SIZES, "data.batch_size=2",
                    "data.progress=false", f"paths.data_dir={tmp_path}/data", "trainer.max_epochs=1", "logger=none",
                    "callbacks.progress_bar=null", f"hydra.run.dir={run}"], log)
-    testing = lambda: "testing " in ((run / "train.log").read_text() if (run / "train.log").is_file() else "")
+    def testing():
+        return "testing " in ((run / "train.log").read_text() if (run / "train.log").is_file() else "")
+
     rc = signal_when(proc, testing, log, [signal.SIGINT])
     line = stop_line(log, rc)
     assert line.startswith(f"error: {run}: stopped by SIGINT (Ctrl-C) while testing after training; the training is "

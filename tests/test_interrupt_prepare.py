@@ -192,7 +192,9 @@ def test_ctrl_c_while_lit3d_train_starts_is_one_line(tmp_path, delay):
     run, log = tmp_path / "run", tmp_path / "train"
     proc = _start(["lit3d-train", "experiment=completion_demo", *TINY_NETS, "data.progress=false", "logger=none",
                    f"paths.data_dir={tmp_path}/data", f"hydra.run.dir={run}"], log)
-    locked = lambda: (run / ".lit3d.lock").exists() and (delay == 0 or __import__("time").sleep(delay) is None)
+    def locked():
+        return (run / ".lit3d.lock").exists() and (delay == 0 or __import__("time").sleep(delay) is None)
+
     line = stop_line(log, signal_when(proc, locked, log, [signal.SIGINT]))
     assert line.startswith("error: ") and "stopped by SIGINT (Ctrl-C)" in line, line
 

@@ -53,8 +53,10 @@ def brute(a, b, na, nb, ca, cb):
 def test_baselines_match_brute_force():
     rng = np.random.default_rng(1)
     a, b = rng.random((120, 3)), rng.random((90, 3))
-    na = rng.normal(size=(120, 3)); na /= np.linalg.norm(na, axis=1, keepdims=True)
-    nb = rng.normal(size=(90, 3)); nb /= np.linalg.norm(nb, axis=1, keepdims=True)
+    na = rng.normal(size=(120, 3))
+    na /= np.linalg.norm(na, axis=1, keepdims=True)
+    nb = rng.normal(size=(90, 3))
+    nb /= np.linalg.norm(nb, axis=1, keepdims=True)
     ca, cb = rng.random((120, 3)), rng.random((90, 3))
     out = pointcloud_baselines(a, b, na, nb, ca, cb)
     d1, d2, y, h = brute(a, b, na, nb, ca, cb)

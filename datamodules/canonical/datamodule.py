@@ -56,7 +56,6 @@ Splits (``split.mode``: ``subject_pose``, ``pose`` or ``all``): :mod:`datamodule
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
 from pathlib import Path
 
 import lightning.pytorch as pl

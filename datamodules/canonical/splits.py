@@ -22,7 +22,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from datamodules.cache import DataError
-from datamodules.canonical.settings import SPLIT_MODES, VAL_POSES
+from datamodules.canonical.settings import VAL_POSES
 
 CANONICAL_SPLITS = ("train", "val", "test")
 OWN_POSE_BASE = 20_000  # pose ids from here on: a subject's own training-only poses (synth data.source.own_poses)

@@ -54,7 +54,10 @@ def _table(path: Path) -> list[dict]:
     for r, cells in enumerate(rows[1:], start=2):
         if not any(c.strip() for c in cells):
             continue
-        cell = (lambda c: cells[col[c]].strip() if c in col and col[c] < len(cells) else "")
+
+        def cell(c):
+            return cells[col[c]].strip() if c in col and col[c] < len(cells) else ""
+
         out.append({"stimulus": cell("stimulus"), "mos": cell("mos"), "file": cell("file"), "row": r})
     return out
 

@@ -124,12 +124,12 @@ class CascadeStage(nn.Module):
 
     def forward(self, x: torch.Tensor, global_skips: list[torch.Tensor] | None = None):
         feats = self.encode(x)
-        l = self.fc_enc(feats[-1].flatten(1))
+        latent = self.fc_enc(feats[-1].flatten(1))
         mask = None
         if self.selector is not None:
-            l, mask = self.selector(l)
+            latent, mask = self.selector(latent)
         b = self.bottleneck
-        h = F.relu(self.fc_dec(l)).view(x.shape[0], self.enc_channels[-1], b, b, b)
+        h = F.relu(self.fc_dec(latent)).view(x.shape[0], self.enc_channels[-1], b, b, b)
         last = len(self.decoder) - 1
         for j, deconv in enumerate(self.decoder):
             if j == self.attn_level:

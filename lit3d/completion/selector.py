@@ -25,7 +25,7 @@ class LatentSelector(nn.Module):
     where the sigmoid's derivative (1e-8 .. 1e-25) stops every gradient to the weight net. The
     selected values are ``l`` itself either way.
 
-    forward(l (B, n) float) -> (selected (B, n), keep_mask (B, n) float in {0, 1}, k ones per row)
+    forward(latent ``l`` (B, n) float) -> (selected (B, n), keep_mask (B, n) float in {0, 1}, k ones per row)
     """
 
     def __init__(self, n: int, k: int, mode: str = "straight_through", normalize: bool = False):
@@ -37,14 +37,14 @@ class LatentSelector(nn.Module):
         self.n, self.k, self.mode, self.normalize = n, k, mode, bool(normalize)
         self.weight_net = nn.Sequential(nn.Linear(n, n), nn.ReLU(inplace=True), nn.Linear(n, n), nn.Sigmoid())
 
-    def forward(self, l: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        w = self.weight_net(F.layer_norm(l, (self.n,)) if self.normalize else l)
+    def forward(self, latent: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        w = self.weight_net(F.layer_norm(latent, (self.n,)) if self.normalize else latent)
         idx = torch.topk(w, self.k, dim=1).indices
         hard = torch.zeros_like(w).scatter(1, idx, 1.0)
         if self.mode == "straight_through":
             # = l * (hard + w - w.detach()), written so the forward value is exactly l * hard
-            return l * hard + l * (w - w.detach()), hard
-        return l * hard, hard
+            return latent * hard + latent * (w - w.detach()), hard
+        return latent * hard, hard
 
     def extra_repr(self) -> str:
         return f"n={self.n}, k={self.k}, mode={self.mode}, normalize={self.normalize}"
