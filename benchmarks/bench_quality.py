@@ -225,7 +225,8 @@ def point_rows(n: int = 300_000) -> list[dict]:
                  CMD, ours, before, baseline_name="the same table without them", threads=workers,
                  note=f"{target_note('time', ours, TABLE_TARGET_S, False, ' s')}; nothing memoised; one run each")]
     return extra + [row(f"quality feature table, pair of {n // 1000}k-point coloured clouds (zipped ASCII PLY), native "
-                f"splats, 36 styles x 2 shadings x 12 views, 256^2, all measures + D1/D2/Y-PSNR, PointSSIM, PCQM ({n_feat} features)",
+                f"splats, 36 styles x 2 shadings x 12 views, 256^2, all measures + D1/D2/Y-PSNR, PointSSIM, PCQM "
+                f"({n_feat} features)",
                 CMD, ours, base, baseline_name="mesh both clouds (96^3 grid) + mesh table", threads=workers,
                 note=f"{target_note('time', ours, TABLE_TARGET_S, False, ' s')}; includes loading, PCA normals "
                      "and splatting of both clouds (nothing memoised); one run each")]

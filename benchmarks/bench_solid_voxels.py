@@ -76,4 +76,5 @@ def run() -> list[dict]:
     return [row(f"Solid 256^3 occupancy of a real CAD mesh, s per model ({len(meshes)} {where})", "make bench",
                 float(np.median(ours_t)), float(np.median(base_t)), threads=1,
                 note=f"baseline holds {np.mean(held):.0%} of our solid on average (min {min(held):.0%}); "
-                     "what it misses is inside open parts, which its hole filling leaves empty", baseline_name="trimesh voxelized(1).fill()")]
+                     "what it misses is inside open parts, which its hole filling leaves empty",
+                baseline_name="trimesh voxelized(1).fill()")]

@@ -109,8 +109,8 @@ def test_he_init_fits_training_pairs_that_the_default_init_does_not(compose_cfg,
     from datamodules.canonical import CanonicalDataModule
     from lit3d.canonical.losses import canonical_loss
 
-    net_cfg = OmegaConf.to_container(compose_cfg(["task=canonical", "task.net.image_size=64", "task.net.head.kind=redraw"]).task.net,
-                                     resolve=True)
+    net_cfg = OmegaConf.to_container(
+        compose_cfg(["task=canonical", "task.net.image_size=64", "task.net.head.kind=redraw"]).task.net, resolve=True)
     dm = CanonicalDataModule.from_flat(str(tmp_path / "data"), image_size=64, n_subjects=6, n_poses=4, mesh_resolution=24,
                              n_folds=2, kinds=["humanoid", "quadruped"], seed=1, split="pose", view_mode="broadside")
     dm.prepare_data()

@@ -72,7 +72,8 @@ def test_ctrl_c_stops_lit3d_data_at_the_next_item_and_the_same_command_resumes(t
     res = subprocess.run([str(BIN / args[0]), *args[1:]], cwd=REPO, env=_env(), capture_output=True, text=True,
                          timeout=600)
     assert res.returncode == 0, res.stderr[-3000:]
-    assert f"{len(done)} of 10 items already prepared" in res.stderr  # log lines go to stderr: stdout holds the JSON summary alone
+    # log lines go to stderr: stdout holds the JSON summary alone
+    assert f"{len(done)} of 10 items already prepared" in res.stderr
     assert {p: p.stat().st_mtime_ns for p in done} == mtimes, "the finished items were made again"
     assert len(_items(data)) == 10 and (data / "completion_demo" / MANIFEST).is_file()
 

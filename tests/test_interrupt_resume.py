@@ -39,7 +39,8 @@ BIN = Path(sys.executable).parent
 # canonical demo at 32^2 with tiny nets: 6 subjects x 6 poses, 3 folds -> 16 train pairs = 4 batches
 # (the old mixed validation rule, data.split.val_subjects=null, keeps 4 subjects for training)
 CANONICAL = [
-    "experiment=canonical_demo", "data.image_size=32", "data.source.n_subjects=6", "data.source.n_poses=6", "data.split.val_subjects=null",
+    "experiment=canonical_demo", "data.image_size=32", "data.source.n_subjects=6", "data.source.n_poses=6",
+    "data.split.val_subjects=null",
     "data.source.mesh_resolution=20", "data.source.kinds=[humanoid]", "data.batch_size=4", "task.net.image_size=32",
     "task.net.lfe.channels=[8,12,16]", "task.net.msfe.channels=[6,6,4]", "task.net.msfe.grid=6",
     "task.net.msfe.fuser_hidden=64", "task.net.msfe.fuser_out=48", "task.net.msfe.dec_channels=[32,16,12,8,8,8]",

@@ -15,7 +15,8 @@ import subprocess
 from test_interrupt_resume import BIN, CANONICAL, CANONICAL_STEPS_PER_EPOCH, REPO, _env, _load
 
 FLAT = [a for a in CANONICAL if "limit_val_batches" not in a] + [
-    "+trainer.limit_val_batches=1", "trainer.check_val_every_n_epoch=1", "task_info.monitor=epoch", "task_info.monitor_mode=min", "logger=none"]
+    "+trainer.limit_val_batches=1", "trainer.check_val_every_n_epoch=1", "task_info.monitor=epoch", "task_info.monitor_mode=min",
+    "logger=none"]
 
 
 def _train(*args: str) -> None:

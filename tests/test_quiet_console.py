@@ -37,8 +37,8 @@ COMPLETION = ["experiment=completion_demo", "data.sizes={train:4,val:2,test_same
               "data.batch_size=2", "task.nets.latent_dim=64", "task.nets.k=16", "task.nets.fixed_latent_dim=64",
               "task.prior_samples=2", "trainer.max_epochs=2", "trainer.log_every_n_steps=1",
               "callbacks.resume_state.every_n_train_batches=1"]
-CANONICAL = ["experiment=canonical_tiny", "data.source.n_subjects=4", "data.source.n_poses=4", "data.split.val_subjects=null", "data.image_size=32",
-             "task.net.image_size=32", "data.batch_size=4", "evaluation.mesh_baselines=[posed]",
+CANONICAL = ["experiment=canonical_tiny", "data.source.n_subjects=4", "data.source.n_poses=4", "data.split.val_subjects=null",
+             "data.image_size=32", "task.net.image_size=32", "data.batch_size=4", "evaluation.mesh_baselines=[posed]",
              "evaluation.retrieval.view_size=32", "trainer.max_epochs=1", "trainer.log_every_n_steps=1",
              "callbacks.resume_state.every_n_train_batches=1"]
 

@@ -47,7 +47,8 @@ def size_defaults(cls) -> list[str]:
     """``name=default`` for each size-named constructor parameter of ``cls`` with a default that is not off."""
     sig = inspect.signature(cls.__init__)
     return [f"{p.name}={p.default!r}" for p in sig.parameters.values()
-            if SIZE_NAME.search(p.name) and p.name not in NOT_SIZES and p.default is not inspect.Parameter.empty and p.default not in OFF]
+            if SIZE_NAME.search(p.name) and p.name not in NOT_SIZES and p.default is not inspect.Parameter.empty
+            and p.default not in OFF]
 
 
 def test_the_check_finds_a_size_default():

@@ -287,11 +287,14 @@ class CompletionDataModule(pl.LightningDataModule):
             views = [render_voxels(v, 0.5, cell, (FRONT_VIEW, BACK_VIEW), style) for v, style in
                      ((to_resolution(inp, self.target_res), "matt_blue"), (tgt, "clay_brown"))]
             origin = f"\nmodel {it['model_id'].split('/')[-1]}" if it.get("model_id") else ""
-            label = f"{s}\n{it['name']}{origin}\ninput {int(inp.sum())} of {inp.numel()} voxels\ntarget fill {float(tgt.mean()):.3f}"
+            label = (f"{s}\n{it['name']}{origin}\ninput {int(inp.sum())} of {inp.numel()} voxels"
+                     f"\ntarget fill {float(tgt.mean()):.3f}")
             rows.append({"label": label, "cells": [views[0][0], views[1][0], views[0][1], views[1][1]]})
         if not rows:
             raise DataError(f"{self.data_dir}: no samples to show")
-        sensor = "3D-RecGAN++ files" if self.source == "recgan" else self.sensor.camera + (", mirrored x" if self.sensor.mirror_x else "") + (", noisy" if self.sensor.noisy else "")
+        sensor = ("3D-RecGAN++ files" if self.source == "recgan" else
+                  self.sensor.camera + (", mirrored x" if self.sensor.mirror_x else "")
+                  + (", noisy" if self.sensor.noisy else ""))
         title = f"Completion data ({self.source}, {sensor}): input {self.input_res}^3, target {self.target_res}^3"
         img = labelled_grid(rows, ["input, camera side", "target, camera side", "input, behind", "target, behind"],
                             title, cell, left=330)

@@ -17,8 +17,8 @@ Steps for one sample:
    orthographic at ``render_factor * res`` pixels a side, or 3D-RecGAN++'s pinhole camera);
 5. back-projection: each foreground pixel's surface point (with the sensor's range noise and
    holes), pushed :data:`~lit3d.sensing.views.SURFACE_PUSH` (a quarter voxel) along its ray
-   into the object, marks its voxel -> partial surface grid at ``res`` (noise-free, >95% of these voxels are target voxels with the
-   conservative target of step 3); the sensor may misregister the points by a sub-voxel
+   into the object, marks its voxel -> partial surface grid at ``res`` (noise-free, >95% of these voxels are
+   target voxels with the conservative target of step 3); the sensor may misregister the points by a sub-voxel
    shift and mirror ``i`` (3D-RecGAN++'s handedness);
 6. the network input is that grid max-pooled by ``input_factor``.
 """

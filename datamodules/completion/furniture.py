@@ -145,10 +145,12 @@ def bench(rng: np.random.Generator) -> Shape:
             parts.append(box((0, h + t / 2, z), (w, t, sd)))
     else:
         parts.append(box((0, h + t / 2, 0), (w, t, d)))
-    parts += _legs(rng, str(rng.choice(["four", "panel", "sled"])), w, d, h, rng.uniform(0.04, 0.07), inset=w * rng.uniform(0, 0.08))
+    parts += _legs(rng, str(rng.choice(["four", "panel", "sled"])), w, d, h, rng.uniform(0.04, 0.07),
+                   inset=w * rng.uniform(0, 0.08))
     if rng.random() < 0.5:
         bt = 0.04
-        parts += _back(rng, str(rng.choice(["solid", "slatted"])), w, h + t, rng.uniform(0.25, 0.45), -d / 2 + bt / 2, bt, rng.uniform(0, 12))
+        parts += _back(rng, str(rng.choice(["solid", "slatted"])), w, h + t, rng.uniform(0.25, 0.45), -d / 2 + bt / 2, bt,
+                       rng.uniform(0, 12))
     return Shape("bench", parts)
 
 

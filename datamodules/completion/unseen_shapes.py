@@ -62,7 +62,8 @@ def faucet(rng: np.random.Generator) -> Shape:
         parts.append(cylinder((0, h - r, -r), (0, h - r * 0.2, reach), r))
         parts.append(cylinder((0, h - 0.04, reach), (0, h - r * 0.5, reach), r * 1.1))
     # lever handle
-    parts.append(cylinder((0, h * rng.uniform(0.6, 0.9), 0), (rng.choice([-1, 1]) * rng.uniform(0.05, 0.09), h * 0.95, -0.02), r * 0.6))
+    parts.append(cylinder((0, h * rng.uniform(0.6, 0.9), 0), (rng.choice([-1, 1]) * rng.uniform(0.05, 0.09), h * 0.95, -0.02),
+                          r * 0.6))
     return Shape("faucet", parts)
 
 
@@ -88,7 +89,8 @@ def firearm(rng: np.random.Generator) -> Shape:
     if rng.random() < 0.7:  # fore-end
         parts.append(box((0, -rh * 0.2, rl / 2 + bl * 0.25), (0.045, rh * 0.6, bl * 0.45)))
     sl = rng.uniform(0.25, 0.35)
-    parts.append(Primitive("box", (0.045, rh * 1.2, sl), pose((0, -rh * 0.4, -rl / 2 - sl / 2 + 0.02), rot_x(-rng.uniform(5, 15)))))
+    parts.append(Primitive("box", (0.045, rh * 1.2, sl),
+                           pose((0, -rh * 0.4, -rl / 2 - sl / 2 + 0.02), rot_x(-rng.uniform(5, 15)))))
     parts.append(Primitive("box", (0.04, 0.12, 0.04), pose((0, -rh / 2 - 0.05, -rl * 0.25), rot_x(-20))))
     if rng.random() < 0.7:
         parts.append(Primitive("box", (0.03, rng.uniform(0.1, 0.18), 0.05), pose((0, -rh / 2 - 0.07, rl * 0.15), rot_x(10))))
@@ -109,7 +111,8 @@ def plane(rng: np.random.Generator) -> Shape:
         parts.append(Primitive("box", (span / 2, 0.04 * L / 3, chord),
                                pose((sx * span / 4, -fr * 0.3, wz - span / 4 * np.tan(np.radians(sweep))), rot_y(sx * sweep))))
         if rng.random() < 0.7:  # engines
-            parts.append(cylinder((sx * span * 0.2, -fr * 0.9, wz + chord * 0.4), (sx * span * 0.2, -fr * 0.9, wz - chord * 0.5), fr * 0.4))
+            parts.append(cylinder((sx * span * 0.2, -fr * 0.9, wz + chord * 0.4), (sx * span * 0.2, -fr * 0.9, wz - chord * 0.5),
+                                  fr * 0.4))
     parts.append(box((0, fr * 1.4, -L / 2 + chord * 0.35), (0.03 * L / 3, fr * 2.2, chord * 0.6)))
     parts.append(box((0, fr * 0.2, -L / 2 + chord * 0.3), (span * 0.35, 0.03 * L / 3, chord * 0.45)))
     return Shape("plane", parts)

@@ -338,7 +338,8 @@ class QualityDataModule(pl.LightningDataModule):
         info: dict[str, Any] = {
             "dataset": self.name, "source": self.source, "target": fm.target_name,
             "target_note": ("ordinal severity of the distortion level within its type, (level+1)/n_levels; "
-                            "NOT a human opinion score") if self.source == "synth" else "mean opinion score, scaled to [0,1], higher = more distorted",
+                            "NOT a human opinion score") if self.source == "synth" else
+                           "mean opinion score, scaled to [0,1], higher = more distorted",
             "pairs": len(fm), "features": len(fm.names), "manifest_hash": self.manifest["manifest_hash"],
             "config_hash": self.manifest["config_hash"], "skipped_bad_files": len(self.skipped),
             "cache_dir": str(self.cache_dir),

@@ -40,7 +40,8 @@ def preview(mesh_path: Path, size: int):
     v = m.vertices - m.bounds.mean(0)
     v = v / max(np.abs(v).max(), 1e-9) * 0.45 * size
     c, s = math.cos(0.6), math.sin(0.6)
-    rot = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]) @ np.array([[1, 0, 0], [0, math.cos(0.4), -math.sin(0.4)], [0, math.sin(0.4), math.cos(0.4)]])
+    rot = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]) @ np.array([[1, 0, 0], [0, math.cos(0.4), -math.sin(0.4)],
+                                                                  [0, math.sin(0.4), math.cos(0.4)]])
     v = v @ rot.T
     tri = v[m.faces]
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])

@@ -194,7 +194,7 @@ def mesh_baseline_retrieval(settings: Mapping, outputs: dict[str, torch.Tensor],
     t0 = time.perf_counter()
     meshes = [datamodule.normalized_mesh(names[s], p) for s, p in keys]
     cfg = DescriptorConfig(**(settings.get("retrieval") or {}))
-    out = baseline_retrieval(meshes, [s for s, _ in keys], methods, cfg, settings.get("baseline_max_vertices"), eps=settings.get("baseline_smacof_eps", 1e-4),
-                             landmarks=settings.get("baseline_landmarks", 300))
+    out = baseline_retrieval(meshes, [s for s, _ in keys], methods, cfg, settings.get("baseline_max_vertices"),
+                             eps=settings.get("baseline_smacof_eps", 1e-4), landmarks=settings.get("baseline_landmarks", 300))
     log.info("mesh baselines %s on %d test shapes: %.0fs", methods, len(keys), time.perf_counter() - t0)
     return out

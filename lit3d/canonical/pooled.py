@@ -11,12 +11,12 @@ mesh rows. Without run dirs the Hydra overrides after ``--`` compose the data, t
 ``lit3d-train`` would) and the items are every item some fold holds out
 (:meth:`datamodules.canonical.CanonicalDataModule.held_out_records`): the posed-input and true
 canonical depth rows plus the mesh rows, and with ``data.render.flow_targets=true`` the warp oracle
-(:func:`warp_oracle`: the true canonical where the posed input sees it, the mean body elsewhere). Mesh rows (one per held-out subject x pose, full
-resolution): the non-learned canonical forms ``evaluation.mesh_baselines`` (landmark geodesics,
-:mod:`lit3d.geometry.canonical_forms`), ShapeDNA of the posed full mesh (the intrinsic ceiling,
-:func:`lit3d.geometry.spectral.shape_dna`; no codebook, so sd 0), and chance (random distances,
-seeded by the codebook seed). ``--depth-row ROW=DIR``: one more depth row, the canonical depth images
-that ``lit3d-reconstruct --body`` wrote for inputs named ``<subject>_pose<pose>``
+(:func:`warp_oracle`: the true canonical where the posed input sees it, the mean body elsewhere). Mesh rows
+(one per held-out subject x pose, full resolution): the non-learned canonical forms
+``evaluation.mesh_baselines`` (landmark geodesics, :mod:`lit3d.geometry.canonical_forms`), ShapeDNA of the
+posed full mesh (the intrinsic ceiling, :func:`lit3d.geometry.spectral.shape_dna`; no codebook, so sd 0),
+and chance (random distances, seeded by the codebook seed). ``--depth-row ROW=DIR``: one more depth row,
+the canonical depth images that ``lit3d-reconstruct --body`` wrote for inputs named ``<subject>_pose<pose>``
 (``DIR/<subject>_pose<pose>_body_canonical_depth.npy``, :func:`folder_depths`), e.g.
 ``--depth-row body_fit=OUT/faust_canonical`` (:mod:`studies.body.evaluate` writes that folder for FAUST).
 Writes ``DIR/pooled_results.md`` (thesis table 5.x layout) and ``DIR/pooled.json`` (every seed's scores).
@@ -73,7 +73,8 @@ def warp_oracle(items: dict) -> tuple[np.ndarray, np.ndarray]:
     """Depth and mask ``(N, 1, S, S)`` float32 of a perfect warp head: the true canonical form where its
     surface is seen in the posed input (``vis``, from the flow targets), the mean canonical body of the
     items elsewhere (mask: mean canonical mask >= .5; depth: mean canonical depth over the items whose
-    mask holds the pixel). Items need ``canon_depth``, ``canon_mask`` and ``vis``, one shape: ``(N, S, S)`` or ``(N, 1, S, S)``."""
+    mask holds the pixel). Items need ``canon_depth``, ``canon_mask`` and ``vis``, one shape: ``(N, S, S)``
+    or ``(N, 1, S, S)``."""
     d = np.asarray(items["canon_depth"], np.float32)
     m = (np.asarray(items["canon_mask"], np.float32) > 0.5).astype(np.float32)
     vis = (np.asarray(items["vis"], np.float32) > 0.5).astype(np.float32)

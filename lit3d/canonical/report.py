@@ -168,7 +168,8 @@ def write_pooled_results(result: dict, out_dir: Path) -> Path:
              f"split {d.get('split')}, {d.get('n_folds')} folds), every item scored once from the fold that held it "
              f"out; every row on the same items; mean ± sd over codebook seeds {result['seeds']}. "
              "Classes = subjects" + ("; every test subject is also in training (its other poses: a pose split). "
-                                     if d.get("split") == "pose" else ". ") + "Thesis rows: the thesis's published figures on its data (no E reported).", "",
+                                     if d.get("split") == "pose" else ". ")
+             + "Thesis rows: the thesis's published figures on its data (no E reported).", "",
              markdown_table(["method", "NN", "FT", "ST", "E", "DCG"], table), "",
              f"Descriptor: {result.get('descriptor')}. Mesh rows: one per held-out subject x pose, full resolution "
              f"(settings {({k: v for k, v in (result.get('settings') or {}).items() if k.startswith('baseline')})}); "

@@ -18,8 +18,9 @@ splatted weight (posed mask x seen probability, bilinear), ``mask = c + (1 - c) 
 ``depth = c * splat_depth + (1 - c) fill_mask fill_depth`` (0 where nothing lands and the fill
 draws no body; ``splat_depth`` the weighted mean of the mapped depths landing there). Zero flow with
 every pixel seen returns the posed input exactly; the output layers start at zero with the seen bias
-at :data:`~lit3d.canonical.warp.VIS_BIAS`, so an untrained head returns (almost exactly) the posed input. Its flow targets need ``data.render.forward_flow=true`` (the
-forward flow cached beside the backward one); without them its flow terms refuse the batch.
+at :data:`~lit3d.canonical.warp.VIS_BIAS`, so an untrained head returns (almost exactly) the posed input. Its
+flow targets need ``data.render.forward_flow=true`` (the forward flow cached beside the backward one); without
+them its flow terms refuse the batch.
 """
 from __future__ import annotations
 

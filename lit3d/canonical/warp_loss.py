@@ -4,7 +4,8 @@ Batch keys (``datamodules.canonical`` with ``data.render.flow_targets=true``): `
 pixels, ``vis`` ``(B, 1, H, W)`` (backward, at canonical pixels: the warp head's), ``fflow``, ``fvis``
 (forward, at posed pixels: the splat head's, :mod:`lit3d.canonical.splat`), ``has_flow`` ``(B,)`` bool,
 ``mask``, ``canon_depth``, ``canon_mask`` ``(B, 1, H, W)``. "Foreground" below is that of the flow's own
-frame: the canonical mask for the warp head, the posed mask for the splat head. Batches without flow targets (FAUST) give zero flow and visibility terms.
+frame: the canonical mask for the warp head, the posed mask for the splat head. Batches without flow targets
+(FAUST) give zero flow and visibility terms.
 
 ``flow_on`` says where the flow's end-point distance is paid: ``visible`` (the canonical pixels whose
 surface point the posed image shows), ``foreground`` (every canonical foreground pixel: a hidden

@@ -309,7 +309,8 @@ def combination_problems(cfg: DictConfig) -> list[str]:
     head = OmegaConf.select(cfg, "task.net.head.kind", default=None)
     flows, forward = (OmegaConf.select(cfg, f"data.render.{k}", default=None) for k in ("flow_targets", "forward_flow"))
     if head == "splat" and flows is True and forward is not True:
-        return ["task.net.head.kind=splat with data.render.flow_targets=true: expected data.render.forward_flow=true (its flow targets)"]
+        return ["task.net.head.kind=splat with data.render.flow_targets=true: "
+                "expected data.render.forward_flow=true (its flow targets)"]
     return []
 
 

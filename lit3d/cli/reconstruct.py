@@ -114,7 +114,8 @@ def _one(args, path: Path, name: str, completer, mapper, scorer, protected) -> d
         files[".png"] = figure_png(depth, res.keep, res.points, res.mesh, title, args.size)
         timings["figure"] = time.perf_counter() - t0
     summary = {
-        "input": str(path), "image_size": [w, h], "intrinsics": intr.as_dict(), "camera": camera_source(args), "depth_scale": units["depth_scale_applied"],
+        "input": str(path), "image_size": [w, h], "intrinsics": intr.as_dict(), "camera": camera_source(args),
+        "depth_scale": units["depth_scale_applied"],
         "depth_units": units["units"], "depth_dtype": units["dtype"], "no_reading_pixels": units["no_reading_pixels"],
         "checkpoint": completer.path, "threshold": completer.threshold, "device": args.device,
         "geometry": completer.geometry.as_dict(), "placement": res.placement.as_dict(),

@@ -14,8 +14,8 @@ Without ``--ckpt`` the score is the shipped quality model's predicted opinion sc
 trained on CPCD2.0 phil's human ratings of coloured point clouds: ``lit3d.quality.shipped``, card in
 ``docs/quality_model.md``) when the pair has the features it uses (two coloured point clouds, the
 default 256 px renders); otherwise, and with ``--unlearned``, the unlearned score: the mean
-Mask-SSIM over styles, shadings and the 12 views (1 = identical renders). Two point clouds (.xyz, a .ply without faces, a .zip holding one
-.ply) are rendered as points, with colour styles when both carry colour (the overall score
+Mask-SSIM over styles, shadings and the 12 views (1 = identical renders). Two point clouds (.xyz, a .ply
+without faces, a .zip holding one .ply) are rendered as points, with colour styles when both carry colour (the overall score
 is then the mean Mask-SSIM over the colour styles alone; the MatCap styles stay in the
 table as features for a learned score) and the D1/D2/Y-PSNR baselines. PLY colours are
 read by their declared type (uchar 0-255, float 0-1); NaN colours are refused. --save-views

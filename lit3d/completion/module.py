@@ -151,7 +151,8 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
     def _metric_modules(self) -> None:
         """Validation and test metrics per category of ``eval_categories`` (states not saved in checkpoints)."""
         thresholds = self.thresholds
-        self.val_metrics = torch.nn.ModuleDict({s: VoxelSweepMetrics(self.eval_categories, thresholds) for s in PREDICTION_SOURCES})
+        self.val_metrics = torch.nn.ModuleDict(
+            {s: VoxelSweepMetrics(self.eval_categories, thresholds) for s in PREDICTION_SOURCES})
         self.test_metrics = torch.nn.ModuleDict(
             {f"{sp}_{s}": VoxelSweepMetrics(self.eval_categories, thresholds) for sp in TEST_SPLITS for s in PREDICTION_SOURCES}
         )

@@ -172,8 +172,8 @@ class AnchoredFusion:
     >= 0) at ``strength`` and divides the corrections by the anchor's weight, so the score keeps the
     anchor's scale with no per-fold centring; ``strength`` inf (or an anchor weight of 0) is the anchor
     alone. Quality on the [0, 1] opinion scale is a monotone map of the score fitted on the training rows
-    (:mod:`lit3d.quality.opinion_map`: the VQEG's four-parameter logistic, or a line). :meth:`predict` returns ``-score`` (the target's orientation); the
-    out-of-fold scores of different folds are on the anchor's one scale.
+    (:mod:`lit3d.quality.opinion_map`: the VQEG's four-parameter logistic, or a line). :meth:`predict`
+    returns ``-score`` (the target's orientation); the out-of-fold scores of different folds are on the anchor's one scale.
 
     Attributes:
         anchor, anchor_sign: the anchor feature and its orientation (+1: higher is better).

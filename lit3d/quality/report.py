@@ -58,7 +58,8 @@ THESIS_CROSS = {  # table 4.8: shape -> (within-dataset, cross-dataset, PointSSI
 
 
 def _methods(metrics: Mapping[str, float], prefix: str) -> list[str]:
-    found = {k[len(prefix) + 1:].split("/")[0] for k in metrics if k.startswith(prefix + "/") and k.count("/") >= prefix.count("/") + 2}
+    found = {k[len(prefix) + 1:].split("/")[0] for k in metrics
+             if k.startswith(prefix + "/") and k.count("/") >= prefix.count("/") + 2}
     order = [c for c in (*COLUMNS, "ours") if c in found]
     return order + sorted(found - set(order) - {"cv", "cross", "n_features"})
 

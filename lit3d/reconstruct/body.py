@@ -13,8 +13,8 @@ Per input NAME, DIR gets (written together, as one set: :func:`lit3d.reconstruct
 The fit starts from a body regressor's prediction (:mod:`lit3d.body.regressor`; the zoo's
 ``body-regressor``, :mod:`lit3d.zoo`, or ``--body-init CKPT``; :func:`start_regressor`), refined by fewer steps
 (:func:`lit3d.body.regressor.fit_from_regressor`; ``--body-refine-poor N``: N more steps where those end
-flagged poor), or with ``--body-init none`` from the mean body (:mod:`lit3d.body.fit`). A poor fit (not a person, a bad cut) is written
-with ``poor_fit: true`` and said on one line.
+flagged poor), or with ``--body-init none`` from the mean body (:mod:`lit3d.body.fit`). A poor fit (not a
+person, a bad cut) is written with ``poor_fit: true`` and said on one line.
 """
 from __future__ import annotations
 

@@ -263,7 +263,8 @@ def distance_matrix_from_meshes(meshes: list[tuple[np.ndarray, np.ndarray]], cfg
     return distance_matrix_from_features(mesh_features(meshes, cfg), cfg, return_hists=return_hists)
 
 
-def depth_meshes(depths: np.ndarray, masks: np.ndarray, cfg: DescriptorConfig | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+def depth_meshes(depths: np.ndarray, masks: np.ndarray,
+                 cfg: DescriptorConfig | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
     """Each ``(S, S)`` normalised depth + mask back-projected to a surface ``(verts, faces)``."""
     cfg = cfg or DescriptorConfig()
     return [depth_to_mesh(np.asarray(d, np.float64), np.asarray(m), cfg.max_jump) for d, m in zip(depths, masks)]

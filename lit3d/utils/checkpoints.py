@@ -25,7 +25,8 @@ def first_line(exc: BaseException, default: str = "") -> str:
 
 def load_checkpoint(path: str | Path, error: type[Exception] = ValueError) -> dict:
     """``torch.load(path, weights_only=True, mmap=True)`` on CPU; every failure is one ``error``
-    naming the file: missing, a folder or FIFO (:func:`lit3d.utils.files.path_problem`), not a ``torch.save`` zip archive, pickled objects refused, corrupt.
+    naming the file: missing, a folder or FIFO (:func:`lit3d.utils.files.path_problem`), not a ``torch.save``
+    zip archive, pickled objects refused, corrupt.
     """
     import torch
 

@@ -2,8 +2,8 @@
 
 Every entry point (``lit3d-train``, ``lit3d-eval``, ``lit3d-data``, ``lit3d-score``,
 ``lit3d-reconstruct``, ``lit3d-summary``) calls :func:`install` before any work, and the tests
-apply the same filters (``tests/conftest.py``: :func:`install` and :func:`pytest_filters`), so a warning is either fixed at its source or
-listed here with the reason it cannot be. A warning caused by lit3d's own code or configs is
+apply the same filters (``tests/conftest.py``: :func:`install` and :func:`pytest_filters`), so a warning is
+either fixed at its source or listed here with the reason it cannot be. A warning caused by lit3d's own code or configs is
 fixed where it arises, never added here.
 
 Fixed at the source instead (for the record): Lightning's per-save "``weights_only`` was not

@@ -5,8 +5,8 @@
 
 Each entry names its file (package data beside this module, or the quality task's shipped model),
 the data it was trained on (only data whose licence allows shipping the weights: Sweet Home 3D and the
-Debian catalogues, Anny and procedural shapes, CPCD2 phil), the command that remakes it and its card under ``docs/models/``. The CLIs
-use these as defaults: ``lit3d-reconstruct --body`` starts from ``body-regressor`` unless
+Debian catalogues, Anny and procedural shapes, CPCD2 phil), the command that remakes it and its card under
+``docs/models/``. The CLIs use these as defaults: ``lit3d-reconstruct --body`` starts from ``body-regressor`` unless
 ``--body-init none``; ``lit3d-score`` scores coloured point clouds with ``cpcd2-phil-fusion``.
 ``lit3d-reconstruct IMAGE`` completes with ``completion-furniture`` when no ``--ckpt`` is given, and
 ``--canonical`` with no path uses ``canonical-people`` (each only where its file is installed).

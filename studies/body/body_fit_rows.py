@@ -14,8 +14,8 @@ box, scaled so that the subject's rest pose stands ``--height`` m tall when the 
 rendered as one 320x240 depth image (:mod:`lit3d.body.synthetic`, as ``python -m studies.body.evaluate
 --faust`` does). The body is fitted from the mean body (``DIR``) and, with ``--init``, from the regressor + its
 refinement (``DIR_refined``); each fit's canonical depth image, rendered as the canonical task renders its targets
-(:func:`lit3d.body.results.fit_outputs`), is saved as ``<subject>_pose<pose>_body_canonical_depth.npy`` (and its quality as ``_body.json``),
-the name :func:`lit3d.canonical.pooled.folder_depths` reads. Items already there are skipped (a
+(:func:`lit3d.body.results.fit_outputs`), is saved as ``<subject>_pose<pose>_body_canonical_depth.npy`` (and
+its quality as ``_body.json``), the name :func:`lit3d.canonical.pooled.folder_depths` reads. Items already there are skipped (a
 stopped run resumes); ``--worker I --workers K`` takes every K-th item from the I-th (parallel runs).
 """
 from __future__ import annotations

@@ -119,7 +119,8 @@ def fit(body, depth: np.ndarray, cam: Camera, label: str, multi_start: bool = Fa
     out = {"obs": obs, "mean": mean, "fit": res, "cpu_s": time.process_time() - c0, "wall_s": time.perf_counter() - t0}
     if init is not None:
         reg, cfg = init
-        for name, run in (("init", lambda: regress(body, reg, obs)), ("refined", lambda: fit_from_regressor(body, reg, obs, cfg))):
+        for name, run in (("init", lambda: regress(body, reg, obs)),
+                          ("refined", lambda: fit_from_regressor(body, reg, obs, cfg))):
             c0 = time.process_time()
             out[name] = run()
             out[f"{name}_cpu_s"] = time.process_time() - c0

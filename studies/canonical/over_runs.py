@@ -72,7 +72,8 @@ def markdown(table: dict, names: list[str]) -> str:
                             [[row, *(cell(v[s]) for s in SCORES)] for row, v in table["scores"].items()])]
     if table["masks"]:
         parts.append(markdown_table(["row", *MASK_KEYS],
-                                    [[row, *(cell(v[k]) if k in v else "–" for k in MASK_KEYS)] for row, v in table["masks"].items()]))
+                                    [[row, *(cell(v[k]) if k in v else "–" for k in MASK_KEYS)]
+                                     for row, v in table["masks"].items()]))
     return "\n\n".join(parts) + "\n"
 
 

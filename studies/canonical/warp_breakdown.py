@@ -88,7 +88,8 @@ def breakdown(net, batch: dict, pred: dict | None = None) -> dict[str, torch.Ten
     out["missed"] = (body & (model < 0.5)).sum((1, 2, 3)) / area
     out["extra"] = (~body & (model >= 0.5)).sum((1, 2, 3)) / area
     error = ((p["flow"] - true_flow) * depth.shape[-1] / 2).norm(dim=1, keepdim=True)
-    for name, where in (("flow error, visible (px)", body & (true_vis > 0.5)), ("flow error, hidden (px)", body & (true_vis <= 0.5))):
+    for name, where in (("flow error, visible (px)", body & (true_vis > 0.5)),
+                        ("flow error, hidden (px)", body & (true_vis <= 0.5))):
         n = where.sum((1, 2, 3)).float()
         out[name] = torch.where(n > 0, (error * where).sum((1, 2, 3)) / n.clamp_min(1), torch.full_like(n, float("nan")))
     return out
