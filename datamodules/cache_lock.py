@@ -12,7 +12,7 @@ def flock_waiting(f, path: Path) -> None:
     """Exclusive ``flock`` on the open file ``f``; logs once when it has to wait. Without
     ``fcntl`` (Windows) or on a file system that refuses locks: a warning, no lock."""
     try:
-        import fcntl  # noqa: PLC0415
+        import fcntl
     except ImportError:  # pragma: no cover - not POSIX
         log.warning("%s: no fcntl here: preparing without the inter-process lock", path)
         return
@@ -35,7 +35,7 @@ def funlock(f) -> None:
     try:
         f.truncate(0)
         f.flush()
-        import fcntl  # noqa: PLC0415
+        import fcntl
 
         fcntl.flock(f.fileno(), fcntl.LOCK_UN)
     except (ImportError, OSError):

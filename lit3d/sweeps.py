@@ -211,7 +211,7 @@ def prepare_study_storage(url: str) -> None:
             if alembic.migration.MigrationContext.configure(conn).get_current_revision() is not None:
                 return
         models.BaseModel.metadata.create_all(engine)
-        rdb = os.path.dirname(optuna.storages._rdb.storage.__file__)  # noqa: SLF001 (optuna's own migrations)
+        rdb = os.path.dirname(optuna.storages._rdb.storage.__file__)  # optuna's own migrations
         config = alembic.config.Config(os.path.join(rdb, "alembic.ini"))
         config.set_main_option("script_location", os.path.join(rdb, "alembic").replace("%", "%%"))
         script = alembic.script.ScriptDirectory.from_config(config)

@@ -54,7 +54,7 @@ def test_lazy_names_are_the_api():
     assert sorted(lit3d.API) == sorted(lit3d.api.__all__)
     assert lit3d.load is lit3d.api.load and "complete" in dir(lit3d)
     with pytest.raises(AttributeError, match="no attribute 'nope'"):
-        lit3d.nope  # noqa: B018
+        lit3d.nope
 
 
 def test_load_gives_each_task_its_model(ckpts):

@@ -41,7 +41,7 @@ def _prepare_counting(data_dir: str, barrier, out) -> None:
     try:
         dm.prepare_data()
         out.put((os.getpid(), len(written), None))
-    except BaseException as exc:  # noqa: BLE001 - reported to the test
+    except BaseException as exc:  # reported to the test
         out.put((os.getpid(), len(written), f"{type(exc).__name__}: {exc}"))
 
 

@@ -235,7 +235,7 @@ def read_ac(source: str | Path | bytes, where: str | None = None):
     Raises:
         DataError: unreadable, truncated or garbled, or no triangle at all.
     """
-    import trimesh  # noqa: PLC0415
+    import trimesh
 
     objects = read_ac_objects(source, where)
     if not objects:

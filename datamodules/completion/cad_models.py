@@ -148,7 +148,7 @@ def index_shapenet(root: str | Path) -> tuple[list[CadModel], list[dict]]:
 
 def _read_part(spec: str):
     """One part file (or ``archive::member``) -> trimesh.Trimesh (materials skipped)."""
-    import trimesh  # noqa: PLC0415
+    import trimesh
 
     suffix = spec.rsplit(".", 1)[-1].lower()
     if suffix in ("ac", "acc"):  # formats trimesh does not read: the project's readers
@@ -170,13 +170,13 @@ def load_model_mesh(model: CadModel, up_axis: str = "y"):
     Raises:
         DataError: naming the file when a part is unreadable or the model has no triangle.
     """
-    import trimesh  # noqa: PLC0415
+    import trimesh
 
     parts = []
     for spec in model.files:
         try:
             mesh = _read_part(spec)
-        except Exception as exc:  # noqa: BLE001 (trimesh raises many types on bad files)
+        except Exception as exc:  # trimesh raises many types on bad files
             raise DataError(f"{spec}: unreadable mesh ({type(exc).__name__}: {exc})") from exc
         if isinstance(mesh, trimesh.Trimesh) and len(mesh.faces):
             parts.append(mesh)

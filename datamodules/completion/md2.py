@@ -74,7 +74,7 @@ def read_md2(source: str | Path | bytes, where: str | None = None):
     Raises:
         DataError: unreadable, truncated or garbled file (the message names it).
     """
-    import trimesh  # noqa: PLC0415
+    import trimesh
 
     data, where = source_bytes(source, where)
     return trimesh.Trimesh(*read_md2_arrays(data, where), process=False)

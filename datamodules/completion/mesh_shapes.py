@@ -37,7 +37,7 @@ class MeshShape:
 
     def mesh(self):
         """The triangle soup as a trimesh (for rendering)."""
-        import trimesh  # noqa: PLC0415
+        import trimesh
 
         return trimesh.Trimesh(self.points, self.faces, process=False)
 

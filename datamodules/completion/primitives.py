@@ -79,7 +79,7 @@ class Primitive:
 
     def mesh(self):
         """A trimesh of the primitive in the object frame (render only)."""
-        import trimesh  # noqa: PLC0415
+        import trimesh
 
         s = self.size
         if self.kind == "box":
@@ -118,7 +118,7 @@ class Shape:
 
 def shape_mesh(shape: Shape):
     """All primitive meshes concatenated into one trimesh (overlaps are fine for rendering)."""
-    import trimesh  # noqa: PLC0415
+    import trimesh
 
     return trimesh.util.concatenate([p.mesh() for p in shape.primitives])
 

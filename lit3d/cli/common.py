@@ -35,7 +35,7 @@ from lit3d.cli.about import EXIT_USER, about_flags
 from lit3d.cli.compose import (  # noqa: F401  (re-exported)
     CONF_DIR, check_composes, check_group_overrides, compose_config, config_groups)
 from lit3d.cli.config_checks import ConfigValueError, check_config_values, config_problem
-from lit3d.cli.errors import EXIT_SIGTERM, Interrupted, UserError  # noqa: F401  (re-exported)
+from lit3d.cli.errors import EXIT_SIGTERM, Interrupted, UserError  # re-exported (and used here)
 from lit3d.cli.key_hints import instantiation_problem
 from lit3d.cli.evaluation import run_evaluation, scalar_metrics  # noqa: F401  (re-exported)
 from lit3d.cli.rundir import claim_run_dir, hold_output_dir

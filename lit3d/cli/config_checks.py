@@ -271,7 +271,7 @@ def _plain_sections(cfg: DictConfig):
     for key in cfg.keys():
         if key == "hydra":
             continue
-        node = cfg._get_node(key)  # noqa: SLF001 (OmegaConf's own node access: no resolution yet)
+        node = cfg._get_node(key)  # OmegaConf's own node access: no resolution yet
         try:
             if isinstance(node, (DictConfig, ListConfig)):
                 value = OmegaConf.to_container(node, resolve=True)

@@ -37,7 +37,7 @@ def misspelt_key(message: str, args: Sequence[str], compose: Callable[[list[str]
     given = next((a for a in args if a.split("=", 1)[0].lstrip("+~") == key), None)
     try:
         cfg = compose([a for a in args if a is not given])
-    except Exception:  # noqa: BLE001 (something else does not compose either: Hydra's message stands)
+    except Exception:  # something else does not compose either: Hydra's message stands
         return None
     parent, _, leaf = key.rpartition(".")
     node = OmegaConf.select(cfg, parent, default=None) if parent else cfg
@@ -69,7 +69,7 @@ def instantiation_problem(exc: BaseException) -> str | None:
 
         params = inspect.signature(get_object(target.group("target"))).parameters
         near = _closest(arg.group("arg"), [p for p in params if p != "self"])
-    except Exception:  # noqa: BLE001 (the target cannot be inspected: no suggestion)
+    except Exception:  # the target cannot be inspected: no suggestion
         pass
     hint = f"; did you mean {node + '.' if node else ''}{near}?" if near else ""
     return f"{key}: not an argument of {target.group('target')}{hint}"

@@ -53,7 +53,7 @@ def write_run_curves(loggers: list, output_dir: Path, title: str) -> Path | None
     run's results are already written)."""
     try:
         path = write_curves(csv_files(loggers), output_dir / CURVES_FILE, title)
-    except Exception as exc:  # noqa: BLE001 - a picture must not fail a finished run
+    except Exception as exc:  # a picture must not fail a finished run
         log.warning("no %s: %s: %s", CURVES_FILE, type(exc).__name__, exc)
         return None
     if path is None:

@@ -135,7 +135,7 @@ def fit(trainer, task, datamodule, ckpt_path: str | None, output_dir: Path) -> N
         if got:  # a second Ctrl-C: stop now
             raise KeyboardInterrupt
         got.append("SIGINT (Ctrl-C)")
-        trainer._signal_connector.received_sigterm = True  # noqa: SLF001 (Lightning's SIGTERM flag)
+        trainer._signal_connector.received_sigterm = True  # Lightning's SIGTERM flag
 
     prepare(trainer, datamodule)  # Ctrl-C here: one line, nothing trained (lit3d.cli.stops)
     main_thread = threading.current_thread() is threading.main_thread()

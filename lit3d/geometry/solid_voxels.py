@@ -30,7 +30,7 @@ def _winding_numbers(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray
     """(N,) generalised winding numbers of ``points`` (N, 3) w.r.t. the triangle soup."""
     if not len(points):
         return np.zeros(0)
-    import igl  # noqa: PLC0415 (libigl: a compiled dependency, loaded only where used)
+    import igl  # libigl: a compiled dependency, loaded only where used
 
     return np.asarray(igl.fast_winding_number(np.ascontiguousarray(vertices, np.float64),
                                               np.ascontiguousarray(faces, np.int64),
@@ -85,7 +85,7 @@ def solid_voxels(vertices: np.ndarray, faces: np.ndarray, res: int, coarse: int 
         seed: the random picks (deterministic output).
         spacing: the surface samples' largest gap, in voxels (:func:`surface_voxels`).
     """
-    from scipy import ndimage  # noqa: PLC0415
+    from scipy import ndimage
 
     rng = np.random.default_rng(seed)
     shell = surface_voxels(vertices, faces, res, spacing)

@@ -41,10 +41,10 @@ def import_pyrender():
         )
     if os.environ["PYOPENGL_PLATFORM"] == "egl":
         # pyrender imports its pyglet viewer; headless pyglet needs EGL only, not X11 (absent on GPU servers)
-        import pyglet  # noqa: PLC0415
+        import pyglet
 
         pyglet.options["headless"] = True
-    import pyrender  # noqa: PLC0415  (platform must be set first)
+    import pyrender  # platform must be set first
 
     return pyrender
 
@@ -63,7 +63,7 @@ def _keep_display(renderer) -> None:
         return
 
     def delete_context_only():
-        from OpenGL.EGL import eglDestroyContext  # noqa: PLC0415
+        from OpenGL.EGL import eglDestroyContext
 
         if platform._egl_display is not None and platform._egl_context is not None:
             eglDestroyContext(platform._egl_display, platform._egl_context)

@@ -87,7 +87,7 @@ def hold(path: str | os.PathLike, busy: Callable[[str], str], wait: bool = False
     if fcntl is None:  # pragma: no cover - not POSIX
         log.warning("%s: no fcntl here: going on without the lock", path)
         return HeldLock(path, None, owner=False)
-    f = open(path, "a+")  # noqa: SIM115 - kept open while the lock is held
+    f = open(path, "a+")  # kept open while the lock is held
     try:
         try:
             fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
