@@ -227,9 +227,11 @@ def _run(args) -> int:
     from lit3d.reconstruct.depth_io import list_inputs
 
     check_args(args)
-    resolve_models(args)
+    shipped = resolve_models(args)
     inputs = _dedupe(list_inputs(args.depth))  # a missing folder or file list is answered before the imports
     names, protected = _plan_outputs(args, inputs)
+    for line in shipped:  # after the output checks: a refused run says one line
+        say(line)
     todo = _to_do(args, inputs, names)
     if not todo:
         say(f"{len(inputs)} of {len(inputs)} image(s) already reconstructed into {args.out} with the same input "

@@ -101,15 +101,17 @@ class Scorer:
         return out
 
 
-def resolve_models(args) -> None:
-    """Zoo names (and the defaults: no ``--ckpt`` -> ``completion-furniture``) become files; says which."""
+def resolve_models(args) -> list[str]:
+    """Zoo names (and the defaults: no ``--ckpt`` -> ``completion-furniture``) become files in ``args``.
+    Returns the console lines that name each shipped model used (none for checkpoint files given)."""
     from lit3d.zoo import resolve
 
-    if not args.body:
-        path, label = resolve(args.ckpt or ZOO_COMPLETION)
-        args.ckpt = str(path)
-        say(f"completion model: {label}")
-    if args.canonical:
-        path, label = resolve(args.canonical)
-        args.canonical = str(path)
-        say(f"canonical model: {label}")
+    lines = []
+    for key, what, default in (("ckpt", "completion", ZOO_COMPLETION), ("canonical", "canonical", None)):
+        if key == "ckpt" and args.body or key == "canonical" and not args.canonical:
+            continue
+        path, label = resolve(getattr(args, key) or default)
+        setattr(args, key, str(path))
+        if label.startswith("shipped"):
+            lines.append(f"{what} model: {label}")
+    return lines
