@@ -29,7 +29,7 @@ from lit3d.reconstruct.depth_io import InputError
 from lit3d.reconstruct.pipeline import Completer, load_completer, task_name
 from lit3d.utils.checkpoints import META_KEY, load_checkpoint
 from lit3d.utils.io import atomic_write_bytes, output_error
-from lit3d.zoo import ZOO, zoo_model
+from lit3d.zoo import is_zoo_name, zoo_model
 from lit3d.zoo import models as zoo_models
 
 TASKS = ("completion", "canonical", "quality")
@@ -66,7 +66,7 @@ def load(path: str | Path, device: str = "cpu") -> Model:
 
     The completion and canonical nets go to :func:`lit3d.export`.
     """
-    if isinstance(path, str) and path in ZOO and not Path(path).exists():
+    if is_zoo_name(path):
         return load_zoo(path, device)
     task = checkpoint_task(path)
     if task == "completion":
@@ -82,11 +82,9 @@ def load_zoo(name: str, device: str = "cpu"):
     model = zoo_model(name)
     if model.task == "body":
         return load_regressor(model.path)
-    if model.task == "completion":
-        return load_completer(model.path, device)
-    if model.task == "canonical":
-        return load_canonical(str(model.path), device)
-    return load_model_file(model.path)
+    if model.task == "quality":
+        return load_model_file(model.path)
+    return load(model.path, device)  # a completion or canonical checkpoint file, read as any other
 
 
 def models() -> list[dict]:

@@ -73,15 +73,27 @@ def models() -> list[dict]:
     return [m.describe() for m in ZOO.values()]
 
 
+# names the CLIs use as defaults whose weights are not trained yet: their recipe, for the one-line refusal
+NOT_SHIPPED = {"canonical-people": "experiment=canonical_people then canonical_people_identity "
+                                   "(bash studies/zoo/remake_canonical_people.sh)"}
+
+
+def is_zoo_name(value) -> bool:
+    """True when ``value`` names a zoo model and no file of that name exists (a file wins over the zoo)."""
+    return isinstance(value, str) and value in ZOO and not Path(value).exists()
+
+
 def resolve(value: str | Path) -> tuple[Path, str]:
     """``(path, label)`` of a checkpoint argument that may be a file or a zoo name: a file that exists wins
     over a zoo entry of the same name; a zoo name gives its installed file (a :class:`ZooError` line when
     the file is not installed). ``label`` says which, for the console ("shipped completion-furniture (PATH)")."""
-    path = Path(value)
-    if isinstance(value, str) and value in ZOO and not path.exists():
+    if isinstance(value, str) and value in NOT_SHIPPED and value not in ZOO and not Path(value).exists():
+        raise ZooError(f"'{value}' is not shipped yet (docs/models.md): give a checkpoint of your own, trained "
+                       f"with {NOT_SHIPPED[value]}")
+    if is_zoo_name(value):
         model = zoo_model(value)
         return model.path, f"shipped {model.name} ({model.path})"
-    return path, str(path)
+    return Path(value), str(Path(value))
 
 
 def zoo_model(name: str) -> ZooModel:
