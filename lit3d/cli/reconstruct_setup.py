@@ -106,10 +106,11 @@ def resolve_models(args) -> list[str]:
     Returns the console lines that name each shipped model used (none for checkpoint files given)."""
     from lit3d.zoo import resolve
 
+    wanted = [] if args.body else [("ckpt", "completion", ZOO_COMPLETION)]
+    if args.canonical:
+        wanted.append(("canonical", "canonical", None))
     lines = []
-    for key, what, default in (("ckpt", "completion", ZOO_COMPLETION), ("canonical", "canonical", None)):
-        if key == "ckpt" and args.body or key == "canonical" and not args.canonical:
-            continue
+    for key, what, default in wanted:
         path, label = resolve(getattr(args, key) or default)
         setattr(args, key, str(path))
         if label.startswith("shipped"):
