@@ -25,7 +25,7 @@ import torch
 
 from benchmarks.bench_completion import _cfg
 from benchmarks.common import median_time, num_threads, row, trainer_step_times
-from lit3d.cli.common import build_datamodule, build_task
+from lit3d.runtime.build import build_datamodule, build_task
 
 CMD = "make bench"
 

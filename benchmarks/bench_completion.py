@@ -34,7 +34,8 @@ from omegaconf import open_dict
 
 from benchmarks.common import (GPU_CMD, SavedTensorMeter, current_rss_mb, default_threads, isolated, num_threads,
                                peak_rss_mb, row, target_note, trainer_step_times)
-from lit3d.cli.common import CONF_DIR, build_datamodule, build_task
+from lit3d.runtime.build import build_datamodule, build_task
+from lit3d.runtime.compose import CONF_DIR
 from lit3d.utils.shapenet_categories import SEEN_CATEGORIES
 
 THESIS_SAMPLES, THESIS_EPOCHS = 26_000, 20

@@ -27,7 +27,7 @@ MESH = REPO.parent / "shared" / "data" / "meshes" / "bunny.obj"
 
 def _completer():
     from benchmarks.bench_completion import _cfg
-    from lit3d.cli.common import build_task
+    from lit3d.runtime.build import build_task
     from lit3d.reconstruct.grid import GridGeometry
     from lit3d.reconstruct.pipeline import Completer, load_completer
 

@@ -23,7 +23,8 @@ import torch
 
 from benchmarks.common import row
 from lit3d.canonical.step_cost import canonical_step_cost
-from lit3d.cli.common import build_task, compose_config
+from lit3d.runtime.build import build_task
+from lit3d.runtime.compose import compose_config
 from lit3d.completion.step_cost import completion_step_cost
 from lit3d.utils.tables import markdown_table
 

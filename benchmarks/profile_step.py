@@ -32,7 +32,7 @@ from torch.autograd import DeviceType
 
 from benchmarks.bench_completion import WITH_CRITIC, _cfg, random_batches
 from benchmarks.common import num_threads
-from lit3d.cli.common import build_task
+from lit3d.runtime.build import build_task
 
 OUT = Path(__file__).resolve().with_name("gpu_profile.md")
 TOP = 25

@@ -10,7 +10,7 @@ from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 from omegaconf import DictConfig, OmegaConf, open_dict
 
-from lit3d.cli.common import CONF_DIR
+from lit3d.runtime.compose import CONF_DIR
 from lit3d.utils import quiet
 
 REPO = Path(__file__).resolve().parents[1]

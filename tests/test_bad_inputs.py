@@ -105,7 +105,7 @@ def _hydra_main(module: str, prog: str):
 def _run_cli(fn_path: str, config_name: str, overrides: Callable[[Any], list[str]]):
     """:func:`run_cli` (what every Hydra main calls) on a config composed in-process."""
     def entry(arg, ctx: Ctx) -> Outcome:
-        from lit3d.cli.common import import_object
+        from lit3d.runtime.build import import_object
 
         cfg = ctx.compose(overrides(arg), config_name=config_name)
         with pytest.raises(SystemExit) as info:

@@ -32,7 +32,7 @@ def test_debug_shows_the_traceback(tmp_path):
 
 
 def test_hydra_full_error_and_score_debug_raise_in_process(tmp_path, monkeypatch):
-    from lit3d.cli.common import UserError
+    from lit3d.runtime.errors import UserError
     from lit3d.cli.score import main as score_main
     from lit3d.cli.train import main as train_main
 

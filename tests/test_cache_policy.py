@@ -21,7 +21,7 @@ import pytest
 from test_interrupt_resume import BIN, REPO, _env, _start
 
 from datamodules.cache import MANIFEST, DataError
-from lit3d.cli.common import build_datamodule
+from lit3d.runtime.build import build_datamodule
 
 SIZES = "data.sizes={train:4,val:2,test_same:2,test_cross:2,test_unseen:2}"
 DATA = ["experiment=completion_demo", SIZES, "data.progress=false"]

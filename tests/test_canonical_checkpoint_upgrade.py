@@ -14,7 +14,7 @@ from lit3d.api.checkpoints import load
 from lit3d.canonical.checkpoint_upgrade import upgrade_checkpoint, upgrade_hparams, upgrade_net
 from lit3d.canonical.factory import build_canonical_net
 from lit3d.canonical.module import CanonicalTask
-from lit3d.cli.common import read_checkpoint
+from lit3d.runtime.checkpoints import read_checkpoint
 from lit3d.utils.checkpoints import META_KEY
 
 NET = {"image_size": 48, "init": "he", "lfe_channels": [8, 12, 16], "lfe_out": 4, "msfe_channels": [6, 6, 4],

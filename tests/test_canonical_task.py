@@ -14,7 +14,7 @@ from lit3d.canonical import evaluator
 from lit3d.canonical.checkpoint_upgrade import upgrade_hparams
 from lit3d.canonical.module import CanonicalTask, validation_retrieval
 from lit3d.canonical.warp_loss import warp_terms
-from lit3d.cli.common import build_datamodule, build_task
+from lit3d.runtime.build import build_datamodule, build_task
 
 
 @pytest.fixture
@@ -119,12 +119,12 @@ def test_config_builds_task_and_data(compose_cfg):
 
 
 def test_paper_summary_rows():
-    from lit3d.cli.common import task_kwargs
+    from lit3d.runtime.build import task_kwargs
 
     GlobalCfg = None  # noqa: F841
     from hydra import compose, initialize_config_dir
 
-    from lit3d.cli.common import CONF_DIR
+    from lit3d.runtime.compose import CONF_DIR
 
     with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         cfg = compose(config_name="train", overrides=["experiment=canonical_paper"])

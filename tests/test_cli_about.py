@@ -13,7 +13,7 @@ import pytest
 from hydra.core.global_hydra import GlobalHydra
 
 from lit3d.cli.about import COMMANDS, lit3d_version
-from lit3d.cli.common import CONF_DIR
+from lit3d.runtime.compose import CONF_DIR
 
 REPO = Path(__file__).resolve().parents[1]
 HYDRA_CLIS = {command: module for module, (command, _) in COMMANDS.items()}

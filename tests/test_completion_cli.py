@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from lit3d.cli.common import UserError
+from lit3d.runtime.errors import UserError
 from lit3d.cli.evaluate import evaluate
 from lit3d.cli.train import train
 from lit3d.utils.tables import fmt
@@ -56,7 +56,7 @@ def test_critic_and_generator_steps_per_batch(compose_cfg, data_dir):
     cfg = compose_cfg([*TINY, "debug=limit", "trainer.max_epochs=1", "trainer.limit_train_batches=3",
                        "trainer.limit_val_batches=0", "task.critic_steps=2", "task.adversarial_start_epoch=0",
                        "task.adversarial=true", "logger=none"], data_dir=data_dir)
-    from lit3d.cli.common import build_datamodule, build_task
+    from lit3d.runtime.build import build_datamodule, build_task
     from hydra.utils import instantiate
 
     task, dm = build_task(cfg.task), build_datamodule(cfg.data)

@@ -17,7 +17,7 @@ from omegaconf import OmegaConf
 from datamodules.completion.depth_voxels import make_sample
 from datamodules.completion.furniture import make_shape
 from lit3d.callbacks.health import group_stats
-from lit3d.cli.common import CONF_DIR
+from lit3d.runtime.compose import CONF_DIR
 from lit3d.completion.losses import resolve_loss_scale
 from lit3d.completion.module import CompletionTask
 from lit3d.completion.selector import LatentSelector

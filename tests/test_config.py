@@ -6,7 +6,8 @@ import torch
 from lightning.pytorch import LightningModule
 from omegaconf import OmegaConf
 
-from lit3d.cli.common import CONF_DIR, build_datamodule, build_task
+from lit3d.runtime.build import build_datamodule, build_task
+from lit3d.runtime.compose import CONF_DIR
 
 EXPERIMENTS = sorted(p.stem for p in (Path(CONF_DIR) / "experiment").glob("*.yaml"))
 TRAINERS = sorted(p.stem for p in (Path(CONF_DIR) / "trainer").glob("*.yaml"))

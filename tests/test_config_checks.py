@@ -9,8 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from lit3d.cli.common import cli_main, compose_config, run_cli
-from lit3d.cli.config_checks import RULES, Rule, config_problems, expected, problem
+from lit3d.cli.common import cli_main, run_cli
+from lit3d.runtime.compose import compose_config
+from lit3d.runtime.config_checks import RULES, Rule, config_problems, expected, problem
 
 REPO = Path(__file__).resolve().parents[1]
 EXPERIMENTS = sorted(p.stem for p in (REPO / "conf" / "experiment").glob("*.yaml"))
@@ -155,7 +156,7 @@ def test_summary_of_nets_that_cannot_run_at_their_size(compose_cfg, capsys, monk
 
 def test_splat_head_without_the_forward_flow_is_one_config_error(compose_cfg):
     """Valid values that do not go together: the splat head with a flow cache lacking the forward flow."""
-    from lit3d.cli.config_checks import ConfigValueError, check_config_values
+    from lit3d.runtime.config_checks import ConfigValueError, check_config_values
 
     base = ["experiment=canonical_tiny", "task.net.head.kind=splat", "data.render.flow_targets=true"]
     with pytest.raises(ConfigValueError, match=r"task.net.head.kind=splat .*expected data.render.forward_flow=true"):

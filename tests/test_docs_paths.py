@@ -8,7 +8,7 @@ Checked, in the prose, the code blocks and the backticks alike:
 - top-level files named bare in backticks (``pyproject.toml``, ``Makefile``) and relative markdown
   links;
 - dotted names of project code in backticks (``datamodules.cache.CacheBuilder``,
-  ``lit3d.cli.common.run_evaluation``): the longest importable module, then attributes.
+  ``lit3d.cli.evaluation.run_evaluation``): the longest importable module, then attributes.
 
 Left out: templates (``lit3d/<task>/``, ``tests/test_normals_*.py``) and the walkthrough's example
 task ``normals``, which CONTRIBUTING_TASKS.md adds on paper only.

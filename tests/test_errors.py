@@ -13,8 +13,9 @@ import pytest
 
 import datamodules
 import lit3d
-from lit3d.cli.common import UserError, _construct
-from lit3d.cli.config_checks import config_problem
+from lit3d.runtime.build import _construct
+from lit3d.runtime.errors import UserError
+from lit3d.runtime.config_checks import config_problem
 from lit3d.utils.errors import Lit3dError
 
 REPO = Path(__file__).resolve().parents[1]

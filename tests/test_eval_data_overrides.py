@@ -12,8 +12,8 @@ from test_cache_policy import TINY_NETS
 from test_interrupt_resume import BIN, REPO, _env
 
 from lit3d.api.checkpoints import untrained_checkpoint
-from lit3d.cli.common import UserError
-from lit3d.cli.config_checks import ConfigValueError
+from lit3d.runtime.errors import UserError
+from lit3d.runtime.config_checks import ConfigValueError
 from lit3d.cli.evaluate import data_overrides, with_data_overrides
 
 SIZES = "data.sizes={train:2,val:2,test_same:2,test_cross:2,test_unseen:0}"

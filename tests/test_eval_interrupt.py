@@ -25,7 +25,8 @@ from test_interrupt_resume import _start
 
 from lit3d.api.checkpoints import untrained_checkpoint
 from lit3d.cli import evaluation
-from lit3d.cli.common import build_datamodule, read_checkpoint_meta
+from lit3d.runtime.build import build_datamodule
+from lit3d.runtime.checkpoints import read_checkpoint_meta
 
 SIZES = "data.sizes={train:2,val:4,test_same:4,test_cross:4,test_unseen:0}"
 OUTPUTS = ("metrics.json", "results.md", "config.yaml")

@@ -16,8 +16,10 @@ from omegaconf import open_dict
 
 from lit3d.canonical import evaluator as canonical_evaluator
 from lit3d.canonical.module import EVALUATION_LEGACY, CanonicalTask
-from lit3d.cli import eval_settings
-from lit3d.cli.common import EXIT_USER, UserError, check_composes, cli_main, compose_config
+from lit3d.runtime import eval_settings
+from lit3d.cli.common import EXIT_USER, cli_main
+from lit3d.runtime.compose import check_composes, compose_config
+from lit3d.runtime.errors import UserError
 from lit3d.cli.evaluate import evaluate
 from lit3d.cli.train import train
 from lit3d.completion.module import CompletionTask

@@ -14,7 +14,7 @@ from hydra.core.global_hydra import GlobalHydra
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
-from lit3d.cli.common import CONF_DIR
+from lit3d.runtime.compose import CONF_DIR
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -151,7 +151,7 @@ def test_a_signal_after_the_last_stop_point_of_preparing_still_stops():
     """A Ctrl-C that comes after the last item's stop point (the data is complete) stops the command at the
     end of :func:`lit3d.cli.stops.preparing` instead of being forgotten (the command then trained on: seen
     once in CI, the Ctrl-C of test_ctrl_c_while_lit3d_train_starts_is_one_line not acted on)."""
-    from lit3d.cli.common import Interrupted
+    from lit3d.runtime.errors import Interrupted
     from lit3d.cli.stops import preparing
 
     before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}

@@ -30,7 +30,8 @@ from pathlib import Path
 import pytest
 import torch
 
-from lit3d.cli.common import build_datamodule, run_cli
+from lit3d.cli.common import run_cli
+from lit3d.runtime.build import build_datamodule
 from lit3d.cli.train import train
 
 REPO = Path(__file__).resolve().parents[1]
@@ -322,7 +323,7 @@ def test_nonfinite_loss_skip_counts_and_keeps_weights(compose_cfg, canonical_dat
 
 @pytest.mark.parametrize("target", ["lit3d.canonical.module.CanonicalTask", "lit3d.completion.module.CompletionTask"])
 def test_unknown_nonfinite_mode_is_refused(target, completion_demo_nets):
-    from lit3d.cli.common import import_object
+    from lit3d.runtime.build import import_object
 
     kwargs = {"nets": completion_demo_nets} if "Completion" in target else {}
     with pytest.raises(ValueError, match="on_nonfinite must be one of"):

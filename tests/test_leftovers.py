@@ -124,7 +124,8 @@ def _killed(res: subprocess.CompletedProcess) -> subprocess.CompletedProcess:
 def checkpoint(tmp_path_factory) -> Path:
     """An untrained tiny completion checkpoint whose data (prepared here) lit3d-eval evaluates."""
     from lit3d.api.checkpoints import untrained_checkpoint
-    from lit3d.cli.common import build_datamodule, read_checkpoint_meta
+    from lit3d.runtime.build import build_datamodule
+    from lit3d.runtime.checkpoints import read_checkpoint_meta
 
     root = tmp_path_factory.mktemp("leftovers")
     ckpt = untrained_checkpoint("completion_demo", root / "c.ckpt", [*TINY_NETS, SIZES, "data.batch_size=2",

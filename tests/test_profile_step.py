@@ -25,7 +25,7 @@ def test_profile_script_writes_the_table_on_a_tiny_config(tmp_path):
 
 def test_profile_variants_are_the_config_switches():
     from benchmarks.profile_step import VARIANTS, _variants
-    from lit3d.cli.common import compose_config
+    from lit3d.runtime.compose import compose_config
 
     assert list(_variants("every")) == list(VARIANTS)
     with pytest.raises(SystemExit, match="unknown"):

@@ -75,7 +75,7 @@ def test_metadata_callback_records_the_datamodule_manifest():
 
 
 def test_train_and_eval_record_provenance(compose_cfg, tmp_path):
-    from lit3d.cli.common import build_datamodule
+    from lit3d.runtime.build import build_datamodule
     from lit3d.cli.evaluate import evaluate
     from lit3d.cli.train import train
 

@@ -143,7 +143,7 @@ def test_synthetic_learned_score_beats_every_baseline(tmp_path):
 
 @pytest.mark.parametrize("experiment", ["quality_demo", "quality_paper"])
 def test_experiment_configs_compose(compose_cfg, experiment):
-    from lit3d.cli.common import task_kwargs
+    from lit3d.runtime.build import task_kwargs
 
     cfg = compose_cfg([f"experiment={experiment}"])
     assert cfg.task_info.name == "quality" and cfg.data._target_ == "datamodules.quality.QualityDataModule"

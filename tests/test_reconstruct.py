@@ -127,7 +127,7 @@ def tiny_ckpt(tmp_path_factory):
     from hydra.core.global_hydra import GlobalHydra
     from omegaconf import open_dict
 
-    from lit3d.cli.common import CONF_DIR
+    from lit3d.runtime.compose import CONF_DIR
     from lit3d.cli.train import train
 
     root = tmp_path_factory.mktemp("reconstruct_ckpt")

@@ -174,7 +174,7 @@ def test_what_a_run_that_waited_may_do(tmp_path):
 def test_an_optuna_search_without_dash_m_claims_no_run_dir(tmp_path):
     """``lit3d-train hparams_search=...`` sweeps (``hydra.mode: MULTIRUN``): its jobs run in the sweep
     dir, so no ``runs/<time>`` dir with a lock file is made for it; a plain run still claims its dir."""
-    from lit3d.cli.common import compose_config
+    from lit3d.runtime.compose import compose_config
     from lit3d.cli.rundir import claim_run_dir
 
     common = ["experiment=completion_demo", f"paths.log_dir={tmp_path}/logs"]

@@ -19,7 +19,8 @@ from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 from omegaconf import OmegaConf
 
-from lit3d.cli.common import CONF_DIR, build_datamodule
+from lit3d.runtime.build import build_datamodule
+from lit3d.runtime.compose import CONF_DIR
 
 REPO = Path(__file__).resolve().parents[1]
 # completion at demo net sizes with tiny latents, one short epoch; data.seed fixed so that the jobs

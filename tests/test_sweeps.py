@@ -15,7 +15,7 @@ from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 from omegaconf import OmegaConf
 
-from lit3d.cli.common import CONF_DIR
+from lit3d.runtime.compose import CONF_DIR
 from lit3d.sweeps import CollectResults, collect, over_seeds
 
 REPO = Path(__file__).resolve().parents[1]

@@ -11,7 +11,7 @@
 ``import lit3d`` stays cheap: these names are imported from here on first use (module-level
 ``__getattr__`` in ``lit3d/__init__.py``). Guide with runnable examples: ``docs/api.md``.
 This package sits above ``lit3d.cli`` in the layer contract (``pyproject.toml``): it reuses the
-CLI's config composition (:func:`lit3d.cli.common.build_task`) and nothing imports it back.
+runtime's task building (:func:`lit3d.runtime.build.build_task`) and nothing imports it back.
 """
 from __future__ import annotations
 

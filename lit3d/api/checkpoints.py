@@ -20,8 +20,10 @@ from omegaconf import DictConfig, open_dict
 
 from lit3d.body.regressor import load_regressor
 from lit3d.callbacks.metadata import MetadataCallback
-from lit3d.cli.common import UserError, build_task, check_composes, check_group_overrides, task_meta, to_plain
-from lit3d.cli.config_checks import ConfigValueError, check_config_values
+from lit3d.runtime.build import build_task, task_meta, to_plain
+from lit3d.runtime.compose import check_composes, check_group_overrides
+from lit3d.runtime.errors import UserError
+from lit3d.runtime.config_checks import ConfigValueError, check_config_values
 from lit3d.quality.predict import QualityPredictor, load_predictor
 from lit3d.quality.shipped import load_model_file
 from lit3d.reconstruct.canonical import CanonicalMapper, load_canonical
@@ -101,7 +103,7 @@ def _check_overrides(overrides) -> None:
 def train_config(overrides: Sequence[str]) -> DictConfig:
     """``conf/train.yaml`` composed with Hydra ``overrides`` (as ``lit3d-train`` would, without running),
     through ``lit3d-train``'s checks: an unknown config option, a key not in the config and a value of the
-    wrong type or out of range (:mod:`lit3d.cli.config_checks`) are one :class:`InputError` line, the
+    wrong type or out of range (:mod:`lit3d.runtime.config_checks`) are one :class:`InputError` line, the
     CLI's, before any net is built."""
     _check_overrides(overrides)
     try:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lit3d.cli.score import DEFAULT_SIZE
+from lit3d.features import SCORE_SIZE
 from lit3d.features.table import FeatureConfig, feature_table
 from lit3d.geometry.normalise import normalise_vertices
 from lit3d.quality.predict import QualityPredictor
@@ -221,7 +221,7 @@ def canonical_points(depth, model: CanonicalMapper, intrinsics: Intrinsics | Non
 
 def _feature_config(model: QualityPredictor | None, size: int | None, styles) -> FeatureConfig:
     if model is None or model.feature_options is None:
-        return FeatureConfig.rendered(size or DEFAULT_SIZE, styles)
+        return FeatureConfig.rendered(size or SCORE_SIZE, styles)
     if model.feature_fn:
         raise InputError(f"{model.path}: the model was trained on features of data.feature_fn={model.feature_fn}, "
                          "not the renderer's feature table")

@@ -11,7 +11,7 @@ class MetadataCallback(pl.Callback):
     """Stores the task config, data config, evaluation settings, W&B run id and the run's provenance
     (plain values) in every checkpoint: ``{"task", "data", "evaluation", "wandb_id", "provenance"}``,
     ``evaluation`` the config's resolved ``evaluation`` node (what ``lit3d-eval`` of the checkpoint
-    evaluates with, :mod:`lit3d.cli.eval_settings`; left out when None), ``provenance`` as
+    evaluates with, :mod:`lit3d.runtime.eval_settings`; left out when None), ``provenance`` as
     :func:`lit3d.utils.provenance.provenance` (lit3d version, git commit, the data's manifest hash)."""
 
     def __init__(self, task_cfg: dict, data_cfg: dict, wandb_id: str | None, evaluation: dict | None = None):

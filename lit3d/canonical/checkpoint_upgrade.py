@@ -5,7 +5,7 @@ today's: the one place that knows the old layouts.
 ``hyper_parameters`` (:func:`upgrade_hparams`) and, in its lit3d metadata, the task config and the data
 config (:func:`datamodules.canonical.flat_config.upgrade_data_config`). A checkpoint of today's layout, or
 of another task, comes back unchanged. Every loader of a canonical checkpoint calls it: ``lit3d-eval``
-(:func:`lit3d.cli.common.read_checkpoint`), the API and ``lit3d-reconstruct --canonical``
+(:func:`lit3d.runtime.checkpoints.read_checkpoint`), the API and ``lit3d-reconstruct --canonical``
 (:func:`lit3d.reconstruct.pipeline.load_task`) and ``task.init_weights``
 (:meth:`lit3d.canonical.module.CanonicalTask.load_initial_weights`).
 """
@@ -21,7 +21,7 @@ TASK_TARGET = "lit3d.canonical.module.CanonicalTask"
 # the evaluator's settings (the config's ``evaluation`` node, :func:`lit3d.canonical.evaluator.protocol`) that
 # checkpoints written before that node hold among the task's hyper-parameters, with the defaults the
 # constructor had for them then (what such a checkpoint without the key was evaluated with); they stay in the
-# checkpoint's task config, where ``lit3d-eval`` reads them (:mod:`lit3d.cli.eval_settings`)
+# checkpoint's task config, where ``lit3d-eval`` reads them (:mod:`lit3d.runtime.eval_settings`)
 EVALUATION_LEGACY = {"retrieval": None, "retrieval_min_subjects": 2, "chance_trials": 100, "ceiling_jitter_deg": 0.0,
                      "mesh_baselines": None, "baseline_max_vertices": None, "baseline_smacof_eps": 1e-4,
                      "baseline_landmarks": 300}

@@ -1,4 +1,4 @@
-"""Evaluator of the canonical task (interface: :mod:`lit3d.cli.registry`): retrieval scores and the
+"""Evaluator of the canonical task (interface: :mod:`lit3d.runtime.registry`): retrieval scores and the
 non-learned mesh baselines after the test run, results.md and figures.
 
 :func:`protocol` reads what :class:`~lit3d.canonical.module.CanonicalTask` gathered during the

@@ -1,4 +1,5 @@
-"""Pieces shared by the Hydra entry points: config dir, task building, loggers, metadata, errors.
+"""Pieces shared by the console scripts: the Hydra entry (:func:`cli_main`, :func:`run_cli`), exit codes and
+one-line errors. Config composition, task building and checkpoint reading are the runtime's (:mod:`lit3d.runtime`).
 
 Heavy libraries (torch, Lightning) are imported inside the functions that need them, so
 that a bad command line (unknown experiment, missing ``data.root``) is answered in about a
@@ -21,7 +22,6 @@ SIGTERM or Ctrl-C while preparing data / evaluating        143    ``error: <data
 """
 from __future__ import annotations
 
-import importlib
 import logging
 import os
 import sys
@@ -32,16 +32,13 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from lit3d.cli.about import EXIT_USER, about_flags
-from lit3d.cli.compose import (  # noqa: F401  (re-exported)
-    CONF_DIR, check_composes, check_group_overrides, compose_config, config_groups)
-from lit3d.cli.config_checks import ConfigValueError, check_config_values, config_problem
-from lit3d.cli.errors import EXIT_SIGTERM, Interrupted, UserError  # re-exported (and used here)
-from lit3d.cli.key_hints import instantiation_problem
-from lit3d.cli.evaluation import run_evaluation, scalar_metrics  # noqa: F401  (re-exported)
+from lit3d.runtime.compose import check_composes, check_group_overrides
+from lit3d.runtime.config_checks import ConfigValueError, check_config_values
+from lit3d.runtime.errors import EXIT_SIGTERM, Interrupted, UserError
+from lit3d.runtime.key_hints import instantiation_problem
 from lit3d.cli.rundir import claim_run_dir, hold_output_dir
 from lit3d.utils import quiet
 from lit3d.utils.checkpoints import first_line
-from lit3d.utils.errors import Lit3dError
 from lit3d.utils.io import OutputError
 from lit3d.utils.stops import start_up
 
@@ -49,107 +46,6 @@ log = logging.getLogger("lit3d")
 
 
 EXIT_DIVERGED = 1    # training stopped on a NaN/Inf loss
-
-
-# checkpoints written before the one-room-per-task layout name their module by its old path
-LEGACY_MODULES = {
-    "lit3d.tasks.completion": "lit3d.completion.module",
-    "lit3d.tasks.quality": "lit3d.quality.module",
-    "lit3d.tasks.canonical": "lit3d.canonical.module",
-}
-
-
-def import_object(path: str) -> Any:
-    """Import ``pkg.module.Name`` (or ``pkg.module:Name``); old module paths are mapped to the new rooms."""
-    module, name = _split_target(path)
-    return getattr(importlib.import_module(module), name)
-
-
-def to_plain(cfg: DictConfig | dict | None) -> dict:
-    """Resolved plain-dict copy of a config node (safe to store in checkpoints)."""
-    if cfg is None:
-        return {}
-    if isinstance(cfg, DictConfig):
-        return OmegaConf.to_container(cfg, resolve=True)
-    return dict(cfg)
-
-
-def task_kwargs(task_cfg: DictConfig | dict) -> dict:
-    """Constructor arguments of a task config (``cfg.task``): everything but ``_target_``."""
-    return {k: v for k, v in to_plain(task_cfg).items() if k != "_target_"}
-
-
-def task_meta(cfg: DictConfig) -> dict:
-    """What a checkpoint stores of the task: ``cfg.task`` (``_target_`` + constructor arguments)
-    plus ``cfg.task_info`` (``name``, ``monitor``, ``monitor_mode``), as plain values."""
-    return {**to_plain(cfg.get("task_info")), **to_plain(cfg.task)}
-
-
-def _construct(group: str, make: Callable[[], Any]) -> Any:
-    """``make()``; a config problem (:func:`config_problem`: a bad option value, an unknown keyword)
-    becomes a one-line :class:`UserError` naming the config group; anything else is passed on."""
-    try:
-        return make()
-    except (Lit3dError, ValueError, TypeError) as exc:
-        if not config_problem(exc):
-            raise
-        raise UserError(f"{group} config: {first_line(exc, type(exc).__name__)}") from exc
-
-
-def _instantiate_plain(node: DictConfig | dict):
-    """``hydra.utils.instantiate`` of a config node with plain (dict/list) arguments (not recursive:
-    nested ``_target_`` nodes, e.g. the quality task's ``cross_data``, stay configs), so that what
-    a LightningModule saves as hyper-parameters loads with ``weights_only=True``; the constructor's
-    own ValueError/TypeError is passed on unwrapped."""
-    from hydra.errors import InstantiationException
-    from hydra.utils import instantiate
-
-    plain = to_plain(node)
-    plain["_target_"] = ".".join(filter(None, _split_target(plain["_target_"])))
-    try:
-        return instantiate(OmegaConf.create(plain), _convert_="all", _recursive_=False)
-    except InstantiationException as exc:  # Hydra wraps the constructor's own error
-        raise (exc.__cause__ if isinstance(exc.__cause__, (ValueError, TypeError)) else exc) from exc
-
-
-def _split_target(path: str) -> tuple[str, str]:
-    module, _, name = path.replace(":", ".").rpartition(".")
-    return LEGACY_MODULES.get(module, module), name
-
-
-def build_task(task_cfg: DictConfig | dict):
-    """The LightningModule of ``cfg.task``: ``hydra.utils.instantiate`` with plain arguments."""
-    return _construct("task", lambda: _instantiate_plain(task_cfg))
-
-
-def build_datamodule(data_cfg: DictConfig | dict):
-    """Instantiate a DataModule from its config (plain values only)."""
-    return _construct("data", lambda: _instantiate_plain(data_cfg))
-
-
-def read_checkpoint(ckpt_path: str | Path) -> tuple[dict, dict]:
-    """``(checkpoint dict, its lit3d metadata)`` (task, data config, W&B id).
-
-    Loads with ``weights_only=True`` (see :func:`lit3d.utils.checkpoints.load_checkpoint`): a
-    checkpoint that pickles arbitrary objects is refused, never executed. A canonical checkpoint comes in
-    today's config layout (:func:`lit3d.canonical.checkpoint_upgrade.upgrade_checkpoint`).
-    """
-    from lit3d.utils.checkpoints import META_KEY, load_checkpoint
-
-    ckpt = load_checkpoint(ckpt_path, UserError)
-    meta = ckpt.get(META_KEY) if isinstance(ckpt, dict) else None
-    if not isinstance(meta, dict):
-        raise UserError(f"{Path(ckpt_path)}: not a lit3d checkpoint (no '{META_KEY}' metadata)")
-    if (meta.get("task") or {}).get("name") == "canonical":  # maybe written before its settings were nodes
-        from lit3d.canonical.checkpoint_upgrade import upgrade_checkpoint  # (imports its DataModule: only here)
-
-        ckpt = upgrade_checkpoint(ckpt)
-    return ckpt, ckpt[META_KEY]
-
-
-def read_checkpoint_meta(ckpt_path: str | Path) -> dict:
-    """The lit3d metadata stored in a checkpoint (:func:`read_checkpoint`)."""
-    return read_checkpoint(ckpt_path)[1]
 
 
 # ------------------------------------------------------------------ command line
@@ -205,7 +101,7 @@ def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None, c
         try:
             check_group_overrides(args)
             composed = check_composes(args, config_name)
-            check_config_values(composed)  # types and ranges (lit3d.cli.config_checks)
+            check_config_values(composed)  # types and ranges (lit3d.runtime.config_checks)
             check_output_paths(composed)
             args, run_dir_lock = claim_run_dir(composed, args, command or config_name)  # one process per run dir
         except (UserError, ConfigValueError, OutputError) as exc:

@@ -22,7 +22,9 @@ from pathlib import Path
 import hydra
 from omegaconf import DictConfig
 
-from lit3d.cli.common import CONF_DIR, build_datamodule, cli_main, run_cli
+from lit3d.cli.common import cli_main, run_cli
+from lit3d.runtime.build import build_datamodule
+from lit3d.runtime.compose import CONF_DIR
 from lit3d.cli.stops import preparing
 from lit3d.utils.io import write_json
 

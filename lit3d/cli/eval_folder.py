@@ -25,7 +25,7 @@ import sys
 from pathlib import Path
 
 from lit3d.cli.about import run_argparse_cli, version_line
-from lit3d.cli.common import CONF_DIR
+from lit3d.runtime.compose import CONF_DIR
 
 PROG = "lit3d-eval-folder"
 

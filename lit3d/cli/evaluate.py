@@ -10,7 +10,7 @@ each key must be one of the checkpoint's data config, and its value passes ``lit
 
 Evaluates with the evaluation settings the checkpoint was trained with (saved by lit3d-train), except
 those the command line sets (``evaluation.*``; with ``task=NAME``, whose config brings the node):
-:mod:`lit3d.cli.eval_settings`.
+:mod:`lit3d.runtime.eval_settings`.
 
 Writes into the run dir: metrics.json, results.md (the thesis's table layout,
 with the thesis's figures beside ours), config.yaml and PNG figures, as one set (staged, then moved
@@ -27,21 +27,15 @@ import hydra
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from lit3d.cli import eval_settings
+from lit3d.runtime import eval_settings
 from lit3d.cli.about import EXIT_USER
-from lit3d.cli.common import (
-    CONF_DIR,
-    UserError,
-    build_datamodule,
-    cli_main,
-    fail,
-    import_object,
-    read_checkpoint,
-    run_cli,
-    run_evaluation,
-    to_plain,
-)
-from lit3d.cli.config_checks import ConfigValueError, check_config_values
+from lit3d.cli.common import cli_main, fail, run_cli
+from lit3d.cli.evaluation import run_evaluation
+from lit3d.runtime.build import build_datamodule, import_object, to_plain
+from lit3d.runtime.checkpoints import read_checkpoint
+from lit3d.runtime.compose import CONF_DIR
+from lit3d.runtime.errors import UserError
+from lit3d.runtime.config_checks import ConfigValueError, check_config_values
 from lit3d.cli.resume_checks import check_eval_data
 from lit3d.cli.stops import evaluating
 from lit3d.utils.provenance import provenance
@@ -111,7 +105,7 @@ def data_overrides(args: list[str]) -> list[str]:
     ``+data_overrides.KEY=VALUE`` when no ``data=NAME`` is given: Hydra's config has no data node then,
     and refused them with its hint to add ``+data...``; :func:`with_data_overrides` applies them to the
     checkpoint's data config. Their values are checked here, before Hydra creates the run dir
-    (:func:`lit3d.cli.config_checks.check_config_values`)."""
+    (:func:`lit3d.runtime.config_checks.check_config_values`)."""
     if any(a.split("=", 1)[0].lstrip("+~") == "data" for a in args if "=" in a):
         return args  # data=NAME: Hydra overrides its node itself
     out, moved = [], []

@@ -19,7 +19,7 @@ import tempfile
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 
-from lit3d.cli.registry import evaluator_module
+from lit3d.runtime.registry import evaluator_module
 from lit3d.utils.io import STAGE_PREFIX, TMP_SUFFIX, atomic_write_text, repair_sets, write_file_set, write_json
 from lit3d.utils.kill_points import kill_point
 from lit3d.utils.stops import check_stop, shielded
@@ -71,7 +71,7 @@ def run_evaluation(trainer, task, datamodule, task_name: str, out_dir: Path, *, 
                    measured: Mapping[str, float] | None = None) -> dict[str, float]:
     """Test ``task`` (after validating it when ``validate``: the completion threshold is chosen there),
     run the task room's evaluator on the result with the evaluation ``settings`` (the config's
-    ``evaluation`` node, :mod:`lit3d.cli.eval_settings`), and on rank 0 write ``metrics.json``, ``results.md``,
+    ``evaluation`` node, :mod:`lit3d.runtime.eval_settings`), and on rank 0 write ``metrics.json``, ``results.md``,
     the artefacts and ``n_figures`` figures per split into ``out_dir`` as one set
     (:func:`staged_outputs`). Used by ``lit3d-eval`` and, after fitting, by ``lit3d-train``.
     ``extra``: entries written first into ``metrics.json`` (not returned), or a function returning

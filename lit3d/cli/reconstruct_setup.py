@@ -75,12 +75,13 @@ class Scorer:
     """``--reference``/``--quality-ckpt``: lit3d-score's rendering-based features of (REF, result)."""
 
     def __init__(self, args):
-        from lit3d.cli.score import DEFAULT_SIZE, _model_features
+        from lit3d.cli.score import _model_features
+        from lit3d.features import SCORE_SIZE
         from lit3d.features.table import FeatureConfig
         from lit3d.render.convert import to_mesh
 
         self.ref = to_mesh(args.reference)
-        self.cfg = FeatureConfig.rendered(DEFAULT_SIZE)
+        self.cfg = FeatureConfig.rendered(SCORE_SIZE)
         self.predictor, self.notes = None, []
         if args.quality_ckpt:
             ns = argparse.Namespace(ckpt=args.quality_ckpt, size=None, styles=None)

@@ -1,6 +1,6 @@
 """A checkpoint against the config that resumes from it (``lit3d-train ckpt_path=...``) or evaluates
 it (``lit3d-eval ckpt_path=... data=...``), before any work. Each refusal is one line
-(:class:`~lit3d.cli.common.UserError`, exit 2); docs/resuming.md "Resume checks".
+(:class:`~lit3d.runtime.errors.UserError`, exit 2); docs/resuming.md "Resume checks".
 
 - :func:`check_task_matches`: the checkpoint holds this config's task (``task_info.name`` and the
   LightningModule class), else ``<ckpt>: the checkpoint holds the canonical task (...), this
@@ -23,8 +23,9 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from lit3d.cli.common import LEGACY_MODULES, UserError, task_meta, to_plain
-from lit3d.cli.registry import EVALUATORS
+from lit3d.runtime.build import LEGACY_MODULES, task_meta, to_plain
+from lit3d.runtime.errors import UserError
+from lit3d.runtime.registry import EVALUATORS
 
 log = logging.getLogger("lit3d")
 

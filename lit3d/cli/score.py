@@ -43,8 +43,8 @@ import warnings
 from pathlib import Path
 
 from lit3d.cli.about import allocation_failure, run_argparse_cli, version_line
+from lit3d.features import SCORE_SIZE
 
-DEFAULT_SIZE = 256
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -58,7 +58,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="many pairs in one process, one table out: FILE.tsv (reference<TAB>distorted a line, "
                         "paths relative to the file) or REF_DIR DIST_DIR (files with the same name stem)")
     p.add_argument("--size", type=int, default=None,
-                   help=f"render size in pixels (default {DEFAULT_SIZE}; with --ckpt: the model's; set: the unlearned "
+                   help=f"render size in pixels (default {SCORE_SIZE}; with --ckpt: the model's; set: the unlearned "
                         "score, the shipped model scores its own renders only)")
     p.add_argument("--styles", default=None,
                    help="'all' (default) or comma-separated style names (with --ckpt: the model's)")
@@ -239,7 +239,7 @@ def _feature_setup(args):
     """``(FeatureConfig, predictor or None, notes)`` from ``--size``/``--styles``, ``--ckpt`` or the shipped model."""
     from lit3d.features.table import FeatureConfig
 
-    cfg = FeatureConfig.rendered(args.size or DEFAULT_SIZE, args.styles)
+    cfg = FeatureConfig.rendered(args.size or SCORE_SIZE, args.styles)
     if args.ckpt:
         if args.unlearned or args.model:
             raise ValueError(f"{'--unlearned' if args.unlearned else '--model'} and --ckpt are two scores: give one")
@@ -283,7 +283,7 @@ def _score(args, cfg, predictor, ref, dist):
         if args.ckpt:
             raise ValueError(f"{args.ckpt}: the model's render size {cfg.render.size} px: {what}{where}") from None
         raise ValueError(f"--size {cfg.render.size}: {what} for renders of {cfg.render.size} px{where}; "
-                         f"try a smaller --size (default {DEFAULT_SIZE})") from None
+                         f"try a smaller --size (default {SCORE_SIZE})") from None
     said = vars(args).setdefault("_cache_warnings", set())
     for w in caught:
         if not issubclass(w.category, CacheWarning):  # not ours: shown as it would have been

@@ -23,7 +23,7 @@ import contextlib
 from collections.abc import Iterator
 from pathlib import Path
 
-from lit3d.cli.common import Interrupted
+from lit3d.runtime.errors import Interrupted
 from lit3d.utils.stops import StopRequested, check_stop, on_signals, pending
 
 

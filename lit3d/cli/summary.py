@@ -7,7 +7,10 @@ from __future__ import annotations
 import hydra
 from omegaconf import DictConfig
 
-from lit3d.cli.common import CONF_DIR, UserError, _construct, cli_main, import_object, run_cli, task_kwargs
+from lit3d.cli.common import cli_main, run_cli
+from lit3d.runtime.build import _construct, import_object, task_kwargs
+from lit3d.runtime.compose import CONF_DIR
+from lit3d.runtime.errors import UserError
 from lit3d.utils.checkpoints import first_line
 
 

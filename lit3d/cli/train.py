@@ -19,20 +19,12 @@ import hydra
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from lit3d.cli.common import (
-    CONF_DIR,
-    Interrupted,
-    UserError,
-    build_datamodule,
-    build_task,
-    cli_main,
-    read_checkpoint,
-    run_cli,
-    run_evaluation,
-    scalar_metrics,
-    task_meta,
-    to_plain,
-)
+from lit3d.cli.common import cli_main, run_cli
+from lit3d.cli.evaluation import run_evaluation, scalar_metrics
+from lit3d.runtime.build import build_datamodule, build_task, task_meta, to_plain
+from lit3d.runtime.checkpoints import read_checkpoint
+from lit3d.runtime.compose import CONF_DIR
+from lit3d.runtime.errors import Interrupted, UserError
 from lit3d.cli.resume_checks import check_resume_config, check_weights_fit
 from lit3d.cli.run_log import with_csv_logger, write_run_curves
 from lit3d.cli.stops import preparing, testing_after_fit

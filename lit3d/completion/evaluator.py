@@ -1,5 +1,5 @@
 """Evaluator of the completion task: metrics from the test run, results.md and figures
-(interface: :mod:`lit3d.cli.registry`).
+(interface: :mod:`lit3d.runtime.registry`).
 
 ``settings`` (the config's ``evaluation`` node, saved in the checkpoint): ``surface``, the sizes of the
 test's surface metrics (``points``, ``fscore_at``, ``seed``; null = off), which the module computes

@@ -1,4 +1,4 @@
-"""Evaluator of the quality task (interface: :mod:`lit3d.cli.registry`): the thesis's protocol
+"""Evaluator of the quality task (interface: :mod:`lit3d.runtime.registry`): the thesis's protocol
 after ``trainer.test``, results.md and scatter plots.
 
 :func:`protocol` adds to the module's ``test/ours/...`` metrics

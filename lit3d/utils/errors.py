@@ -7,7 +7,7 @@ their older built-in bases (``ValueError`` mostly), so code that caught those st
 
     Lit3dError
     ├── UserError              lit3d.cli.common: a bad path or option, printed as one line
-    ├── ConfigValueError       lit3d.cli.config_checks: a config value of the wrong type or range
+    ├── ConfigValueError       lit3d.runtime.config_checks: a config value of the wrong type or range
     ├── DataError              datamodules.cache: a bad data file or data setting
     │   ├── DataConfigError    datamodules.completion.plan
     │   └── MosDataError       datamodules.quality.mos

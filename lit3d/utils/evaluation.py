@@ -1,4 +1,4 @@
-"""What a task room's evaluator hands back after the test (interface: :mod:`lit3d.cli.registry`), and
+"""What a task room's evaluator hands back after the test (interface: :mod:`lit3d.runtime.registry`), and
 the evaluation settings older checkpoints still carry among the task's hyper-parameters."""
 from __future__ import annotations
 

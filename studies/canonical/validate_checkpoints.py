@@ -28,8 +28,9 @@ from omegaconf import OmegaConf
 from datamodules.canonical.flat_config import upgrade_data_config
 from lit3d.canonical.evaluator import prediction_source, scored_outputs
 from lit3d.canonical.heldout import heldout_arrays, item_ids, save_heldout, settings_of
-from lit3d.cli.common import build_datamodule, import_object, read_checkpoint
-from lit3d.cli.eval_settings import checkpoint_settings
+from lit3d.runtime.build import build_datamodule, import_object
+from lit3d.runtime.checkpoints import read_checkpoint
+from lit3d.runtime.eval_settings import checkpoint_settings
 
 
 def _trainer() -> pl.Trainer:

@@ -28,7 +28,7 @@ from hydra.utils import instantiate
 
 from datamodules.completion.depth_voxels import make_sample
 from datamodules.completion.furniture import make_shape
-from lit3d.cli.common import CONF_DIR
+from lit3d.runtime.compose import CONF_DIR
 from lit3d.utils.shapenet_categories import SEEN_CATEGORIES
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 from hydra import compose, initialize_config_dir
 from omegaconf import open_dict
 
-from lit3d.cli.common import CONF_DIR
+from lit3d.runtime.compose import CONF_DIR
 from lit3d.cli.train import train
 
 SHORT = ["experiment=completion_demo", "seed=0", "logger=csv", "callbacks.progress_bar=null",

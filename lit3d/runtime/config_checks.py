@@ -166,7 +166,7 @@ RULES: tuple[Rule, ...] = (
     Rule("task.net.head.attend_grid",          "int",     ">= 0"),
     Rule("task.net.hidden",                    "int",     ">= 1"),
     Rule("task.net.blocks",                    "int",     ">= 1"),
-    # evaluation settings (the evaluator's, not the module's: lit3d.cli.eval_settings)
+    # evaluation settings (the evaluator's, not the module's: lit3d.runtime.eval_settings)
     Rule("evaluation.cv",                      "bool"),
     Rule("evaluation.chance_trials",           "int",     ">= 1"),
     Rule("evaluation.retrieval_min_subjects",  "int",     ">= 1"),
@@ -199,7 +199,7 @@ def _in_range(value: float, spec: str) -> bool:
             if low_ok and high_ok:
                 return True
         else:
-            raise ValueError(f"bad range {spec!r} in lit3d.cli.config_checks.RULES")
+            raise ValueError(f"bad range {spec!r} in lit3d.runtime.config_checks.RULES")
     return False
 
 

@@ -7,9 +7,9 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
-from lit3d.cli.errors import UserError
-from lit3d.cli.eval_settings import override_problem, stale_task_keys
-from lit3d.cli.key_hints import misspelt_key
+from lit3d.runtime.errors import UserError
+from lit3d.runtime.eval_settings import override_problem, stale_task_keys
+from lit3d.runtime.key_hints import misspelt_key
 from lit3d.utils.config_dir import config_dir
 
 CONF_DIR = str(config_dir())
@@ -64,7 +64,7 @@ def check_composes(args: Sequence[str], config_name: str, conf_dir: str = CONF_D
     """Raise :class:`UserError` when the overrides do not compose (e.g. a key that is not in the
     config: ``trainer.max_epoch=3``), with Hydra's first two lines as the message (a moved evaluation
     setting, ``task.mesh_baselines=[]``: one line naming ``evaluation.mesh_baselines``,
-    :mod:`lit3d.cli.eval_settings`); else return the composed config (with its ``hydra`` node).
+    :mod:`lit3d.runtime.eval_settings`); else return the composed config (with its ``hydra`` node).
 
     Skipped for multiruns and Hydra's own flags (``-m``, ``--cfg`` ...): Hydra reports those.
     """

@@ -2,7 +2,7 @@
 config's ``_target_``.
 
 An evaluator module (``lit3d/<task>/evaluator.py``) provides (``settings``: the run's evaluation
-settings, the config's ``evaluation`` node as a plain dict, :mod:`lit3d.cli.eval_settings`; the
+settings, the config's ``evaluation`` node as a plain dict, :mod:`lit3d.runtime.eval_settings`; the
 LightningModule does not hold them):
 
 - ``prepare(task, settings) -> None``: before ``trainer.test`` (the completion task's surface metrics
@@ -15,7 +15,7 @@ LightningModule does not hold them):
 - ``write_figures(task, datamodule, out_dir, n, evaluation) -> list[Path]``: labelled PNGs.
 
 ``lit3d-eval`` and ``lit3d-train`` (after testing) both run it through
-:func:`lit3d.cli.common.run_evaluation`.
+:func:`lit3d.cli.evaluation.run_evaluation`.
 """
 from __future__ import annotations
 

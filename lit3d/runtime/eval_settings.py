@@ -3,7 +3,7 @@
 Each task's ``conf/task/<task>.yaml`` fills it (canonical: the retrieval descriptor, the chance trials,
 the mesh baselines; completion: the surface metrics; quality: the baselines, leave-one-shape-out and
 cross-dataset protocols); experiments and the command line override it (``evaluation.retrieval.vocab=300``).
-The task room's evaluator gets it as an argument (:mod:`lit3d.cli.registry`); the LightningModule does
+The task room's evaluator gets it as an argument (:mod:`lit3d.runtime.registry`); the LightningModule does
 not hold it.
 
 - ``lit3d-train`` evaluates with ``cfg.evaluation`` and saves it, resolved, in every checkpoint
