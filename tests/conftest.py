@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import logging
 import os
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -105,18 +106,6 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip)
 
 
-def square_subjects(n: int = 8, size: int = 32, classes: int = 4):
-    """A toy subject-recognition batch: ``(depth (n,1,size,size), mask, subject_idx (n,))``, subject k a
-    filled square of side 6 + 3k (depth .5) at a random place (seeded): what tells them apart is the size."""
-    import torch
-
-    g = torch.Generator().manual_seed(0)
-    depth, idx = torch.zeros(n, 1, size, size), torch.arange(n) % classes
-    for i in range(n):
-        s = 6 + 3 * int(idx[i])
-        x, y = torch.randint(0, size - s, (2,), generator=g).tolist()
-        depth[i, 0, y:y + s, x:x + s] = 0.5
-    return depth, (depth > 0).float(), idx
 
 
 @pytest.fixture(autouse=True)
@@ -129,3 +118,23 @@ def _restore_logging():
     for lg, handlers, level in saved:
         lg.handlers[:] = handlers
         lg.setLevel(level)
+
+
+@pytest.fixture
+def readonly_dir(tmp_path):
+    """A folder no file can be written into: chmod 555, or (as root, who ignores modes) a read-only
+    tmpfs mounted on it; skipped where neither works."""
+    d = tmp_path / "ro"
+    d.mkdir()
+    if os.geteuid() != 0:
+        d.chmod(0o555)
+        yield d
+        d.chmod(0o755)
+        return
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=64k", "tmpfs", str(d)],
+                      capture_output=True).returncode != 0:
+        pytest.skip("running as root and cannot mount a read-only tmpfs")
+    try:
+        yield d
+    finally:
+        subprocess.run(["umount", str(d)], check=False)

@@ -17,9 +17,7 @@ from __future__ import annotations
 
 import os
 import subprocess
-import sys
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -32,23 +30,15 @@ from datamodules.quality.mos import MosDataError, read_liris_epfl
 from datamodules.completion.recgan import convert_pair, load_grid
 from lit3d.cli.common import run_cli
 from lit3d.render.convert import ShapeError, to_mesh
-from bad_input_writers import (  # the bad files
-    _file, _npz, _dir, _missing, PLY_HEAD, GARBAGE, BOX, _pair, _depth, _mos, _option, _ckpt)
-from test_mos_readers import liris_epfl  # the MOS dataset writer (published layout)
-
-REPO = Path(__file__).resolve().parents[1]
-BIN = Path(sys.executable).parent
+from tests.helpers.bad_files import _file, _npz, _dir, _missing, PLY_HEAD, GARBAGE, BOX, _pair, _depth, _mos, _option, _ckpt
+from tests.helpers.files import liris_epfl
+from tests.helpers.runs import BIN, REPO
+from tests.helpers.entry_points import Ctx, Outcome, data_cli, eval_cli, train_cli
 
 
-@dataclass
-class Outcome:
-    code: int | str     # exit status, or the exception type name for library loaders
-    err: str            # stderr (or "error: <exception message>")
 
 
-@dataclass
-class Ctx:  # what an entry point of the table gets: tmp_path, pytest's capsys, monkeypatch, compose_cfg
-    tmp: Path; capsys: Any; monkeypatch: Any; compose: Callable  # noqa: E702
+
 
 
 # ----------------------------------------------------------------------------- entry points
@@ -88,18 +78,6 @@ def mos_reader(root, ctx):
     return _raises(MosDataError, read_liris_epfl, root)
 
 
-def _hydra_main(module: str, prog: str):
-    """A Hydra console script called in-process (``sys.argv`` = prog + the option)."""
-    def entry(arg, ctx: Ctx) -> Outcome:
-        import importlib
-
-        main = importlib.import_module(module).main
-        ctx.monkeypatch.setattr(sys, "argv", [prog, *str(arg).split()])
-        with pytest.raises(SystemExit) as info:
-            main()
-        return Outcome(info.value.code, ctx.capsys.readouterr().err)
-    entry.__name__ = prog
-    return entry
 
 
 def _run_cli(fn_path: str, config_name: str, overrides: Callable[[Any], list[str]]):
@@ -115,9 +93,6 @@ def _run_cli(fn_path: str, config_name: str, overrides: Callable[[Any], list[str
     return entry
 
 
-train_cli = _hydra_main("lit3d.cli.train", "lit3d-train")
-eval_cli = _hydra_main("lit3d.cli.evaluate", "lit3d-eval")
-data_cli = _hydra_main("lit3d.cli.data", "lit3d-data")
 eval_ckpt = _run_cli("lit3d.cli.evaluate.evaluate", "eval", lambda p: [f"ckpt_path={p}", "task=canonical"])
 eval_ckpt_any_task = _run_cli("lit3d.cli.evaluate.evaluate", "eval", lambda p: [f"ckpt_path={p}"])
 eval_no_ckpt = _run_cli("lit3d.cli.evaluate.evaluate", "eval", lambda _: [])

@@ -15,10 +15,10 @@ import pytest
 from datamodules.quality.mos import MosDataError
 from lit3d.cli.common import run_cli
 from lit3d.render.convert import ShapeError
-from bad_input_writers import write_depth_cache
-from test_bad_inputs import BIN, REPO, Ctx, data_cli, eval_cli, train_cli
-from test_mos_readers import liris_epfl  # the MOS dataset writer (published layout)
-from test_output_writer import readonly_dir  # noqa: F401  (the fixture: a real read-only folder)
+from tests.helpers.bad_files import write_depth_cache
+from tests.helpers.runs import BIN, REPO
+from tests.helpers.entry_points import Ctx, data_cli, eval_cli, train_cli
+from tests.helpers.files import liris_epfl
 
 
 # ----------------------------------------------------------------------------- tracebacks on request
@@ -82,7 +82,7 @@ HYDRA_MAINS = {"lit3d-train": train_cli, "lit3d-eval": eval_cli, "lit3d-data": d
 @pytest.mark.parametrize("fault", ["run-dir-under-a-file", "run-dir-is-a-file", "run-dir-read-only",
                                    "data-dir-is-a-file", "data-dir-read-only"])
 @pytest.mark.parametrize("prog", sorted(HYDRA_MAINS))
-def test_unwritable_run_or_data_dir_is_one_line_before_any_work(prog, fault, tmp_path, readonly_dir, capsys,  # noqa: F811
+def test_unwritable_run_or_data_dir_is_one_line_before_any_work(prog, fault, tmp_path, readonly_dir, capsys,
                                                                  monkeypatch):
     """hydra.run.dir / data.data_dir that is a file, lies under one, or is read-only: exit 2 and
     one line naming the path, before Hydra creates anything; the file is left as it was."""

@@ -18,18 +18,18 @@ import time
 from pathlib import Path
 
 import pytest
-from test_interrupt_resume import BIN, REPO, _env, _start
+from tests.helpers.runs import BIN, REPO, child_env, start_script
 
 from datamodules.cache import MANIFEST, DataError
 from lit3d.runtime.build import build_datamodule
+from tests.helpers.runs import TINY_NETS
 
 SIZES = "data.sizes={train:4,val:2,test_same:2,test_cross:2,test_unseen:2}"
 DATA = ["experiment=completion_demo", SIZES, "data.progress=false"]
-TINY_NETS = ["task.nets.latent_dim=64", "task.nets.k=16", "task.nets.fixed_latent_dim=64", "task.prior_samples=2"]
 
 
 def _run(args: list[str], timeout: float = 180) -> subprocess.CompletedProcess:
-    return subprocess.run([str(BIN / args[0]), *args[1:]], cwd=REPO, env=_env(), capture_output=True, text=True,
+    return subprocess.run([str(BIN / args[0]), *args[1:]], cwd=REPO, env=child_env(), capture_output=True, text=True,
                           timeout=timeout)
 
 
@@ -107,7 +107,7 @@ def test_training_stops_when_another_process_re_prepares_its_data(tmp_path):
     common = ["experiment=completion_demo", "data.sizes={train:8,val:4,test_same:4,test_cross:4,test_unseen:4}",
               "data.batch_size=4", "data.progress=false", *TINY_NETS, "logger=none", "callbacks.progress_bar=null",
               "test_after_fit=false", data]
-    proc = _start(["lit3d-train", *common, "trainer.max_epochs=500", f"hydra.run.dir={run}"], tmp_path / "train")
+    proc = start_script(["lit3d-train", *common, "trainer.max_epochs=500", f"hydra.run.dir={run}"], tmp_path / "train")
     try:
         last, t0 = run / "checkpoints" / "last.ckpt", time.monotonic()
         while not last.is_file():  # the first epoch is done

@@ -10,7 +10,7 @@ from datamodules.canonical.batches import SubjectGroupedBatches
 from datamodules.cache import DataError
 from lit3d.canonical.contrastive import ContrastiveEmbedder, supervised_contrastive
 from lit3d.canonical.module import CanonicalTask
-from test_canonical_identity import _batch, _net, _step_losses
+from tests.helpers.canonical import subject_batch, tiny_canonical_net, step_losses
 
 
 def _reference(z: torch.Tensor, labels: list[int], t: float) -> float:
@@ -51,9 +51,9 @@ def test_loss_without_positives_is_zero_and_differentiable():
 
 @pytest.mark.parametrize("on", ["latent", "output"])
 def test_training_step_adds_the_weighted_term_and_it_reaches_the_net(compose_cfg, on):
-    batch = _batch()
+    batch = subject_batch()
     node = {"weight": "{w}", "embed": on, "dim": 16, "channels": [8, 16]}
-    losses, task = _step_losses(compose_cfg, batch, (0.0, 2.0), contrastive=node)
+    losses, task = step_losses(compose_cfg, batch, (0.0, 2.0), contrastive=node)
     out = task.net(batch["depth"], batch["mask"])
     emb = task.contrastive_head(out)
     assert emb.shape == (8, 16)
@@ -66,9 +66,9 @@ def test_training_step_adds_the_weighted_term_and_it_reaches_the_net(compose_cfg
 
 def test_the_latent_term_learns_to_tell_the_subjects_apart(compose_cfg):
     torch.manual_seed(0)
-    task = CanonicalTask(net=_net(compose_cfg), mask_loss="bce", phases={"use": False},
+    task = CanonicalTask(net=tiny_canonical_net(compose_cfg), mask_loss="bce", phases={"use": False},
                          contrastive={"weight": 1.0, "dim": 16})
-    batch = _batch(n=8, classes=4)
+    batch = subject_batch(n=8, classes=4)
     opt = torch.optim.Adam(task.parameters(), 3e-3)
     losses = []
     for _ in range(40):
@@ -86,10 +86,10 @@ def test_the_latent_term_learns_to_tell_the_subjects_apart(compose_cfg):
 
 def test_contrastive_settings_are_checked(compose_cfg):
     with pytest.raises(ValueError, match="task.contrastive.embed must be one of"):
-        CanonicalTask(net=_net(compose_cfg), contrastive={"weight": 1.0, "embed": "pixels", "dim": 8})
+        CanonicalTask(net=tiny_canonical_net(compose_cfg), contrastive={"weight": 1.0, "embed": "pixels", "dim": 8})
     with pytest.raises(ValueError, match="embed_dim >= 1"):
-        CanonicalTask(net=_net(compose_cfg), contrastive={"weight": 1.0, "dim": 0})
-    assert CanonicalTask(net=_net(compose_cfg)).contrastive_head is None  # off by default
+        CanonicalTask(net=tiny_canonical_net(compose_cfg), contrastive={"weight": 1.0, "dim": 0})
+    assert CanonicalTask(net=tiny_canonical_net(compose_cfg)).contrastive_head is None  # off by default
     with pytest.raises(ValueError, match="needs the MSFE latent"):
         ContrastiveEmbedder("latent", 8, 4, [4])(type("Out", (), {"latent": None})())
 

@@ -3,29 +3,20 @@ on the MSFE latent: wired into the loss and the encoder, learn their targets, re
 cannot serve."""
 import pytest
 import torch
-from omegaconf import OmegaConf
 
-from conftest import square_subjects
 from lit3d.canonical.module import CanonicalTask
+from tests.helpers.canonical import step_losses, subject_batch, tiny_canonical_net
 
 
-def _net(compose_cfg, size=32):
-    cfg = compose_cfg(["experiment=canonical_tiny", f"task.net.image_size={size}"])
-    return OmegaConf.to_container(cfg.task.net, resolve=True)
 
 
-def _batch(n=8, size=32, classes=4):
-    """Subjects told apart by size (:func:`conftest.square_subjects`); the target is the input."""
-    depth, mask, idx = square_subjects(n, size, classes)
-    return {"depth": depth, "mask": mask, "canon_depth": depth.clone(), "canon_mask": mask.clone(),
-            "subject_idx": idx}
 
 
 def test_identity_loss_reaches_the_encoder_and_learns_the_subjects(compose_cfg):
     torch.manual_seed(0)
-    task = CanonicalTask(net=_net(compose_cfg), mask_loss="bce", phases={"use": False},
+    task = CanonicalTask(net=tiny_canonical_net(compose_cfg), mask_loss="bce", phases={"use": False},
                          identity={"weight": 1.0, "classes": 4})
-    batch = _batch()
+    batch = subject_batch()
     latent = task.net(batch["depth"], batch["mask"]).latent
     assert latent.shape == (8, task.identity_head.in_features)
     loss = task._identity_loss(latent, batch["subject_idx"])
@@ -48,39 +39,28 @@ def test_identity_loss_reaches_the_encoder_and_learns_the_subjects(compose_cfg):
 
 def test_identity_settings_are_checked(compose_cfg):
     with pytest.raises(ValueError, match="task.identity.classes >= 2"):
-        CanonicalTask(net=_net(compose_cfg), identity={"weight": 1.0, "classes": 0})
+        CanonicalTask(net=tiny_canonical_net(compose_cfg), identity={"weight": 1.0, "classes": 0})
     with pytest.raises(ValueError, match="arch=unet"):
-        CanonicalTask(net=_net(compose_cfg), arch="unet", identity={"weight": 1.0, "classes": 4})
-    task = CanonicalTask(net=_net(compose_cfg), identity={"weight": 1.0, "classes": 2})
-    batch = _batch(classes=4)
+        CanonicalTask(net=tiny_canonical_net(compose_cfg), arch="unet", identity={"weight": 1.0, "classes": 4})
+    task = CanonicalTask(net=tiny_canonical_net(compose_cfg), identity={"weight": 1.0, "classes": 2})
+    batch = subject_batch(classes=4)
     with pytest.raises(ValueError, match="subject index 3 outside identity.classes=2"):
         task._identity_loss(task.net(batch["depth"], batch["mask"]).latent, batch["subject_idx"])
-    assert CanonicalTask(net=_net(compose_cfg)).identity_head is None  # off by default
+    assert CanonicalTask(net=tiny_canonical_net(compose_cfg)).identity_head is None  # off by default
 
 
-def _step_losses(compose_cfg, batch, weights, **task_kw):
-    """``({weight: training_step loss}, the last task)``: one task per weight (``task_kw``: objective nodes, one
-    of which names the weight with ``{w}``), same seed, the same batch."""
-    losses = {}
-    for w in weights:
-        torch.manual_seed(0)
-        task = CanonicalTask(net=_net(compose_cfg), mask_loss="bce", phases={"use": False},
-                             **{k: {f: (w if v == "{w}" else v) for f, v in node.items()} for k, node in task_kw.items()})
-        task.log = lambda *a, **k: None  # no trainer here: logging is not what these tests check
-        losses[w] = task.training_step(batch, 0)
-    return losses, task
 
 
 def test_training_step_adds_the_weighted_identity_term(compose_cfg):
-    batch = _batch()
-    losses, task = _step_losses(compose_cfg, batch, (0.0, 2.0), identity={"weight": "{w}", "classes": 4})
+    batch = subject_batch()
+    losses, task = step_losses(compose_cfg, batch, (0.0, 2.0), identity={"weight": "{w}", "classes": 4})
     ce = task._identity_loss(task.net(batch["depth"], batch["mask"]).latent, batch["subject_idx"])
     assert losses[2.0].item() == pytest.approx(losses[0.0].item() + 2.0 * ce.item(), rel=1e-4)
 
 
 def _pheno_batch(n=8, size=32):
     """Subjects told apart by size; two phenotypes that follow the size (what a body-shape code must say)."""
-    batch = _batch(n, size)
+    batch = subject_batch(n, size)
     k = batch["subject_idx"].float()
     batch["phenotype"] = torch.stack([k / 3, 1 - k / 3], 1)
     return batch
@@ -88,7 +68,7 @@ def _pheno_batch(n=8, size=32):
 
 def test_phenotype_regression_reaches_the_encoder_and_learns_the_shapes(compose_cfg):
     torch.manual_seed(0)
-    task = CanonicalTask(net=_net(compose_cfg), mask_loss="bce", phases={"use": False},
+    task = CanonicalTask(net=tiny_canonical_net(compose_cfg), mask_loss="bce", phases={"use": False},
                          phenotype={"weight": 1.0, "dims": 2})
     batch = _pheno_batch()
     err = task._phenotype_error(task.net(batch["depth"], batch["mask"]).latent, batch)
@@ -108,14 +88,14 @@ def test_phenotype_regression_reaches_the_encoder_and_learns_the_shapes(compose_
 
 def test_training_step_adds_the_weighted_phenotype_term_and_needs_targets(compose_cfg):
     batch = _pheno_batch()
-    losses, task = _step_losses(compose_cfg, batch, (0.0, 3.0), phenotype={"weight": "{w}", "dims": 2})
+    losses, task = step_losses(compose_cfg, batch, (0.0, 3.0), phenotype={"weight": "{w}", "dims": 2})
     mse = task._phenotype_error(task.net(batch["depth"], batch["mask"]).latent, batch).pow(2).mean()
     assert losses[3.0].item() == pytest.approx(losses[0.0].item() + 3.0 * mse.item(), rel=1e-4)
     with pytest.raises(ValueError, match="data.phenotype_targets=true"):
-        task.training_step(_batch(), 0)
+        task.training_step(subject_batch(), 0)
     with pytest.raises(ValueError, match="task.phenotype.dims=3"):
-        bad = CanonicalTask(net=_net(compose_cfg), phenotype={"weight": 1.0, "dims": 3})
+        bad = CanonicalTask(net=tiny_canonical_net(compose_cfg), phenotype={"weight": 1.0, "dims": 3})
         bad._phenotype_error(bad.net(batch["depth"], batch["mask"]).latent, batch)
     with pytest.raises(ValueError, match="task.phenotype.dims >= 1"):
-        CanonicalTask(net=_net(compose_cfg), phenotype={"weight": 1.0, "dims": 0})
-    assert CanonicalTask(net=_net(compose_cfg)).phenotype_head is None  # off by default
+        CanonicalTask(net=tiny_canonical_net(compose_cfg), phenotype={"weight": 1.0, "dims": 0})
+    assert CanonicalTask(net=tiny_canonical_net(compose_cfg)).phenotype_head is None  # off by default

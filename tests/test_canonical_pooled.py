@@ -5,49 +5,30 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-import torch
 from lightning.fabric.utilities.data import AttributeDict
 
-from datamodules.canonical import CanonicalDataModule
 from lit3d.canonical import evaluator, heldout, pooled
 from lit3d.utils.evaluation import Evaluation
-
-RETRIEVAL = {"level": 0, "view_size": 32, "vocab": 16, "dense_step": 6}
-
-
-def _dm(tmp_path, fold=0, **kw):
-    args = dict(image_size=32, n_subjects=4, n_poses=3, mesh_resolution=16, n_folds=3, batch_size=4,
-                kinds=["humanoid", "quadruped"], seed=1, split="pose", val_per_subject=1, fold=fold)
-    args.update(kw)
-    dm = CanonicalDataModule.from_flat(str(tmp_path / "data"), **args)
-    dm.prepare_data()
-    dm.setup()
-    return dm
+from tests.helpers.canonical import RETRIEVAL, fold_outputs, pooled_datamodule
 
 
-def _fold_outputs(dm):
-    """What CanonicalTask.test_outputs gathers, with the posed input as the 'prediction'."""
-    ds = dm.datasets["test"]
-    items = [ds[i] for i in range(len(ds))]
-    t = lambda k: torch.stack([it[k] for it in items])  # noqa: E731
-    out = {k: t(k) for k in ("depth", "mask", "canon_depth", "canon_mask")}
-    out.update(pred_depth=out["depth"], pred_mask=out["mask"])
-    for k in ("subject_idx", "pose", "view", "index"):
-        out[k] = torch.tensor([it[k] for it in items])
-    return out
+
+
+
 
 
 def test_held_out_ids_cover_every_posed_item_once_over_the_folds(tmp_path):
-    dm = _dm(tmp_path, view_mode="broadside", flip_lr=True)
+    dm = pooled_datamodule(tmp_path, view_mode="broadside", flip_lr=True)
     ids = dm.held_out_ids()
     assert len(ids) == 4 * 3 and len(set(ids)) == len(ids)  # every non-canonical pose of every subject
     tested = []
     for f in range(3):
-        tested += [f"{r['subject']}/{r['pose']}/{r['view']}" for r in _dm(tmp_path, f, view_mode="broadside").splits["test"]]
+        rows = pooled_datamodule(tmp_path, f, view_mode="broadside").splits["test"]
+        tested += [f"{r['subject']}/{r['pose']}/{r['view']}" for r in rows]
     assert sorted(tested) == sorted(ids)
     assert dm.datasets["train"].flip_lr and not dm.datasets["test"].flip_lr
     assert dm.cache_config()["view_mode"] == "broadside"
-    assert "view_mode" not in _dm(tmp_path / "fixed").cache_config()  # old caches keep their hash
+    assert "view_mode" not in pooled_datamodule(tmp_path / "fixed").cache_config()  # old caches keep their hash
 
 
 def test_pool_checks_coverage():
@@ -90,8 +71,8 @@ def test_folds_write_heldout_and_the_pooled_evaluator_scores_every_row(tmp_path)
                     baseline_max_vertices=None, baseline_smacof_eps=1e-4)
     runs = []
     for f in range(3):
-        dm = _dm(tmp_path, f)
-        held = evaluator.heldout_items(SimpleNamespace(hparams=hp, _trainer=None), _fold_outputs(dm), dm, settings)
+        dm = pooled_datamodule(tmp_path, f)
+        held = evaluator.heldout_items(SimpleNamespace(hparams=hp, _trainer=None), fold_outputs(dm), dm, settings)
         run = tmp_path / f"run{f}"
         assert evaluator.write_artefacts(Evaluation({}, {"heldout": held}), run) == [run / heldout.HELDOUT_FILE]
         evaluator.write_results({"test/depth_mse": 0.1}, run)

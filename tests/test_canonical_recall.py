@@ -5,7 +5,7 @@ import lightning.pytorch as pl
 import pytest
 import torch
 
-from conftest import square_subjects
+from tests.helpers.canonical import square_subjects
 from datamodules.canonical import CanonicalDataModule
 from lit3d.canonical.module import CanonicalTask
 from lit3d.canonical.recall import SubjectRecallNet

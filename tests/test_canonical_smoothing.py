@@ -10,7 +10,7 @@ from lightning.fabric.utilities.data import AttributeDict
 from lit3d.canonical import evaluator, pooled
 from lit3d.canonical.smoothing import SETTING, smooth_prediction
 from lit3d.metrics.image.filters import masked_gaussian_blur
-from tests.test_canonical_pooled import RETRIEVAL, _dm, _fold_outputs
+from tests.helpers.canonical import RETRIEVAL, pooled_datamodule, fold_outputs
 
 
 def _rough(outputs):
@@ -24,8 +24,8 @@ def _rough(outputs):
 
 @pytest.mark.parametrize("sigma", [0.0, 1.5])
 def test_protocol_scores_and_saves_the_smoothed_prediction(tmp_path, sigma):
-    dm = _dm(tmp_path)
-    outputs = _rough(_fold_outputs(dm))
+    dm = pooled_datamodule(tmp_path)
+    outputs = _rough(fold_outputs(dm))
     raw = outputs["pred_depth"].clone()
     task = SimpleNamespace(hparams=AttributeDict(arch="canonical", mask_threshold=0.5), _trainer=None,
                            test_outputs=SimpleNamespace(compute=lambda: dict(outputs)))
@@ -48,8 +48,8 @@ def test_protocol_scores_and_saves_the_smoothed_prediction(tmp_path, sigma):
 def test_the_posed_input_is_also_scored_on_its_outline(tmp_path, sigma):
     """With smoothing on, an ``input_outline`` row scores the posed input smoothed like the prediction: a
     prediction that is the posed input itself scores exactly that row; without smoothing there is no such row."""
-    dm = _dm(tmp_path, n_poses=6)  # 2 test poses of each of 4 subjects: retrieval is scored
-    outputs = _fold_outputs(dm)
+    dm = pooled_datamodule(tmp_path, n_poses=6)  # 2 test poses of each of 4 subjects: retrieval is scored
+    outputs = fold_outputs(dm)
     outputs = {**outputs, "pred_depth": outputs["depth"].clone(), "pred_mask": outputs["mask"].clone()}
     task = SimpleNamespace(hparams=AttributeDict(arch="canonical", mask_threshold=0.5), _trainer=None,
                            test_outputs=SimpleNamespace(compute=lambda: dict(outputs)))

@@ -12,7 +12,7 @@ from datamodules.completion.cad_models import load_model_mesh
 from datamodules.completion.catalogues import (
     CATALOGUES, catalogue_root, frame, index_installed, index_ufoai, package_tree, present_packages,
 )
-from tests.test_catalogue_readers import CUBE_QUADS, TET_T, TET_V, ac_file, ac_object, md2_bytes
+from tests.helpers.catalogue_files import CUBE_QUADS, TET_T, TET_V, ac_file, ac_object, md2_bytes
 
 
 def test_frame_turns_source_axes_to_y_up_z_front():

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import torch
 from kornia.color import rgb_to_lab
-from piq_helpers import piq_functions
+from tests.helpers.piq import piq_functions
 from skimage.color import deltaE_ciede2000, rgb2lab
 
 from lit3d.metrics.image.colour_measures import (

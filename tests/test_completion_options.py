@@ -12,7 +12,7 @@ from torch.utils.data import DataLoader
 
 from lit3d.completion.losses import critic_loss, gradient_penalty
 from lit3d.completion.module import CompletionTask
-from tests.completion_helpers import grid_pair, tiny_nets, tiny_task
+from tests.helpers.completion import grid_pair, tiny_nets, tiny_task
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 

@@ -19,7 +19,7 @@ from lit3d.completion.losses import gradient_penalty
 from lit3d.completion.module import CompletionTask
 from lit3d.utils.meta_autocast import MetaAutocast
 from lit3d.utils.step_cost import CostCounter, SavedBytes
-from tests.completion_helpers import grid_pair, tiny_nets, tiny_task
+from tests.helpers.completion import grid_pair, tiny_nets, tiny_task
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_cache_policy import TINY_NETS
+from tests.helpers.runs import TINY_NETS
 
 from datamodules.cache import atomic_save_npz
 from lit3d.api.checkpoints import untrained_checkpoint

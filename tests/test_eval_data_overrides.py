@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 import yaml
-from test_cache_policy import TINY_NETS
-from test_interrupt_resume import BIN, REPO, _env
+from tests.helpers.runs import TINY_NETS
+from tests.helpers.runs import BIN, REPO, child_env
 
 from lit3d.api.checkpoints import untrained_checkpoint
 from lit3d.runtime.errors import UserError
@@ -27,7 +27,7 @@ def checkpoint(tmp_path_factory) -> Path:
 
 
 def _eval(args: list[str], timeout: float = 300) -> subprocess.CompletedProcess:
-    return subprocess.run([str(BIN / "lit3d-eval"), *args], cwd=REPO, env=_env(), capture_output=True, text=True,
+    return subprocess.run([str(BIN / "lit3d-eval"), *args], cwd=REPO, env=child_env(), capture_output=True, text=True,
                           timeout=timeout)
 
 

@@ -19,9 +19,9 @@ import signal
 from pathlib import Path
 
 import pytest
-from test_cache_policy import TINY_NETS
-from signal_helpers import signal_when, stop_line
-from test_interrupt_resume import _start
+from tests.helpers.runs import TINY_NETS
+from tests.helpers.signals import signal_when, stop_line
+from tests.helpers.runs import start_script
 
 from lit3d.api.checkpoints import untrained_checkpoint
 from lit3d.cli import evaluation
@@ -54,7 +54,7 @@ def _results(run: Path) -> list[str]:
 
 def test_ctrl_c_while_testing_exits_with_one_line_and_writes_nothing(tmp_path, checkpoint):
     run, log = tmp_path / "run", tmp_path / "eval"
-    proc = _start(["lit3d-eval", f"ckpt_path={checkpoint}", f"hydra.run.dir={run}"], log)
+    proc = start_script(["lit3d-eval", f"ckpt_path={checkpoint}", f"hydra.run.dir={run}"], log)
     # the Trainer is built (its first log line): the handlers are in place, validation comes next
     def started():
         return "GPU available" in ((run / "evaluate.log").read_text() if (run / "evaluate.log").is_file() else "")
@@ -73,7 +73,7 @@ def test_sigterm_while_the_outputs_are_written_keeps_the_earlier_evaluation(tmp_
                "config.yaml": "earlier: true\n"}
     for name, text in earlier.items():
         (run / name).write_text(text)
-    proc = _start(["lit3d-eval", f"ckpt_path={checkpoint}", f"hydra.run.dir={run}"], log)
+    proc = start_script(["lit3d-eval", f"ckpt_path={checkpoint}", f"hydra.run.dir={run}"], log)
 
     def writing() -> bool:  # this evaluation's files are being written (staged; before: into the run dir)
         return any(p.name.startswith(".evaluation.") for p in run.iterdir()) or \
@@ -111,7 +111,7 @@ def test_ctrl_c_while_testing_after_training_keeps_the_training_and_says_how_to_
     now one line (exit 143) says the training is complete, names the checkpoint and the lit3d-eval command,
     and no test output is written."""
     run, log = tmp_path / "run", tmp_path / "train"
-    proc = _start(["lit3d-train", "experiment=completion_demo", *TINY_NETS, SIZES, "data.batch_size=2",
+    proc = start_script(["lit3d-train", "experiment=completion_demo", *TINY_NETS, SIZES, "data.batch_size=2",
                    "data.progress=false", f"paths.data_dir={tmp_path}/data", "trainer.max_epochs=1", "logger=none",
                    "callbacks.progress_bar=null", f"hydra.run.dir={run}"], log)
     def testing():

@@ -21,8 +21,8 @@ import sys
 from pathlib import Path
 
 import pytest
-from test_interrupt_resume import BIN, REPO, _env
-from test_output_writer import _depth_png
+from tests.helpers.runs import BIN, REPO, child_env
+from tests.helpers.files import write_depth_png
 
 OLD = {"x.obj": b"old mesh", "x_occupancy.npz": b"old grid", "x.png": b"old picture", "x.json": b"old summary"}
 NEW = {k: v.replace(b"old", b"new") for k, v in OLD.items()}
@@ -57,7 +57,7 @@ io.write_file_set(out, new)
 
 def _stop_writer(out: Path, where: str, sig: int) -> subprocess.Popen:
     as_text = [json.dumps({k: v.decode() for k, v in d.items()}) for d in (OLD, NEW)]
-    proc = subprocess.Popen([sys.executable, "-c", WRITER, str(out), where, *as_text], cwd=REPO, env=_env(),
+    proc = subprocess.Popen([sys.executable, "-c", WRITER, str(out), where, *as_text], cwd=REPO, env=child_env(),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert proc.stdout.readline().strip() == "stopping here", proc.stderr.read()
     proc.send_signal(sig)
@@ -94,11 +94,11 @@ def test_rerun_skips_finished_sets_unless_overwrite(tmp_path):
 
     ckpt = untrained_checkpoint("completion_demo", tmp_path / "c.ckpt", [
         "task.nets.latent_dim=64", "task.nets.k=16", "task.nets.fixed_latent_dim=64", "task.prior_samples=2"])
-    src, out = _depth_png(tmp_path / "in" / "cow.png"), tmp_path / "out"
+    src, out = write_depth_png(tmp_path / "in" / "cow.png"), tmp_path / "out"
 
     def cli(*extra: str) -> subprocess.CompletedProcess:
         res = subprocess.run([str(BIN / "lit3d-reconstruct"), str(src), "--ckpt", str(ckpt), "--out", str(out),
-                              "--no-figure", *extra], cwd=REPO, env=_env(), capture_output=True, text=True, timeout=300)
+                              "--no-figure", *extra], cwd=REPO, env=child_env(), capture_output=True, text=True, timeout=300)
         assert res.returncode == 0, res.stderr[-3000:]
         return res
 

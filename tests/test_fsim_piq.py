@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 import torch
 
-from piq_helpers import piq_functions
+from tests.helpers.piq import piq_functions
 
 from lit3d.metrics.image import fsim
 

@@ -16,7 +16,7 @@ from omegaconf import open_dict
 
 from lit3d.cli.evaluate import evaluate
 from lit3d.cli.train import train
-from test_ddp_equivalence import CASES, COMMON
+from tests.helpers.ddp import CASES, COMMON
 
 pytestmark = pytest.mark.gpu
 

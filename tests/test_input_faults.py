@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from PIL import Image
-from test_interrupt_resume import REPO, _env
-from test_output_writer import _depth_png, readonly_dir  # noqa: F401 (fixture)
+from tests.helpers.runs import REPO, child_env
+from tests.helpers.files import write_depth_png
 
 from lit3d.cli import reconstruct as rec
 from lit3d.reconstruct.depth_io import InputError, read_depth
@@ -73,8 +73,8 @@ def _mask(path: Path, cols: slice) -> Path:
 
 def test_mask_folder_pairs_by_exact_stem_and_the_json_names_it(tmp_path, cli):
     src, masks = tmp_path / "in", tmp_path / "masks"
-    _depth_png(src / "scan[1].png")
-    _depth_png(src / "cow.png")
+    write_depth_png(src / "scan[1].png")
+    write_depth_png(src / "cow.png")
     _mask(masks / "scan1.png", slice(8, 12))      # what the glob pattern scan[1].* matched
     _mask(masks / "scan[1].png", slice(8, 20))    # scan[1]'s own mask
     _mask(masks / "cow.png", slice(8, 14))
@@ -271,7 +271,7 @@ def test_sigterm_says_what_was_kept_and_a_rerun_skips_it(tmp_path):
 
     def start(stop_at: str) -> subprocess.Popen:
         return subprocess.Popen([sys.executable, "-c", STOPPABLE, stop_at, str(src), "--ckpt", str(src / "s0.npy"),
-                                 "--out", str(out), "--no-figure"], cwd=REPO, env=_env(), text=True,
+                                 "--out", str(out), "--no-figure"], cwd=REPO, env=child_env(), text=True,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 
     proc = start("s2.npy")

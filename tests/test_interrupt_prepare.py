@@ -25,9 +25,9 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from test_cache_policy import TINY_NETS
-from signal_helpers import signal_when, stop_line
-from test_interrupt_resume import BIN, REPO, _env, _start
+from tests.helpers.runs import TINY_NETS
+from tests.helpers.signals import signal_when, stop_line
+from tests.helpers.runs import BIN, REPO, child_env, start_script
 
 from datamodules.cache import MANIFEST, CacheBuilder
 from datamodules.completion.voxel_cache import load_pair
@@ -57,7 +57,7 @@ def _line_pattern(data: Path, what: str, total: int) -> str:
 def test_ctrl_c_stops_lit3d_data_at_the_next_item_and_the_same_command_resumes(tmp_path):
     data, log = tmp_path / "data", tmp_path / "data_cli"
     args = ["lit3d-data", *DATA, _sizes(10), f"paths.data_dir={data}", f"hydra.run.dir={tmp_path}/run"]
-    rc = _stop_during_preparation(_start(args, log), data, log, [signal.SIGINT])
+    rc = _stop_during_preparation(start_script(args, log), data, log, [signal.SIGINT])
     line = stop_line(log, rc)
     m = re.fullmatch(_line_pattern(data, "SIGINT (Ctrl-C)", 10), line)
     assert m, line
@@ -69,7 +69,7 @@ def test_ctrl_c_stops_lit3d_data_at_the_next_item_and_the_same_command_resumes(t
         load_pair(p)  # each item on disk is whole
     mtimes = {p: p.stat().st_mtime_ns for p in done}
 
-    res = subprocess.run([str(BIN / args[0]), *args[1:]], cwd=REPO, env=_env(), capture_output=True, text=True,
+    res = subprocess.run([str(BIN / args[0]), *args[1:]], cwd=REPO, env=child_env(), capture_output=True, text=True,
                          timeout=600)
     assert res.returncode == 0, res.stderr[-3000:]
     # log lines go to stderr: stdout holds the JSON summary alone
@@ -86,7 +86,7 @@ def test_lit3d_train_stops_while_preparing_without_training(tmp_path, signals, w
     data, run, log = tmp_path / "data", tmp_path / "run", tmp_path / "train"
     args = ["lit3d-train", *DATA, _sizes(24, 2), "data.batch_size=4", *TINY_NETS, "trainer.max_epochs=1", "logger=csv",
             "callbacks.progress_bar=null", f"paths.data_dir={data}", f"hydra.run.dir={run}"]
-    rc = _stop_during_preparation(_start(args, log), data, log, signals)
+    rc = _stop_during_preparation(start_script(args, log), data, log, signals)
     line = stop_line(log, rc)
     m = re.fullmatch(_line_pattern(data, what, 32), line)
     assert m and int(m.group(1)) == len(_items(data)) < 32, line
@@ -191,7 +191,7 @@ def test_ctrl_c_while_lit3d_train_starts_is_one_line(tmp_path, delay):
     """A Ctrl-C before any stage with its own stop (while the command claims its run dir, starts Hydra, imports
     Lightning, builds the model): one line and exit 143, no KeyboardInterrupt traceback (before: Python's)."""
     run, log = tmp_path / "run", tmp_path / "train"
-    proc = _start(["lit3d-train", "experiment=completion_demo", *TINY_NETS, "data.progress=false", "logger=none",
+    proc = start_script(["lit3d-train", "experiment=completion_demo", *TINY_NETS, "data.progress=false", "logger=none",
                    f"paths.data_dir={tmp_path}/data", f"hydra.run.dir={run}"], log)
     def locked():
         return (run / ".lit3d.lock").exists() and (delay == 0 or __import__("time").sleep(delay) is None)

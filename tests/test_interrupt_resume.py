@@ -20,10 +20,8 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -33,23 +31,9 @@ import torch
 from lit3d.cli.common import run_cli
 from lit3d.runtime.build import build_datamodule
 from lit3d.cli.train import train
+from tests.helpers.runs import BIN, CANONICAL, CANONICAL_STEPS_PER_EPOCH, REPO, child_env, load_checkpoint, start_script
 
-REPO = Path(__file__).resolve().parents[1]
-BIN = Path(sys.executable).parent
 
-# canonical demo at 32^2 with tiny nets: 6 subjects x 6 poses, 3 folds -> 16 train pairs = 4 batches
-# (the old mixed validation rule, data.split.val_subjects=null, keeps 4 subjects for training)
-CANONICAL = [
-    "experiment=canonical_demo", "data.image_size=32", "data.source.n_subjects=6", "data.source.n_poses=6",
-    "data.split.val_subjects=null",
-    "data.source.mesh_resolution=20", "data.source.kinds=[humanoid]", "data.batch_size=4", "task.net.image_size=32",
-    "task.net.lfe.channels=[8,12,16]", "task.net.msfe.channels=[6,6,4]", "task.net.msfe.grid=6",
-    "task.net.msfe.fuser_hidden=64", "task.net.msfe.fuser_out=48", "task.net.msfe.dec_channels=[32,16,12,8,8,8]",
-    "task.net.reconstruction.channels=[12,16,24]", "evaluation.retrieval=null",
-    "evaluation.mesh_baselines=[]", "task.mask_loss=bce", "test_after_fit=false", "callbacks.progress_bar=null",
-    "+trainer.limit_val_batches=0", "data.source.own_poses=0", "data.split.val_poses=training", "data.prepare_workers=0",
-]
-CANONICAL_STEPS_PER_EPOCH = 4
 PHASES = [{"start": 0, "alpha": 10.0, "beta": 1000.0}, {"start": 1, "alpha": 1000.0, "beta": 1000.0},
           {"start": 2, "alpha": 1000.0, "beta": 100.0}]
 
@@ -68,20 +52,10 @@ COMPLETION = [
 COMPLETION_BATCHES_PER_EPOCH = 4
 
 
-def _env() -> dict:
-    env = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}
-    env.update(WANDB_MODE="offline", WANDB_SILENT="true", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    return env
 
 
-def _start(args: list[str], log: Path) -> subprocess.Popen:
-    """A console script in the background, stdout/stderr into files (no pipe to fill up)."""
-    with open(log.with_suffix(".out"), "w") as out, open(log.with_suffix(".err"), "w") as err:
-        return subprocess.Popen([str(BIN / args[0]), *args[1:]], cwd=REPO, env=_env(), stdout=out, stderr=err)
 
 
-def _load(path: Path) -> dict:
-    return torch.load(path, map_location="cpu", weights_only=True)
 
 
 def _wait_for_checkpoint(proc: subprocess.Popen, path: Path, ready, log: Path, timeout: float = 240) -> dict:
@@ -92,7 +66,7 @@ def _wait_for_checkpoint(proc: subprocess.Popen, path: Path, ready, log: Path, t
             pytest.fail(f"training ended (rc {proc.returncode}) before the checkpoint was ready:\n"
                         f"{log.with_suffix('.err').read_text()[-3000:]}")
         if path.is_file():
-            ckpt = _load(path)  # a half-written file would raise here
+            ckpt = load_checkpoint(path)  # a half-written file would raise here
             if ready(ckpt):
                 return ckpt
         time.sleep(0.2)
@@ -127,7 +101,7 @@ def test_sigterm_saves_last_and_resume_continues_canonical(tmp_path, canonical_d
               "logger=csv", "trainer.log_every_n_steps=1", "callbacks.resume_state.every_n_train_batches=1",
               f"paths.data_dir={canonical_data}", f"hydra.run.dir={run}"]
     last = run / "checkpoints" / "last.ckpt"
-    proc = _start(["lit3d-train", *common, _phases_override(PHASES), "trainer.max_epochs=500"], tmp_path / "first")
+    proc = start_script(["lit3d-train", *common, _phases_override(PHASES), "trainer.max_epochs=500"], tmp_path / "first")
     _wait_for_checkpoint(proc, last, lambda c: c["epoch"] >= 1 and c["global_step"] > per_epoch, tmp_path / "first")
     proc.send_signal(signal.SIGTERM)
     assert proc.wait(timeout=120) == 143
@@ -138,7 +112,7 @@ def test_sigterm_saves_last_and_resume_continues_canonical(tmp_path, canonical_d
     assert lines[-1].startswith(f"error: {run}: stopped by SIGTERM at epoch ")
     assert f"hydra.run.dir={run} ckpt_path=last" in lines[-1]
 
-    saved = _load(last)
+    saved = load_checkpoint(last)
     epoch, step = saved["epoch"], saved["global_step"]
     assert epoch >= 1 and step > per_epoch
     assert _adam_steps(saved) == {step}  # one Adam step per training step, none lost
@@ -154,10 +128,10 @@ def test_sigterm_saves_last_and_resume_continues_canonical(tmp_path, canonical_d
     total = (epoch + 2) * per_epoch
     res = subprocess.run([str(BIN / "lit3d-train"), *common, _phases_override([{"start": 0, "alpha": 1.0, "beta": 1.0}]),
                           f"trainer.max_epochs={epoch + 2}", "ckpt_path=last"],
-                         cwd=REPO, env=_env(), capture_output=True, text=True, timeout=300)
+                         cwd=REPO, env=child_env(), capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-3000:]
     assert "Restored all states from the checkpoint" in (run / "train.log").read_text()
-    final = _load(last)
+    final = load_checkpoint(last)
     # written at the end of the last epoch by ModelCheckpoint(save_last) (its epoch counter has moved on)
     assert final["epoch"] in (epoch + 1, epoch + 2) and final["global_step"] == total
     assert _adam_steps(final) == {total}  # Adam continued from the saved state (else total - step)
@@ -184,7 +158,7 @@ def test_ctrl_c_saves_last_and_says_how_to_resume(tmp_path, canonical_data):
     common = [*CANONICAL, "data.batch_size=2", "logger=none", "callbacks.resume_state.every_n_train_batches=1",
               f"paths.data_dir={canonical_data}", f"hydra.run.dir={run}"]
     last = run / "checkpoints" / "last.ckpt"
-    proc = _start(["lit3d-train", *common, "trainer.max_epochs=500"], tmp_path / "first")
+    proc = start_script(["lit3d-train", *common, "trainer.max_epochs=500"], tmp_path / "first")
     _wait_for_checkpoint(proc, last, lambda c: c["global_step"] >= 3, tmp_path / "first")
     proc.send_signal(signal.SIGINT)
     assert proc.wait(timeout=120) == 143
@@ -194,12 +168,12 @@ def test_ctrl_c_saves_last_and_says_how_to_resume(tmp_path, canonical_data):
     assert [ln for ln in lines if ln.startswith("error:")] == [lines[-1]], err[-2000:]
     assert lines[-1].startswith(f"error: {run}: stopped by SIGINT (Ctrl-C) at epoch ")
     assert f"hydra.run.dir={run} ckpt_path=last" in lines[-1]
-    saved = _load(last)
+    saved = load_checkpoint(last)
     assert saved["global_step"] >= 3 and _adam_steps(saved) == {saved["global_step"]}
     res = subprocess.run([str(BIN / "lit3d-train"), *common, f"trainer.max_epochs={saved['epoch'] + 1}",
-                          "ckpt_path=last"], cwd=REPO, env=_env(), capture_output=True, text=True, timeout=300)
+                          "ckpt_path=last"], cwd=REPO, env=child_env(), capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-3000:]
-    assert _load(last)["global_step"] > saved["global_step"]
+    assert load_checkpoint(last)["global_step"] > saved["global_step"]
 
 
 # ----------------------------------------------------------------------------- SIGKILL: completion GAN
@@ -209,13 +183,13 @@ def test_sigkill_then_resume_continues_completion_gan(tmp_path):
     common = [*COMPLETION, "logger=none", "callbacks.resume_state.every_n_train_batches=1",
               f"paths.data_dir={tmp_path}/data", f"hydra.run.dir={run}"]
     last = run / "checkpoints" / "last.ckpt"
-    proc = _start(["lit3d-train", *common, "trainer.max_epochs=200"], tmp_path / "first")
+    proc = start_script(["lit3d-train", *common, "trainer.max_epochs=200"], tmp_path / "first")
     _wait_for_checkpoint(proc, last, lambda c: c["epoch"] >= 1 and c["generator_steps"] > COMPLETION_BATCHES_PER_EPOCH,
                          tmp_path / "first")
     proc.send_signal(signal.SIGKILL)  # no handler, no final save: what survives is the last per-batch save
     assert proc.wait(timeout=60) == -signal.SIGKILL
 
-    saved = _load(last)
+    saved = load_checkpoint(last)
     epoch, batches = saved["epoch"], saved["generator_steps"]
     assert epoch >= 1 and batches > COMPLETION_BATCHES_PER_EPOCH
     assert saved["global_step"] == 2 * batches  # critic + generator step per batch
@@ -224,9 +198,9 @@ def test_sigkill_then_resume_continues_completion_gan(tmp_path):
 
     total = (epoch + 2) * COMPLETION_BATCHES_PER_EPOCH
     res = subprocess.run([str(BIN / "lit3d-train"), *common, f"trainer.max_epochs={epoch + 2}", "ckpt_path=last"],
-                         cwd=REPO, env=_env(), capture_output=True, text=True, timeout=600)
+                         cwd=REPO, env=child_env(), capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr[-3000:]
-    final = _load(last)
+    final = load_checkpoint(last)
     assert final["epoch"] in (epoch + 1, epoch + 2)  # end-of-epoch save_last: the counter may have moved on
     assert final["generator_steps"] == total and final["global_step"] == 2 * total
     assert _adam_steps(final, 0) == {total} and _adam_steps(final, 1) == {total}
@@ -243,7 +217,7 @@ def test_killed_data_generation_keeps_finished_items_and_resumes_identically(tmp
                  "data.sizes={train:120,val:0,test_same:0,test_cross:0,test_unseen:0}"]
     data_dir = tmp_path / "data"
     items_dir = data_dir / "completion_demo" / "items"  # the demo's data_dir
-    proc = _start(["lit3d-data", *overrides, f"paths.data_dir={data_dir}", f"hydra.run.dir={tmp_path}/run"],
+    proc = start_script(["lit3d-data", *overrides, f"paths.data_dir={data_dir}", f"hydra.run.dir={tmp_path}/run"],
                   tmp_path / "data_cli")
     t0 = time.monotonic()
     while len(list(items_dir.rglob("*.npz"))) < 5:
@@ -316,7 +290,7 @@ def test_nonfinite_loss_raise_stops_with_step_and_term(compose_cfg, canonical_da
 def test_nonfinite_loss_skip_counts_and_keeps_weights(compose_cfg, canonical_data):
     cfg = _overflowing(compose_cfg, canonical_data, "skip", "callbacks.resume_state.every_n_train_batches=1")
     run_cli(train, cfg)
-    ckpt = _load(Path(cfg.paths.output_dir) / "checkpoints" / "last.ckpt")
+    ckpt = load_checkpoint(Path(cfg.paths.output_dir) / "checkpoints" / "last.ckpt")
     assert ckpt["skipped_steps"] == CANONICAL_STEPS_PER_EPOCH  # every step overflowed, every one was skipped
     assert all(torch.isfinite(v).all() for v in ckpt["state_dict"].values()), "a skipped step changed the weights"
 
@@ -344,7 +318,7 @@ def test_resume_state_rng_round_trips_through_a_weights_only_checkpoint(tmp_path
     torch.save({"callbacks": {"ResumeState": ResumeState(str(tmp_path)).state_dict()}}, tmp_path / "s.ckpt")
     expected = (random.random(), np.random.rand(3).tolist(), torch.rand(3).tolist())
     random.seed(2), np.random.seed(2), torch.manual_seed(2)  # a fresh process would start elsewhere
-    state = _load(tmp_path / "s.ckpt")["callbacks"]["ResumeState"]
+    state = load_checkpoint(tmp_path / "s.ckpt")["callbacks"]["ResumeState"]
     ResumeState(str(tmp_path)).load_state_dict(state)
     assert (random.random(), np.random.rand(3).tolist(), torch.rand(3).tolist()) == expected
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import shutil
 import subprocess
 
-from test_interrupt_resume import BIN, CANONICAL, CANONICAL_STEPS_PER_EPOCH, REPO, _env, _load
+from tests.helpers.runs import BIN, CANONICAL, CANONICAL_STEPS_PER_EPOCH, REPO, child_env, load_checkpoint
 
 FLAT = [a for a in CANONICAL if "limit_val_batches" not in a] + [
     "+trainer.limit_val_batches=1", "trainer.check_val_every_n_epoch=1", "task_info.monitor=epoch", "task_info.monitor_mode=min",
@@ -20,7 +20,7 @@ FLAT = [a for a in CANONICAL if "limit_val_batches" not in a] + [
 
 
 def _train(*args: str) -> None:
-    res = subprocess.run([str(BIN / "lit3d-train"), *FLAT, *args], cwd=REPO, env=_env(), capture_output=True,
+    res = subprocess.run([str(BIN / "lit3d-train"), *FLAT, *args], cwd=REPO, env=child_env(), capture_output=True,
                          text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-3000:]
 
@@ -29,7 +29,7 @@ def test_last_is_the_newest_state_with_a_flat_metric_and_after_a_move(tmp_path):
     run = tmp_path / "run"
     data = f"paths.data_dir={tmp_path}/data"
     _train(data, f"hydra.run.dir={run}", "trainer.max_epochs=3")
-    last = _load(run / "checkpoints" / "last.ckpt")
+    last = load_checkpoint(run / "checkpoints" / "last.ckpt")
     assert last["global_step"] == 3 * CANONICAL_STEPS_PER_EPOCH, "last.ckpt lags behind the run"
     assert sorted(p.name for p in (run / "checkpoints").iterdir()) == ["best-000.ckpt", "last.ckpt"]
 
@@ -38,7 +38,7 @@ def test_last_is_the_newest_state_with_a_flat_metric_and_after_a_move(tmp_path):
     _train(data, f"hydra.run.dir={moved}", "trainer.max_epochs=4", "ckpt_path=last")
     names = sorted(p.name for p in (moved / "checkpoints").iterdir())
     assert names == ["best-000.ckpt", "last.ckpt"], names  # no last-v1.ckpt, no second "best" after the move
-    last = _load(moved / "checkpoints" / "last.ckpt")
+    last = load_checkpoint(moved / "checkpoints" / "last.ckpt")
     assert last["global_step"] == 4 * CANONICAL_STEPS_PER_EPOCH
     state = next(v for k, v in last["callbacks"].items() if k.startswith("ModelCheckpoint"))
     assert state["best_model_path"] == str((moved / "checkpoints" / "best-000.ckpt").resolve())

@@ -23,8 +23,8 @@ import sys
 from pathlib import Path
 
 import pytest
-from test_cache_policy import TINY_NETS
-from test_interrupt_resume import BIN, REPO, _env
+from tests.helpers.runs import TINY_NETS
+from tests.helpers.runs import BIN, REPO, child_env
 
 from lit3d.cli.run_leftovers import clear_run_dirs
 from lit3d.utils.io import atomic_write_text, write_json
@@ -107,7 +107,7 @@ def test_a_run_dir_clears_its_own_leftovers_and_those_of_killed_runs_beside_it(t
 
 # ----------------------------------------------------------------------------- real runs, killed
 def _run(args: list[str], kill_at: str | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
-    env = _env()
+    env = child_env()
     env.pop("LIT3D_KILL_AT", None)
     if kill_at:
         env["LIT3D_KILL_AT"] = kill_at

@@ -3,40 +3,16 @@ from __future__ import annotations
 
 import csv
 
-import openpyxl
 import pytest
-import trimesh
 
 from datamodules.quality.mos import MosDataError, read_guo2016, read_liris_epfl, read_liris_masking
+from tests.helpers.files import liris_epfl, write_box_mesh, write_xlsx
 
 
-def _mesh(path):
-    path.parent.mkdir(parents=True, exist_ok=True)
-    trimesh.creation.box().export(path)
 
 
-def _xlsx(path, rows, title_rows=(("LIRIS/EPFL subjective scores",),), sheet="MOS"):
-    wb = openpyxl.Workbook()
-    ws = wb.active
-    ws.title = sheet
-    for r in title_rows:
-        ws.append(list(r))
-    for r in rows:
-        ws.append(list(r))
-    wb.save(path)
 
 
-def liris_epfl(root, rows=None, missing=()):
-    shapes = ("Armadillo", "Dyno", "RockerArm", "Venus")
-    for s in shapes:
-        _mesh(root / s / f"{s}.obj")
-        for k in (1, 2):
-            if f"{s}_noise_{k}" not in missing:
-                _mesh(root / s / f"{s}_noise_{k}.obj")
-    if rows is None:
-        rows = [("Model", "Observer 1", "MOS")] + [(f"{s}_noise_{k}", 1, 2.5 * k) for s in shapes for k in (1, 2)]
-    _xlsx(root / "MOS_GeneralPurpose.xlsx", rows)
-    return root
 
 
 def test_liris_epfl_reads_pairs(tmp_path):
@@ -58,7 +34,7 @@ def test_missing_mesh_names_the_row(tmp_path):
 
 def test_unmatched_row_and_missing_column_and_range(tmp_path):
     root = liris_epfl(tmp_path / "a", rows=[("Model", "MOS"), ("Armadillo_noise_1", 3), ("Bunny_noise_1", 2)])
-    _mesh(root / "extra" / "Bunny_noise_1.obj")
+    write_box_mesh(root / "extra" / "Bunny_noise_1.obj")
     with pytest.raises(MosDataError, match="Bunny_noise_1.*matches no shape of liris_epfl"):
         read_liris_epfl(root)
     root = liris_epfl(tmp_path / "b", rows=[("Model", "Rating"), ("Armadillo_noise_1", 3)])
@@ -78,7 +54,7 @@ def test_no_reference_and_no_spreadsheet(tmp_path):
     with pytest.raises(MosDataError, match="no reference mesh for shape 'venus'"):
         read_liris_epfl(root)
     (tmp_path / "b" / "Dyno").mkdir(parents=True)
-    _mesh(tmp_path / "b" / "Dyno" / "Dyno.obj")
+    write_box_mesh(tmp_path / "b" / "Dyno" / "Dyno.obj")
     with pytest.raises(MosDataError, match="no score spreadsheet"):
         read_liris_epfl(tmp_path / "b")
     with pytest.raises(MosDataError, match="dataset root not found"):
@@ -88,12 +64,12 @@ def test_no_reference_and_no_spreadsheet(tmp_path):
 def test_liris_masking_flat_layout_with_shape_column(tmp_path):
     # flat folder, reference marked "_ref", a shape column, MOS 0..4 with 4 = identical
     for s in ("Armadillo", "Dyno", "Lion", "Bimba"):
-        _mesh(tmp_path / "models" / f"{s}_ref.ply")
+        write_box_mesh(tmp_path / "models" / f"{s}_ref.ply")
         for k in range(1, 4):
-            _mesh(tmp_path / "models" / f"{s}-noise-rough-{k}.ply")
+            write_box_mesh(tmp_path / "models" / f"{s}-noise-rough-{k}.ply")
     rows = [("Object", "Distorted model", "MOS")] + [(s, f"{s}-noise-rough-{k}", 4 - k)
                                                       for s in ("Armadillo", "Dyno", "Lion", "Bimba") for k in range(1, 4)]
-    _xlsx(tmp_path / "masking_mos.xlsx", rows, title_rows=())
+    write_xlsx(tmp_path / "masking_mos.xlsx", rows, title_rows=())
     ds = read_liris_masking(tmp_path)
     assert len(ds.items) == 12 and ds.layout.higher_is_better
     assert ds.items[0].reference.name == "Armadillo_ref.ply"
@@ -103,9 +79,9 @@ def test_liris_masking_flat_layout_with_shape_column(tmp_path):
 def test_guo2016_csv_and_data_range(tmp_path):
     shapes = ("dwarf", "hulk", "squirrel", "statue")
     for s in shapes:
-        _mesh(tmp_path / s / f"{s}.obj")
+        write_box_mesh(tmp_path / s / f"{s}.obj")
         for k in ("noise_1", "taubin_1"):
-            _mesh(tmp_path / s / f"{s}_{k}.obj")
+            write_box_mesh(tmp_path / s / f"{s}_{k}.obj")
     with open(tmp_path / "guo_scores.csv", "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["stimulus", "score"])

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import os
 import stat
-import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -19,19 +18,11 @@ from PIL import Image
 from lit3d.cli import reconstruct as rec
 from lit3d.reconstruct.depth_io import InputError, read_depth, read_depth_info
 from lit3d.utils.io import OutputError, atomic_write_bytes, check_output_dir, unique_names, write_file_set
+from tests.helpers.files import file_tree, write_depth_png
 
 
-def _tree(root: Path) -> dict[str, bytes | None]:
-    """Every path under ``root`` -> its bytes (None for folders): what a run must leave as it was."""
-    return {str(p.relative_to(root)): (p.read_bytes() if p.is_file() else None) for p in sorted(root.rglob("*"))}
 
 
-def _depth_png(path: Path) -> Path:
-    d = np.zeros((24, 32), np.uint16)
-    d[6:18, 8:24] = 1500
-    path.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(d).save(path)
-    return path
 
 
 def _run(capsys, *argv) -> tuple[int, list[str]]:
@@ -45,26 +36,6 @@ def fake_ckpt(tmp_path) -> Path:
     p = tmp_path / "model.ckpt"
     p.write_bytes(b"not loaded: the output checks come first")
     return p
-
-
-@pytest.fixture
-def readonly_dir(tmp_path):
-    """A folder no file can be written into: chmod 555, or (as root, who ignores modes) a read-only
-    tmpfs mounted on it; skipped where neither works."""
-    d = tmp_path / "ro"
-    d.mkdir()
-    if os.geteuid() != 0:
-        d.chmod(0o555)
-        yield d
-        d.chmod(0o755)
-        return
-    if subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=64k", "tmpfs", str(d)],
-                      capture_output=True).returncode != 0:
-        pytest.skip("running as root and cannot mount a read-only tmpfs")
-    try:
-        yield d
-    finally:
-        subprocess.run(["umount", str(d)], check=False)
 
 
 # ------------------------------------------------------------------ the writer
@@ -85,15 +56,15 @@ def test_a_set_with_one_bad_name_writes_nothing(tmp_path):
     (tmp_path / "cow.obj").write_text("old")
     with pytest.raises(OutputError, match="cow.json: an output file of this name exists as a folder"):
         write_file_set(tmp_path, {"cow.obj": b"new", "cow.png": b"p", "cow.json": b"{}"})
-    assert _tree(tmp_path) == {"cow.json": None, "cow.obj": b"old"}
+    assert file_tree(tmp_path) == {"cow.json": None, "cow.obj": b"old"}
 
 
 def test_set_refuses_to_replace_an_input(tmp_path):
-    src = _depth_png(tmp_path / "cow.png")
+    src = write_depth_png(tmp_path / "cow.png")
     before = src.read_bytes()
     with pytest.raises(OutputError, match="would replace the input"):
         write_file_set(tmp_path, {"cow.obj": b"m", "cow.png": b"picture"}, protected=[src])
-    assert src.read_bytes() == before and sorted(_tree(tmp_path)) == ["cow.png"]
+    assert src.read_bytes() == before and sorted(file_tree(tmp_path)) == ["cow.png"]
 
 
 def test_unique_names_keep_the_extension_then_the_folder():
@@ -121,43 +92,43 @@ def test_check_output_dir_one_line_per_problem(tmp_path, readonly_dir):
 # ------------------------------------------------------------------ lit3d-reconstruct: file system
 def test_reconstruct_refuses_out_that_would_replace_the_input(tmp_path, fake_ckpt, capsys):
     same = tmp_path / "same"
-    src = _depth_png(same / "cow.png")
-    before = _tree(same)
+    src = write_depth_png(same / "cow.png")
+    before = file_tree(same)
     code, lines = _run(capsys, src, "--ckpt", fake_ckpt, "--out", same)
     assert code == 2 and len(lines) == 1, lines
     assert lines[0].startswith("lit3d-reconstruct: error: ") and str(src) in lines[0]
     assert "would replace the input" in lines[0]
-    assert _tree(same) == before
+    assert file_tree(same) == before
     # --no-figure writes no .png: then the same folder is fine for the checks (the stand-in checkpoint fails next)
     code, lines = _run(capsys, src, "--ckpt", fake_ckpt, "--out", same, "--no-figure")
     assert code == 2 and "model.ckpt" in lines[-1]
-    assert _tree(same) == before
+    assert file_tree(same) == before
 
 
 def test_reconstruct_refuses_an_out_that_is_a_file_or_read_only(tmp_path, fake_ckpt, readonly_dir, capsys):
-    src = _depth_png(tmp_path / "in" / "cow.png")
+    src = write_depth_png(tmp_path / "in" / "cow.png")
     a_file = tmp_path / "out.txt"
     a_file.write_text("mine")
     for out, words in ((a_file, "is an existing file"), (a_file / "sub", "which is a file"),
                        (readonly_dir, "not writable"), (readonly_dir / "new", "not writable")):
-        before = _tree(tmp_path)
+        before = file_tree(tmp_path)
         code, lines = _run(capsys, src, "--ckpt", fake_ckpt, "--out", out)
         assert code == 2 and len(lines) == 1 and words in lines[0] and str(out) in lines[0], lines
         assert "internal error" not in lines[0] and "model.ckpt" not in lines[0]  # before the checkpoint
-        assert _tree(tmp_path) == before
+        assert file_tree(tmp_path) == before
 
 
 def test_reconstruct_refuses_an_output_name_taken_by_a_folder(tmp_path, fake_ckpt, capsys):
-    src = _depth_png(tmp_path / "in" / "cow.png")
+    src = write_depth_png(tmp_path / "in" / "cow.png")
     out = tmp_path / "out"
     (out / "cow_occupancy.npz").mkdir(parents=True)
     code, lines = _run(capsys, src, "--ckpt", fake_ckpt, "--out", out)
     assert code == 2 and len(lines) == 1 and "cow_occupancy.npz" in lines[0] and "folder" in lines[0], lines
-    assert _tree(out) == {"cow_occupancy.npz": None}
+    assert file_tree(out) == {"cow_occupancy.npz": None}
 
 
 def test_reconstruct_refuses_fov_zero_and_bad_depth_scale(tmp_path, fake_ckpt, capsys):
-    src = _depth_png(tmp_path / "cow.png")
+    src = write_depth_png(tmp_path / "cow.png")
     for opt, val in (("--fov", "0"), ("--fov", "180"), ("--fov", "-5"), ("--depth-scale", "0")):
         code, lines = _run(capsys, src, "--ckpt", fake_ckpt, "--out", tmp_path / "out", opt, val)
         assert code == 2 and len(lines) == 1 and opt in lines[0], lines
@@ -166,7 +137,7 @@ def test_reconstruct_refuses_fov_zero_and_bad_depth_scale(tmp_path, fake_ckpt, c
 
 def test_colliding_stems_and_repeated_inputs_are_named_apart(tmp_path, fake_ckpt, capsys):
     d = tmp_path / "d"
-    _depth_png(d / "a_cow.png")
+    write_depth_png(d / "a_cow.png")
     np.save(d / "a_cow.npy", np.ones((24, 32), np.float32))
     code, lines = _run(capsys, d, d / "a_cow.png", "--ckpt", fake_ckpt, "--out", tmp_path / "out")
     text = "\n".join(lines)
@@ -249,11 +220,11 @@ def test_nan_colours_are_refused_in_one_line(tmp_path, binary, capsys):
     col[3, 1] = np.nan
     bad = _ply(tmp_path / "nan.ply", col, "float", binary)
     ok = _ply(tmp_path / "ok.ply", np.full((50, 3), 0.5, np.float32), "float", binary)
-    before = _tree(tmp_path)
+    before = file_tree(tmp_path)
     assert score.main([str(ok), str(bad), "--no-cache"]) == 2
     lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert len(lines) == 1 and str(bad) in lines[0] and "NaN" in lines[0], lines
-    assert _tree(tmp_path) == before
+    assert file_tree(tmp_path) == before
 
 
 def test_data_cache_items_get_the_users_umask(tmp_path):

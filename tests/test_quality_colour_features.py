@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
-from piq_helpers import piq_functions
+from tests.helpers.piq import piq_functions
 
 from lit3d.features.common import UNLEARNED_COLOUR_STYLES, overall_score
 from lit3d.features.points import PIQ_STYLES

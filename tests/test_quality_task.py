@@ -19,6 +19,7 @@ from datamodules.quality import SEVERITY_NAME, QualityDataModule
 from lit3d.quality.predict import QualityCheckpointError, load_predictor, predict_from_features
 from lit3d.quality.protocol import LearnedScore, TrainConfig, baseline_methods, leave_one_shape_out
 from lit3d.quality.module import QualityTask
+from tests.helpers.quality import make_dm
 
 
 def fake_features(ref, dist):
@@ -38,12 +39,6 @@ def fake_features(ref, dist):
             "faces_ratio": len(b.faces) / len(a.faces)}
 
 
-def make_dm(tmp_path, **kw) -> QualityDataModule:
-    args = dict(data_dir=str(tmp_path / "q"), shapes=["blob", "bumpy", "torus", "rock"], n_levels=2,
-                distortions=["noise", "taubin", "simplify", "quantize"], subdivisions=3,
-                feature_fn="test_quality_task.fake_features", seed=0)
-    args.update(kw)
-    return QualityDataModule(**args)
 
 
 def test_datamodule_prepares_once_and_describes(tmp_path):

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scipy.stats
 import torch
-from test_quality_task import make_dm
+from tests.helpers.quality import make_dm
 
 from datamodules.quality.batches import ShuffledBatches
 from lit3d.features.matrix import minibatch_count, minibatches

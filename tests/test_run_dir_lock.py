@@ -15,7 +15,7 @@ import time
 from datetime import datetime, timedelta
 from pathlib import Path
 
-from test_interrupt_resume import BIN, CANONICAL, REPO, _env, _start
+from tests.helpers.runs import BIN, CANONICAL, REPO, child_env, start_script
 
 # a few tiny completion items: lit3d-data runs in seconds
 TINY_DATA = ["experiment=completion_demo", "data.sizes={train:2,val:1,test_same:1,test_cross:1,test_unseen:1}",
@@ -23,7 +23,7 @@ TINY_DATA = ["experiment=completion_demo", "data.sizes={train:2,val:1,test_same:
 
 
 def _run(args: list[str], timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([str(BIN / args[0]), *args[1:]], cwd=REPO, env=_env(), capture_output=True, text=True,
+    return subprocess.run([str(BIN / args[0]), *args[1:]], cwd=REPO, env=child_env(), capture_output=True, text=True,
                           timeout=timeout)
 
 
@@ -43,7 +43,7 @@ def _holder(run: Path) -> subprocess.Popen:
     """A process that holds ``run``'s lock (it prints ``held`` once it does) until its stdin closes."""
     code = ("import sys; from lit3d.cli.rundir import lock_run_dir; lock_run_dir(sys.argv[1]); "
             "print('held', flush=True); sys.stdin.read()")
-    proc = subprocess.Popen([sys.executable, "-c", code, str(run)], cwd=REPO, env=_env(),
+    proc = subprocess.Popen([sys.executable, "-c", code, str(run)], cwd=REPO, env=child_env(),
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     assert proc.stdout.readline().strip() == "held"
     return proc
@@ -52,7 +52,7 @@ def _holder(run: Path) -> subprocess.Popen:
 def test_second_training_into_a_busy_run_dir_is_refused(tmp_path):
     run = tmp_path / "run"
     common = [*CANONICAL, "logger=none", f"paths.data_dir={tmp_path}/data", f"hydra.run.dir={run}"]
-    first = _start(["lit3d-train", *common, "trainer.max_epochs=500", "task.optimizer.lr=0.001"], tmp_path / "first")
+    first = start_script(["lit3d-train", *common, "trainer.max_epochs=500", "task.optimizer.lr=0.001"], tmp_path / "first")
     try:
         # Hydra writes config.yaml, hydra.yaml, then overrides.yaml (not atomically): wait until all are written
         written = [run / ".hydra" / n for n in ("config.yaml", "overrides.yaml")]
@@ -78,7 +78,7 @@ def test_wait_for_run_dir_waits_and_a_killed_holder_leaves_no_lock(tmp_path):
     run = tmp_path / "run"
     args = ["lit3d-data", *TINY_DATA, f"paths.data_dir={tmp_path}/data", f"hydra.run.dir={run}"]
     holder = _holder(run)
-    waiting = _start([*args, "wait_for_run_dir=true"], tmp_path / "waiting")
+    waiting = start_script([*args, "wait_for_run_dir=true"], tmp_path / "waiting")
     err = tmp_path / "waiting.err"
     _wait_for(lambda: "waiting for it" in err.read_text(), waiting, tmp_path / "waiting")
     assert f"{run}: run dir in use by pid {holder.pid} on " in err.read_text()
@@ -105,7 +105,7 @@ def test_timestamped_run_dirs_never_collide(tmp_path):
         d.mkdir(parents=True)
         (d / "other_run.txt").write_text("x")
     args = ["lit3d-data", *TINY_DATA, f"paths.data_dir={tmp_path}/data", f"paths.log_dir={tmp_path}/logs"]
-    procs = [_start(args, tmp_path / f"p{i}") for i in range(2)]  # two runs started at the same time
+    procs = [start_script(args, tmp_path / f"p{i}") for i in range(2)]  # two runs started at the same time
     for i, p in enumerate(procs):
         assert p.wait(timeout=180) == 0, (tmp_path / f"p{i}.err").read_text()[-3000:]
     for d in taken:
@@ -126,7 +126,7 @@ def test_a_run_that_waited_never_replaces_the_finished_run(tmp_path):
     holder = _holder(run)
     args = ["lit3d-train", *TINY_DATA, "logger=none", f"paths.data_dir={tmp_path}/data", f"hydra.run.dir={run}",
             "wait_for_run_dir=true"]
-    waiting = _start(args, tmp_path / "waiting")
+    waiting = start_script(args, tmp_path / "waiting")
     err = tmp_path / "waiting.err"
     _wait_for(lambda: "waiting for it" in err.read_text(), waiting, tmp_path / "waiting")
     # the run it waits for finishes: its results are in the dir when it lets go

@@ -73,7 +73,7 @@ def test_save_views_file_system_faults_one_line(pair, tmp_path, capsys):
     import stat
     import subprocess as sp
 
-    from test_output_writer import _tree
+    from tests.helpers.files import file_tree as _tree
 
     ref, dist = pair
     a_file = tmp_path / "notes.txt"

@@ -10,7 +10,7 @@ import torch
 from lit3d.completion.module import CompletionTask
 from lit3d.completion.step_cost import completion_step_cost
 from lit3d.utils.step_cost import CostCounter, SavedBytes
-from tests.completion_helpers import tiny_nets
+from tests.helpers.completion import tiny_nets
 
 META = torch.device("meta")
 

@@ -10,7 +10,7 @@ import torch
 
 from datamodules.canonical import CanonicalDataModule
 from datamodules.completion.recgan import RecganPair
-from test_mos_readers import liris_epfl  # the MOS dataset writer (published layout)
+from tests.helpers.files import liris_epfl
 
 
 def _write(path: Path, data: bytes | str) -> Path:
