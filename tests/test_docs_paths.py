@@ -4,7 +4,7 @@
 Checked, in the prose, the code blocks and the backticks alike:
 
 - file and folder paths under the checkout's top-level folders (``datamodules/completion/plan.py``,
-  ``lit3d/sensing/``, ``tests/test_import_structure.py``, ``conf/``...);
+  ``lit3d/sensing/``, ``tests/test_import_structure.py``, ``conf/``, ``.ci/run``...);
 - top-level files named bare in backticks (``pyproject.toml``, ``Makefile``) and relative markdown
   links;
 - dotted names of project code in backticks (``datamodules.cache.CacheBuilder``,
@@ -23,10 +23,10 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ("docs/design.md", "docs/CONTRIBUTING_TASKS.md")
-TOP = ("lit3d", "datamodules", "tests", "conf", "scripts", "benchmarks", "sweeps", "docs", "studies")
+TOP = ("lit3d", "datamodules", "tests", "conf", "scripts", "benchmarks", "sweeps", "docs", "studies", ".ci")
 EXAMPLE_TASK = "normals"  # CONTRIBUTING_TASKS.md's walkthrough task: named, not built
 
-PATH = re.compile(r"(?<![\w./-])((?:%s)/[\w./<>*{}-]*)" % "|".join(TOP))
+PATH = re.compile(r"(?<![\w./-])((?:%s)/[\w./<>*{}-]*)" % "|".join(map(re.escape, TOP)))
 # top-level files named bare (``pyproject.toml``); a bare ``nets.py`` is a file of the task being described
 BACKTICK_FILE = re.compile(r"`((?:[\w-]+\.(?:toml|cfg))|Makefile|LICENSE)`")
 LINK = re.compile(r"\]\(([^)#\s]+)(?:#[^)]*)?\)")
@@ -96,16 +96,17 @@ def test_the_scan_sees_paths_and_skips_templates(tmp_path, monkeypatch):
     (tmp_path / "docs" / "x.md").write_text(
         "```\ndatamodules/completion/   plan\n```\nSee `lit3d/cli/registry.py`, then datamodules/cache.py.\n"
         "Add `lit3d/<task>/evaluator.py` and `datamodules/normals/`; `pyproject.toml`; [a](other.md)\n"
-        "`datamodules.cache.CacheBuilder` and `datamodules.normals.NormalsDataModule`\n")
+        "`datamodules.cache.CacheBuilder` and `datamodules.normals.NormalsDataModule`; `.ci/run`, not x.ci/y\n")
     monkeypatch.setitem(globals(), "ROOT", tmp_path)
-    assert named_paths("docs/x.md") == ["datamodules/cache.py", "datamodules/completion/", "docs/other.md",
+    assert named_paths("docs/x.md") == [".ci/run", "datamodules/cache.py", "datamodules/completion/", "docs/other.md",
                                         "lit3d/cli/registry.py", "pyproject.toml"]
     assert named_objects("docs/x.md") == ["datamodules.cache.CacheBuilder"]
     assert _resolves("datamodules.cache.CacheBuilder") and not _resolves("datamodules.cache.NoSuchThing")
 
 
-ALL_DOCS = sorted({*DOCS, "README.md", "sweeps/README.md",
-                   *(p.relative_to(ROOT).as_posix() for p in (ROOT / "docs").glob("*.md")),
+# CHANGELOG.md is left out: its history names paths that have moved since, as it should
+ALL_DOCS = sorted({*DOCS, "README.md", "BENCHMARKS.md", "CREDITS.md", "sweeps/README.md",
+                   *(p.relative_to(ROOT).as_posix() for p in (ROOT / "docs").rglob("*.md")),
                    *(p.relative_to(ROOT).as_posix() for p in (ROOT / "studies").rglob("*.md"))})
 COMMAND = re.compile(r"python -m\s+((?:lit3d|datamodules|studies|benchmarks)\b[\w.<>*{}]*)")
 

@@ -289,7 +289,8 @@ def test_folder_cli_help_and_version(capsys):
         assert exc.value.code == 0
     out = capsys.readouterr().out
     assert "against the targets of a prepared completion data split" in out
-    assert out.count("    lit3d-eval-folder ") == 3  # three examples
+    assert out.count("    lit3d-eval-folder ") == 5  # five examples, two of them --targets
+    assert "--targets TARGET_DIR" in out and "paired with" in out
     assert out.endswith(f"lit3d-eval-folder (lit3d) {lit3d_version()}\n")
 
 

@@ -77,9 +77,9 @@ def find_prediction(pred_dir: Path, split: str, item: dict) -> Path | None:
     return None
 
 
-def read_grid_prediction(path: Path, shape: tuple[int, ...]) -> np.ndarray:
+def read_grid_prediction(path: Path, shape: tuple[int, ...] | None) -> np.ndarray:
     """``(R, R, R)`` float32 occupancy probabilities in [0, 1] of a grid prediction file (module doc;
-    an SDF gives 1 where negative, else 0), checked against the target's ``shape``."""
+    an SDF gives 1 where negative, else 0), checked against the target's ``shape`` (None: any 3-D grid)."""
     arr = load_array(path)
     sdf = is_sdf(arr)
     arr = np.asarray(arr)
@@ -87,7 +87,11 @@ def read_grid_prediction(path: Path, shape: tuple[int, ...]) -> np.ndarray:
         raise ShapeError(f"{path}: array has dtype {arr.dtype}, expected bool, integer or float values")
     if arr.ndim == 4 and 1 in (arr.shape[0], arr.shape[-1]):
         arr = arr.reshape(arr.shape[1:] if arr.shape[0] == 1 else arr.shape[:-1])
-    if tuple(arr.shape) != tuple(shape):
+    if arr.size == 0:
+        raise ShapeError(f"{path}: empty array")
+    if shape is None and arr.ndim != 3:
+        raise ShapeError(f"{path}: array of shape {tuple(arr.shape)}, expected a 3-D grid")
+    if shape is not None and tuple(arr.shape) != tuple(shape):
         raise ShapeError(f"{path}: grid of shape {tuple(arr.shape)}, expected the target's {tuple(shape)}")
     values = arr.astype(np.float64, copy=False)
     if not np.isfinite(values).all():
