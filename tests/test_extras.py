@@ -13,7 +13,7 @@ import pytest
 from PIL import Image
 
 from lit3d.cli.common import cli_main, compose_config
-from lit3d.cli.extra_checks import default_logger
+from lit3d.cli.extra_checks import NO_WANDB_NOTE, default_logger
 from lit3d.utils.extras import EXTRAS, MissingExtra, has_extra, installed, require
 
 
@@ -124,22 +124,46 @@ def test_default_logger_is_none_without_wandb(capsys, monkeypatch):
     args = ["experiment=completion_demo"]
     composed = compose_config("train", args, return_hydra_config=True)
     assert composed.hydra.runtime.choices.logger == "wandb", "the default this fallback is for"
-    assert default_logger(args, composed) == args  # wandb is installed here
+    assert default_logger(args, composed) == (args, None)  # wandb is installed here
     _without(monkeypatch, "wandb")
-    assert default_logger(args, composed) == [*args, "logger=none"]
-    assert _lines(capsys) == ["note: wandb is not installed: logging to the CSV log only (logger=none); "
-                              "pip install 'lit3d[wandb]' for the offline W&B log"]
-    assert default_logger([*args, "logger=wandb"], composed) == [*args, "logger=wandb"]
-    assert default_logger(["-m", *args], None) == ["-m", *args, "logger=none"]
-    assert default_logger(["--help", *args], None) == ["--help", *args]  # runs nothing: no note
+    assert default_logger(args, composed) == ([*args, "logger=none"], NO_WANDB_NOTE)
+    assert default_logger([*args, "logger=wandb"], composed) == ([*args, "logger=wandb"], None)
+    assert default_logger(["-m", *args], None) == (["-m", *args, "logger=none"], NO_WANDB_NOTE)
+    assert default_logger(["--help", *args], None) == (["--help", *args], None)  # runs nothing: no note
     tb = compose_config("train", [*args, "logger=tensorboard"], return_hydra_config=True)
-    assert default_logger(args, tb) == args  # a config whose logger is not the W&B default
+    assert default_logger(args, tb) == (args, None)  # a config whose logger is not the W&B default
+
+
+def test_a_refused_command_line_without_wandb_is_still_one_line(tmp_path, capsys, monkeypatch):
+    """No note about the logger before the error line (exit 2)."""
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+    _without(monkeypatch, "wandb", "anny")
+    for args in (["experiment=canonical_humans"], ["experiment=completion_demo", "data.batch_size=0"]):
+        with pytest.raises(SystemExit) as info:
+            cli_main(_never_run, [*args, f"hydra.run.dir={tmp_path}/run"])
+        lines = _lines(capsys)
+        assert info.value.code == 2 and len(lines) == 1 and lines[0].startswith("error: "), lines
 
 
 def test_train_without_wandb_composes_with_the_csv_log_only(tmp_path, capsys, monkeypatch):
     """Through :func:`cli_main`: the command line Hydra gets ends with ``logger=none``."""
     monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
     _without(monkeypatch, "wandb")
+    monkeypatch.setattr(sys, "argv", ["lit3d-train"])  # cli_main hands Hydra its command line in sys.argv
     argv = cli_main(lambda: list(sys.argv[1:]), ["experiment=completion_demo", f"hydra.run.dir={tmp_path}/run"])
     assert argv[-1] == "logger=none"
-    assert any("pip install 'lit3d[wandb]'" in ln for ln in _lines(capsys))
+    assert _lines(capsys) == [f"note: {NO_WANDB_NOTE}"]
+
+
+def test_colour_measures_without_piq_name_the_install_line(monkeypatch, capsys):
+    """piq is no extra (its torchvision would replace the CPU torch): its line says how to install it,
+    and a command reports it as a user error (exit 2), not as an internal one."""
+    from lit3d.cli.about import report_error
+    from lit3d.metrics.image import colour_measures
+
+    monkeypatch.setattr(colour_measures, "_PIQ_FUNCTIONS", {})  # nothing loaded yet
+    _without(monkeypatch, "piq")
+    with pytest.raises(MissingExtra, match=r"need piq: pip install --no-deps piq==0\.8\.0") as info:
+        colour_measures.piq_functions()
+    assert report_error("lit3d-score", info.value) == 2
+    assert _lines(capsys) == [f"lit3d-score: error: {info.value}"]

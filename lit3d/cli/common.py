@@ -210,15 +210,18 @@ def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None, c
             check_group_overrides(args)
             check_override_extras(args)  # a launcher or sweeper plugin that is not installed: before Hydra composes
             composed = check_composes(args, config_name)
-            if (command or config_name) == "train":  # the loggers are lit3d-train's
-                defaulted = default_logger(args, composed)
-                if defaulted != args:
-                    args, composed = defaulted, check_composes(defaulted, config_name)
-                check_logger_extras(composed)
             check_data_extras(composed, args)
+            note = None
+            if (command or config_name) == "train":  # the loggers are lit3d-train's
+                args, note = default_logger(args, composed)
+                if note is not None:
+                    composed = check_composes(args, config_name)
+                check_logger_extras(composed)
             check_config_values(composed)  # types and ranges (lit3d.cli.config_checks)
             check_output_paths(composed)
             args, run_dir_lock = claim_run_dir(composed, args, command or config_name)  # one process per run dir
+            if note is not None:  # after every check: a refused command line stays one line
+                print(f"note: {note}", file=sys.stderr, flush=True)
         except (UserError, ConfigValueError, OutputError, MissingExtra) as exc:
             if _debug_requested():
                 raise

@@ -7,11 +7,11 @@
 - the Anny data (``data.source.kind=anny``: ``data=anny``, ``experiment=canonical_humans``) needs ``lit3d[body]``.
 
 ``lit3d-train``'s default logger is W&B (offline); where ``wandb`` is not installed and the command line
-picks no logger, :func:`default_logger` picks ``logger=none`` (the CSV log every run keeps) and says so.
+picks no logger, :func:`default_logger` picks ``logger=none`` (the CSV log every run keeps) and the
+command says so once every check has passed.
 """
 from __future__ import annotations
 
-import sys
 from collections.abc import Sequence
 
 from omegaconf import DictConfig, OmegaConf
@@ -64,9 +64,13 @@ def check_data_extras(cfg: DictConfig | None, args: Sequence[str] = ()) -> None:
     require("body", f"experiment={experiment} (data.source.kind=anny)" if by_experiment else "data.source.kind=anny")
 
 
-def default_logger(args: Sequence[str], composed: DictConfig | None) -> list[str]:
-    """``args`` plus ``logger=none`` when the logger would be the default W&B one and ``wandb`` is not
-    installed (``pip install lit3d`` without ``[wandb]``), with a note saying so; else ``args`` as given.
+NO_WANDB_NOTE = ("wandb is not installed: logging to the CSV log only (logger=none); "
+                 "pip install 'lit3d[wandb]' for the offline W&B log")
+
+
+def default_logger(args: Sequence[str], composed: DictConfig | None) -> tuple[list[str], str | None]:
+    """``(args plus logger=none, the note saying so)`` when the logger would be the default W&B one and
+    ``wandb`` is not installed (``pip install lit3d`` without ``[wandb]``); else ``(args, None)``.
 
     A logger on the command line is kept (and checked by :func:`check_logger_extras`). ``composed``: the
     config of ``args``; None where :func:`~lit3d.cli.compose.check_composes` composes nothing (Hydra's flags):
@@ -74,11 +78,9 @@ def default_logger(args: Sequence[str], composed: DictConfig | None) -> list[str
     """
     args = list(args)
     if has_extra("wandb") or any(_key_value(a)[0] == "logger" for a in args):
-        return args
+        return args, None
     if composed is None and not any(a in ("-m", "--multirun") for a in args):
-        return args
+        return args, None
     if composed is not None and OmegaConf.select(composed, "hydra.runtime.choices.logger", default=None) != "wandb":
-        return args
-    print("note: wandb is not installed: logging to the CSV log only (logger=none); "
-          "pip install 'lit3d[wandb]' for the offline W&B log", file=sys.stderr, flush=True)
-    return [*args, "logger=none"]
+        return args, None
+    return [*args, "logger=none"], NO_WANDB_NOTE
