@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Create .venv and install lit3d with its dev extras; make sure the EGL libraries are there. This is all
+# Create .venv and install lit3d with every extra and the test tools (lit3d[all,dev]: the body model, SLURM,
+# W&B, TensorBoard, Optuna); make sure the EGL libraries are there. This is all
 # that make demo needs; make test and make bench also run scripts/bootstrap_extras.sh (the real-model
 # catalogues and the Anny body-model cache, about 5 min on a bare machine).
 #   TORCH_SPEC   torch requirement (default torch==2.13.0, the CPU wheel). GPU users:
@@ -46,9 +47,9 @@ if [ ! -x "$VENV/bin/python" ]; then
   "$PYTHON" -m venv "$VENV"
 fi
 "$VENV/bin/python" -m pip install -q --upgrade pip >/dev/null 2>&1 || true
-echo "bootstrap: installing $TORCH_SPEC and lit3d[dev]"
+echo "bootstrap: installing $TORCH_SPEC and lit3d[all,dev]"
 "$VENV/bin/pip" install -q "$TORCH_SPEC"
-"$VENV/bin/pip" install -q -e ".[dev]"
+"$VENV/bin/pip" install -q -e ".[all,dev]"  # all: make demo and make test use every extra
 # piq: the colour image measures of the quality features (FSIMc, VIF, GMSD, HaarPSI, MDSI, VSI of coloured point
 # clouds, lit3d.metrics.image.colour_measures) and the reference of tests/test_fsim_piq.py. --no-deps: piq requires
 # torchvision, whose PyPI wheels are CUDA builds that replace the CPU torch (or fail to load beside it); the six

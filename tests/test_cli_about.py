@@ -96,3 +96,30 @@ def test_console_script_help_and_version():
     assert "lit3d-train experiment=completion_demo" in res.stdout
     res = subprocess.run([exe, "--version"], cwd=REPO, capture_output=True, text=True, timeout=120)
     assert res.returncode == 0 and res.stdout.strip() == f"lit3d-train (lit3d) {lit3d_version()}"
+
+
+ARGPARSE_CLIS = ("score", "reconstruct", "eval_folder")
+DOC_NAME = re.compile(r"(?<![\w/.])(README\.md|CHANGELOG\.md|CITATION\.cff|docs/[\w./-]*)")
+
+
+def _project_url() -> str:
+    import tomllib
+
+    return tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["urls"]["Source"]
+
+
+@pytest.mark.parametrize("command", sorted(HYDRA_CLIS) + [f"lit3d-{m.replace('_', '-')}" for m in ARGPARSE_CLIS])
+def test_help_names_docs_by_their_online_address(command, monkeypatch, capsys):
+    """A wheel ships no README.md or docs/: each command's --help names them by the project's address
+    (``[project.urls]`` Source), and the page it names is in the checkout."""
+    if command in HYDRA_CLIS:
+        text = _run_main(HYDRA_CLIS[command], ["--help"], monkeypatch, capsys)
+    else:
+        module = command.removeprefix("lit3d-").replace("-", "_")
+        text = importlib.import_module(f"lit3d.cli.{module}")._parser().format_help()
+    url = _project_url()
+    text = " ".join(text.split())
+    for page in re.findall(re.escape(url) + r"/blob/main/([\w./-]*\w)", text):
+        assert (REPO / page).is_file(), page
+    local = DOC_NAME.findall(re.sub(re.escape(url) + r"[\w./-]*", "", text))
+    assert not local, f"{command} --help names files a wheel does not ship: {local}"

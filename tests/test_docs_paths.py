@@ -94,12 +94,12 @@ def test_the_scan_sees_paths_and_skips_templates(tmp_path, monkeypatch):
     example task do not; trailing punctuation is not part of a path."""
     (tmp_path / "docs").mkdir()
     (tmp_path / "docs" / "x.md").write_text(
-        "```\ndatamodules/completion/   plan\n```\nSee `lit3d/cli/registry.py`, then datamodules/cache.py.\n"
+        "```\ndatamodules/completion/   plan\n```\nSee `lit3d/runtime/registry.py`, then datamodules/cache.py.\n"
         "Add `lit3d/<task>/evaluator.py` and `datamodules/normals/`; `pyproject.toml`; [a](other.md)\n"
         "`datamodules.cache.CacheBuilder` and `datamodules.normals.NormalsDataModule`; `.ci/run`, not x.ci/y\n")
     monkeypatch.setitem(globals(), "ROOT", tmp_path)
     assert named_paths("docs/x.md") == [".ci/run", "datamodules/cache.py", "datamodules/completion/", "docs/other.md",
-                                        "lit3d/cli/registry.py", "pyproject.toml"]
+                                        "lit3d/runtime/registry.py", "pyproject.toml"]
     assert named_objects("docs/x.md") == ["datamodules.cache.CacheBuilder"]
     assert _resolves("datamodules.cache.CacheBuilder") and not _resolves("datamodules.cache.NoSuchThing")
 

@@ -82,6 +82,38 @@ def test_wheel_ships_configs_license_and_py_typed(wheel):
     assert not any(n.startswith("conf/") for n in names), "configs only inside the lit3d package"
 
 
+# extra -> a requirement it adds, which the base install does not have
+EXTRA_REQUIREMENTS = {"body": "anny", "slurm": "hydra-submitit-launcher", "wandb": "wandb", "tensorboard": "tensorboard",
+                      "optuna": "hydra-optuna-sweeper"}
+URL_LABELS = {"Homepage", "Documentation", "Source", "Changelog", "Citation"}
+
+
+def test_wheel_metadata_names_the_project_urls_and_the_extras(wheel):
+    """``pip show``/an index page link the repository (CITATION.cff's repository-code), and the heavy
+    features are extras: ``Requires-Dist: anny...; extra == "body"``, not in the base requirements."""
+    import email.parser
+    import re
+
+    with zipfile.ZipFile(wheel) as z:
+        (metadata,) = [n for n in z.namelist() if n.endswith(".dist-info/METADATA")]
+        meta = email.parser.Parser().parsestr(z.read(metadata).decode())
+    repo = re.search(r'^repository-code: "([^"]+)"$', (REPO / "CITATION.cff").read_text(), re.M).group(1)
+    urls = dict(u.split(", ", 1) for u in meta.get_all("Project-URL"))
+    assert set(urls) == URL_LABELS and all(u.startswith(repo) for u in urls.values()), urls
+    assert urls["Source"] == repo
+    for label in ("Changelog", "Citation"):  # the files they name are the project's own
+        assert (REPO / urls[label].removeprefix(f"{repo}/blob/main/")).is_file(), urls[label]
+    assert set(meta.get_all("Provides-Extra")) == {*EXTRA_REQUIREMENTS, "all", "dev"}
+    requires = meta.get_all("Requires-Dist")
+    base = {re.match(r"[\w.-]+", r).group(0).lower() for r in requires if "extra ==" not in r}
+    assert {"torch", "lightning", "hydra-core", "trimesh", "pyrender"} <= base
+    for extra, package in EXTRA_REQUIREMENTS.items():
+        assert package not in base, f"{package} is in the base install; expected only with lit3d[{extra}]"
+        assert any(r.startswith(package) and f'extra == "{extra}"' in r for r in requires), (extra, requires)
+    assert any(r.startswith("roma") and 'extra == "body"' in r for r in requires)
+    assert any(r.startswith("lit3d[") and 'extra == "all"' in r for r in requires)
+
+
 def test_installed_wheel_trains_outside_the_checkout(wheel, tmp_path):
     assert not tmp_path.resolve().is_relative_to(REPO)
     venv = tmp_path / "venv"

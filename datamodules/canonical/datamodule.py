@@ -79,6 +79,7 @@ from datamodules.canonical.splits import (CANONICAL_SPLITS, deal, fold_pairs, sp
                                           thin_training)
 from datamodules.loaders import evaluation_loader
 from lit3d.body_model import bodies
+from lit3d.utils.extras import require
 
 log = logging.getLogger("lit3d")
 
@@ -109,6 +110,8 @@ class CanonicalDataModule(pl.LightningDataModule):
         self.training = parse(TrainingSettings, training, "training")
         if self.source_settings.kind not in ROOTLESS and not root:
             raise DataError(f"data source '{self.source_settings.kind}' needs root=<folder with the meshes>")
+        if self.source_settings.kind == "anny":  # the Anny body model: the extra lit3d[body]
+            require("body", "data.source.kind=anny")
         n_views = len(self.render.azimuths)
         eval_views = self.split.eval_views
         if eval_views is not None and (not eval_views or any(not 0 <= int(v) < n_views for v in eval_views)):

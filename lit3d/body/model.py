@@ -27,6 +27,7 @@ import torch
 
 from lit3d.body_model.bodies import ELBOW, ELBOW_AXIS, JOINT_LIMITS, BodyModel, anny_to_y_up, right_of
 from lit3d.body.surface import incidence_matrix
+from lit3d.utils.extras import require
 
 PHENOTYPES = ("gender", "age", "muscle", "weight", "height", "proportions")
 # Anny (x, y, z; z up, facing -y) -> camera (x right, y down, z forward): (x, -z, y); a rotation (det +1)
@@ -90,6 +91,7 @@ class Body:
     :class:`~lit3d.body_model.bodies.BodyModel` (loads anny on first use)."""
 
     def __init__(self, model: BodyModel | None = None):
+        require("body", "the Anny body fit")
         self.model = model or BodyModel()
         anny = self.model.model
         labels = list(anny.bone_labels)

@@ -36,6 +36,7 @@ from lit3d.body.model import DOFS, PHENOTYPES, Body, Params
 from lit3d.body.points import Observation
 from lit3d.body.results import fit_quality, render_mask
 from lit3d.utils.checkpoints import load_checkpoint
+from lit3d.utils.extras import require
 
 FORMAT = "lit3d-body-regressor-1"
 N_EXTRAS = 3  # bounding box height and width (m), median depth (m)
@@ -208,7 +209,8 @@ def checkpoint(net: BodyRegressor, prep: Preprocess, net_args: dict, train: dict
 
 def load_regressor(path: str | Path) -> Regressor:
     """The :class:`Regressor` of a checkpoint; any problem is one :class:`BodyCheckpointError`
-    line naming the file."""
+    line naming the file; :class:`~lit3d.utils.extras.MissingExtra` without ``lit3d[body]`` (it fits Anny)."""
+    require("body", "the body regressor")
     ck = load_checkpoint(path, BodyCheckpointError)
     if not isinstance(ck, dict) or ck.get("format") != FORMAT:
         found = ck.get("format") if isinstance(ck, dict) else type(ck).__name__

@@ -17,6 +17,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from lit3d.utils.checkpoints import first_line
+from lit3d.utils.extras import MissingExtra
 from lit3d.utils.provenance import lit3d_version
 
 EXIT_USER = 2        # a problem with the command line, a config or an input file
@@ -56,8 +57,9 @@ def about_flags(args: Sequence[str], hydra_main: Callable) -> list[str]:
     return args
 
 
-# NotImplementedError: an input format or option the command does not take
-USER_ERRORS = (ValueError, FileNotFoundError, PermissionError, NotImplementedError)
+# NotImplementedError: an input format or option the command does not take; MissingExtra: an option whose
+# optional extra is not installed (lit3d.utils.extras)
+USER_ERRORS = (ValueError, FileNotFoundError, PermissionError, NotImplementedError, MissingExtra)
 
 
 def allocation_failure(exc: BaseException) -> str | None:

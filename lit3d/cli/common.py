@@ -13,6 +13,7 @@ what                                                       exit   line
 bad option/file (UserError, DataError, ShapeError, ???)    2      ``error: <file or option>: <problem>``
 wrong type/range of a config value (ConfigValueError)      2      ``error: <key>=<value>: expected <what>``
 unwritable output (run dir, data_dir: a file, read-only)   2      ``error: <path>: <problem>``
+an option whose optional extra is missing (MissingExtra)   2      ``error: <option> needs <what>: pip install 'lit3d[<extra>]'``
 NaN/Inf loss (FloatingPointError)                          1      ``error: non-finite loss at ... step``
 SIGTERM or Ctrl-C during training (last.ckpt saved)        143    ``error: <run dir>: stopped by SIGTERM``
 SIGTERM or Ctrl-C while preparing data / evaluating        143    ``error: <data_dir|run dir>: stopped by ...``
@@ -36,9 +37,11 @@ from lit3d.runtime.compose import check_composes, check_group_overrides
 from lit3d.runtime.config_checks import ConfigValueError, check_config_values
 from lit3d.runtime.errors import EXIT_SIGTERM, Interrupted, UserError
 from lit3d.runtime.key_hints import instantiation_problem
+from lit3d.runtime.extra_checks import check_data_extras, check_logger_extras, check_override_extras, default_logger
 from lit3d.cli.rundir import claim_run_dir, hold_output_dir
 from lit3d.utils import quiet
 from lit3d.utils.checkpoints import first_line
+from lit3d.utils.extras import MissingExtra
 from lit3d.utils.io import OutputError
 from lit3d.utils.stops import start_up
 
@@ -90,7 +93,8 @@ def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None, c
     ``--debug`` is taken off the command line and turns on ``HYDRA_FULL_ERROR=1``
     (tracebacks); unknown config-group options (``experiment=``, ``task=``, ``data=`` ...)
     and overrides that do not compose (a misspelt key) stop with one line and exit 2 before
-    Hydra runs anything.
+    Hydra runs anything, as does a choice whose optional extra is not installed (:mod:`lit3d.runtime.extra_checks`;
+    ``lit3d-train`` without ``wandb`` and no ``logger=``: ``logger=none``).
     """
     quiet.install()
     args = about_flags(sys.argv[1:] if argv is None else argv, hydra_main)  # --version; --help: the command's page
@@ -100,11 +104,21 @@ def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None, c
     with start_up():  # a Ctrl-C lost during the start still stops the command at its first stage
         try:
             check_group_overrides(args)
+            check_override_extras(args)  # a launcher or sweeper plugin that is not installed: before Hydra composes
             composed = check_composes(args, config_name)
+            check_data_extras(composed, args)
+            note = None
+            if (command or config_name) == "train":  # the loggers are lit3d-train's
+                args, note = default_logger(args, composed)
+                if note is not None:
+                    composed = check_composes(args, config_name)
+                check_logger_extras(composed)
             check_config_values(composed)  # types and ranges (lit3d.runtime.config_checks)
             check_output_paths(composed)
             args, run_dir_lock = claim_run_dir(composed, args, command or config_name)  # one process per run dir
-        except (UserError, ConfigValueError, OutputError) as exc:
+            if note is not None:  # after every check: a refused command line stays one line
+                print(f"note: {note}", file=sys.stderr, flush=True)
+        except (UserError, ConfigValueError, OutputError, MissingExtra) as exc:
             if _debug_requested():
                 raise
             fail(exc, EXIT_USER)
@@ -137,7 +151,7 @@ def exit_code_for(exc: BaseException) -> int | None:
 
     if isinstance(exc, Interrupted):
         return exc.exit_code
-    if isinstance(exc, (UserError, ConfigValueError, DataError, ShapeError, MissingMandatoryValue)):
+    if isinstance(exc, (UserError, ConfigValueError, DataError, ShapeError, MissingMandatoryValue, MissingExtra)):
         return EXIT_USER
     if _file_system_fault(exc):  # an output that cannot be written: the path and the problem
         return EXIT_USER

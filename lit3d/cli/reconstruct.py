@@ -25,6 +25,9 @@ never over an input file. A bad input gets one line naming the file and the prob
 batch goes on, and the exit status is 2; an unusable --out (a file, read-only, would replace
 an input, is an input folder) stops the run with exit 2 before the network is loaded. SIGTERM
 or Ctrl-C ends with one line saying which sets were kept (exit 143 or 130); a rerun skips them.
+
+--body needs the Anny body model: pip install 'lit3d[body]'. Docs:
+https://github.com/lit3d/lit3d/blob/main/docs/reconstruct.md
 """
 from __future__ import annotations
 
@@ -46,7 +49,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("depth", nargs="+", help="depth image(s) or folder(s) of them")
     p.add_argument("--ckpt", help="completion checkpoint (lit3d-train task=completion) or zoo name; default: the "
                                   "shipped completion-furniture (lit3d.models()); not with --body")
-    p.add_argument("--body", action="store_true", help="fit the Anny body model instead (a person)")
+    p.add_argument("--body", action="store_true", help="fit the Anny body model instead (a person; needs lit3d[body])")
     p.add_argument("--body-init", metavar="CKPT", help="with --body: start regressor (default: zoo's; none: mean body)")
     p.add_argument("--body-refine-poor", metavar="N", type=int, default=0, help="with a regressor: N more steps if poor")
     p.add_argument("--out", required=True, help="output folder")

@@ -38,6 +38,7 @@ def camera_source(args) -> str:
 
 def check_args(args) -> None:
     from lit3d.reconstruct.depth_io import InputError
+    from lit3d.utils.extras import require
 
     given = [getattr(args, k) for k in ("fx", "fy", "cx", "cy")]
     if any(v is not None for v in given) and not all(v is not None for v in given):
@@ -50,6 +51,8 @@ def check_args(args) -> None:
         raise InputError(f"--depth-scale {args.depth_scale:g}: expected a positive number of metres per unit")
     if args.body and (args.ckpt or args.canonical or args.reference):
         raise InputError("--body (Anny fit) goes without --ckpt, --canonical and --reference")
+    if args.body:
+        require("body", "--body")
     if (args.body_init and not args.body) or (args.body_refine_poor and str(args.body_init).lower() == "none"):
         raise InputError("--body-init CKPT: needs --body, and --body-refine-poor N needs a regressor, not none")
     if args.quality_ckpt and not args.reference:

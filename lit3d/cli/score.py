@@ -11,9 +11,9 @@ Examples::
     lit3d-score --pairs targets/ predictions/ --json      # files with the same name stem in both folders
 
 Without ``--ckpt`` the score is the shipped quality model's predicted opinion score (MOS 1..5,
-trained on CPCD2.0 phil's human ratings of coloured point clouds: ``lit3d.quality.shipped``, card in
-``docs/quality_model.md``) when the pair has the features it uses (two coloured point clouds, the
-default 256 px renders); otherwise, and with ``--unlearned``, the unlearned score: the mean
+trained on CPCD2.0 phil's human ratings of coloured point clouds: ``lit3d.quality.shipped``, card:
+https://github.com/lit3d/lit3d/blob/main/docs/quality_model.md) when the pair has the features it uses
+(two coloured point clouds, the default 256 px renders); otherwise, and with ``--unlearned``, the unlearned score: the mean
 Mask-SSIM over styles, shadings and the 12 views (1 = identical renders). Two point clouds (.xyz, a .ply
 without faces, a .zip holding one .ply) are rendered as points, with colour styles when both carry colour (the overall score
 is then the mean Mask-SSIM over the colour styles alone; the MatCap styles stay in the

@@ -25,6 +25,7 @@ from lit3d.runtime.build import build_datamodule, build_task, task_meta, to_plai
 from lit3d.runtime.checkpoints import read_checkpoint
 from lit3d.runtime.compose import CONF_DIR
 from lit3d.runtime.errors import Interrupted, UserError
+from lit3d.runtime.extra_checks import check_logger_extras
 from lit3d.cli.resume_checks import check_resume_config, check_weights_fit
 from lit3d.cli.run_log import with_csv_logger, write_run_curves
 from lit3d.cli.stops import preparing, testing_after_fit
@@ -170,6 +171,7 @@ def train(cfg: DictConfig) -> float | None:
     from lit3d.callbacks.stop_points import StopPoints
 
     check_training_length(cfg.trainer)
+    check_logger_extras(cfg)  # a multirun job's loggers (a single run's are checked before Hydra starts)
     output_dir = Path(cfg.paths.output_dir)
     output_dir.mkdir(parents=True, exist_ok=True)
     pl.seed_everything(cfg.seed, workers=True)

@@ -72,7 +72,7 @@ def _instantiate_plain(node: DictConfig | dict):
     try:
         return instantiate(OmegaConf.create(plain), _convert_="all", _recursive_=False)
     except InstantiationException as exc:  # Hydra wraps the constructor's own error
-        raise (exc.__cause__ if isinstance(exc.__cause__, (ValueError, TypeError)) else exc) from exc
+        raise (exc.__cause__ if isinstance(exc.__cause__, (ValueError, TypeError, Lit3dError)) else exc) from exc
 
 
 def _split_target(path: str) -> tuple[str, str]:

@@ -21,6 +21,7 @@ their older built-in bases (``ValueError`` mostly), so code that caught those st
     │   └── LockBusy           lit3d.utils.locks
     ├── QualityCheckpointError lit3d.quality.predict
     ├── RenderBackendError     lit3d.render.egl: no headless OpenGL
+    ├── MissingExtra           lit3d.utils.extras: a feature whose optional extra is not installed (an ImportError too)
     └── NonFiniteLossError     lit3d.callbacks.nonfinite: training diverged
 
 Signals are not errors: ``lit3d.cli.about.Stopped`` stays a ``KeyboardInterrupt``.

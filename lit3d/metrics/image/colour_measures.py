@@ -35,6 +35,8 @@ import torch
 import torch.nn.functional as F
 from kornia.color import rgb_to_lab
 
+from lit3d.utils.extras import MissingExtra, installed
+
 # measure -> (piq module, function, extra keyword arguments)
 _PIQ = {
     "fsim": ("fsim", "fsim", {"chromatic": True}),
@@ -148,15 +150,16 @@ def piq_functions() -> dict[str, Callable]:
 
     The modules ``piq.fsim``, ``piq.vif``, ... are imported under a stand-in ``piq`` package
     that skips piq's ``__init__`` (which imports torchvision); ``sys.modules`` is restored
-    afterwards (the functions keep their modules). Raises ``ImportError`` if piq is not installed.
+    afterwards (the functions keep their modules). Raises :class:`~lit3d.utils.extras.MissingExtra` (an
+    ``ImportError``) if piq is not installed.
     """
     with _PIQ_LOCK:
         if _PIQ_FUNCTIONS:
             return dict(_PIQ_FUNCTIONS)
+        if not installed("piq"):  # not an extra of lit3d: pip would let piq's torchvision replace the CPU torch
+            raise MissingExtra("the colour measures of coloured point clouds need piq: "
+                               "pip install --no-deps piq==0.8.0 (--no-deps: piq's torchvision would replace torch)")
         spec = importlib.util.find_spec("piq") if "piq" not in sys.modules else None
-        if "piq" not in sys.modules and spec is None:
-            raise ImportError("piq is not installed (scripts/bootstrap.sh installs it: "
-                              "pip install --no-deps piq==0.8.0)")
         if spec is None:  # piq already imported (its __init__ ran: torchvision is there)
             loaded = _import_piq()
         else:
