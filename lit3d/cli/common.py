@@ -39,7 +39,7 @@ from lit3d.cli.errors import EXIT_SIGTERM, Interrupted, UserError  # re-exported
 from lit3d.cli.key_hints import instantiation_problem
 from lit3d.cli.evaluation import run_evaluation, scalar_metrics  # noqa: F401  (re-exported)
 from lit3d.cli.rundir import claim_run_dir, hold_output_dir
-from lit3d.utils import quiet
+from lit3d.utils import forced_exit, quiet
 from lit3d.utils.checkpoints import first_line
 from lit3d.utils.errors import Lit3dError
 from lit3d.utils.io import OutputError
@@ -159,6 +159,7 @@ def _debug_requested() -> bool:
 
 def fail(exc: BaseException, code: int) -> None:
     """Print ``error: <first line of exc>`` on stderr and exit with ``code``."""
+    forced_exit.said(code)  # a second Ctrl-C while the command exits adds no second line
     print(f"error: {first_line(exc, type(exc).__name__)}", file=sys.stderr, flush=True)
     sys.exit(code)
 
@@ -194,14 +195,15 @@ def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None, c
     ``--debug`` is taken off the command line and turns on ``HYDRA_FULL_ERROR=1``
     (tracebacks); unknown config-group options (``experiment=``, ``task=``, ``data=`` ...)
     and overrides that do not compose (a misspelt key) stop with one line and exit 2 before
-    Hydra runs anything.
+    Hydra runs anything. A second Ctrl-C or SIGTERM (or the first one inside a native step) ends the
+    command within 2 s wherever it is (:mod:`lit3d.utils.forced_exit`).
     """
     quiet.install()
     args = about_flags(sys.argv[1:] if argv is None else argv, hydra_main)  # --version; --help: the command's page
     if "--debug" in args:
         args = [a for a in args if a != "--debug"]
         os.environ["HYDRA_FULL_ERROR"] = "1"
-    with start_up():  # a Ctrl-C lost during the start still stops the command at its first stage
+    with forced_exit.watching(), start_up():  # a Ctrl-C lost during the start still stops the command at its first stage
         try:
             check_group_overrides(args)
             composed = check_composes(args, config_name)
