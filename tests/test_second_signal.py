@@ -336,8 +336,8 @@ def test_body_model_says_the_first_build_on_stderr(anny_cache_in, monkeypatch, c
 @pytest.mark.slow
 def test_ctrl_c_during_a_real_first_anny_build_ends_within_2_s(tmp_path):
     """lit3d-reconstruct --body with an empty ANNY_CACHE_DIR (a real first build, minutes): the start line and a
-    heartbeat on stderr, then one Ctrl-C ends it within 2 s with one error line, exit 130, no part-written
-    cache file and nothing in --out."""
+    heartbeat on stderr, then one Ctrl-C ends it within 2 s with one line, exit 130, no part-written cache
+    file and nothing in --out."""
     from lit3d.body_model.anny_cache import is_whole
     from test_body_fit import INTR, H, W, _save_mm
 
@@ -360,8 +360,12 @@ def test_ctrl_c_during_a_real_first_anny_build_ends_within_2_s(tmp_path):
     assert any("building the Anny body model's cache in " in ln for ln in seen), seen
     proc.send_signal(signal.SIGINT)
     rc, took, lines = _ends_within(proc)
+    print(f"exit {rc} {took:.2f} s after SIGINT, {len(seen)} lines before it: {lines}")
     assert rc == 130 and took < LIMIT_S, (rc, took, seen, lines)
-    assert len(lines) == 1 and lines[0].startswith("lit3d-reconstruct: error: stopped by SIGINT (Ctrl-C) while building "
-                                                   "the Anny body model's cache; ended at once"), lines
+    # the watcher's line, or the command's own stop line where Python got to run its handler first (the build
+    # was in Python code, not inside one long native call)
+    assert len(lines) == 1 and lines[0].startswith(("lit3d-reconstruct: error: stopped by SIGINT (Ctrl-C) while building "
+                                                    "the Anny body model's cache; ended at once",
+                                                    "lit3d-reconstruct: interrupted at image 1 of 1: nothing new")), lines
     assert all(is_whole(p) for p in (tmp_path / "anny").rglob("*.safetensors"))
     assert not (tmp_path / "out").exists()

@@ -15,6 +15,8 @@ unwritable output (run dir, data_dir: a file, read-only)   2      ``error: <path
 NaN/Inf loss (FloatingPointError)                          1      ``error: non-finite loss at ... step``
 SIGTERM or Ctrl-C during training (last.ckpt saved)        143    ``error: <run dir>: stopped by SIGTERM``
 SIGTERM or Ctrl-C while preparing data / evaluating        143    ``error: <data_dir|run dir>: stopped by ...``
+a second one (or the first while the Anny cache builds)    130    ``error: stopped by a second SIGINT ...``
+  (:mod:`lit3d.utils.forced_exit`: within 2 s)             /143
 ========================================================  =====  =========================================
 
 ``--debug`` on the command line or ``HYDRA_FULL_ERROR=1`` shows the traceback instead.

@@ -22,13 +22,17 @@ number to a pipe, whatever the main thread is doing), and
 ``os._exit`` runs no ``finally`` and no ``atexit``: what a clean-up does not remove stays, as after
 SIGKILL, and the next run clears it (:func:`lit3d.utils.io.repair_sets`, :mod:`lit3d.cli.run_leftovers`).
 Forked children (DataLoader workers) turn the watching off, so their own Ctrl-C is not counted as the
-parent's second one. Outside :func:`watching` (library use, the tests' own process) nothing changes.
+parent's second one. A forced exit that is due when the scope ends happens then (the command's own stop
+line said, or not), not after Python's own end, which takes seconds once torch is loaded; none is ever
+due in a process that no signal reached. Outside
+:func:`watching` (library use, the tests' own process) nothing changes.
 """
 from __future__ import annotations
 
 import contextlib
 import os
 import signal
+import sys
 import threading
 from collections.abc import Callable, Iterator
 
@@ -36,17 +40,20 @@ GRACE_S = 0.75  # after the signal that forces the exit: the program's own stop 
 LABELS = {int(signal.SIGINT): "SIGINT (Ctrl-C)", int(signal.SIGTERM): "SIGTERM"}
 
 _lock = threading.Lock()
-# pipe: (read fd, write fd) while watching; generation: bumped when a watching scope ends (a pending
-# forced exit of an ended scope does nothing); steps: the native steps under way, innermost last;
-# cleanups: token -> clean-up; said: the exit status of a command that has said its last line
+# pipe: (read fd, write fd) while watching; generation: bumped when a scope begins, and when one ends with
+# no forced exit due (a pending forced exit of another generation does nothing); count, last: the
+# signals seen in this scope; forcing, due: a forced exit is due, its (signal, native step); exiting: one
+# thread is ending the process; steps: the native steps under way,
+# innermost last; cleanups: token -> clean-up; said: the exit status of a command that has said its last line
 _state: dict = {"pipe": None, "prefix": "", "count": 0, "last": int(signal.SIGINT), "generation": 0, "forcing": False,
-                "steps": [], "cleanups": {}, "said": None}
+                "due": None, "exiting": False, "steps": [], "cleanups": {}, "said": None}
 
 
 def ignore(signum, frame) -> None:
     """A handler that does nothing: a command on its way out after a clean stop (:func:`lit3d.utils.stops.on_signals`
     with ``ignore_after_stop``) takes no exception from another signal, but, unlike ``SIG_IGN``, the watcher
-    still sees it (a second signal ends the command if its exit hangs)."""
+    still sees it (a second signal ends the command if its exit hangs). At the end of :func:`watching` it
+    becomes ``SIG_IGN``: Python's finalisation puts its own handlers back to the default action."""
 
 
 @contextlib.contextmanager
@@ -66,17 +73,26 @@ def watching(prefix: str = "") -> Iterator[None]:
         os.close(w)
         yield
         return
-    with _lock:
-        _state.update(pipe=(r, w), prefix=prefix, count=0, forcing=False, said=None)
-        generation = _state["generation"]
+    with _lock:  # a new generation: a forced exit still pending from an earlier scope is void
+        generation = _state["generation"] + 1
+        _state.update(pipe=(r, w), prefix=prefix, count=0, forcing=False, said=None, generation=generation)
     threading.Thread(target=_watch, args=(r, generation), name="lit3d-forced-exit", daemon=True).start()
     try:
         yield
     finally:
         with _lock:
             signal.set_wakeup_fd(previous)
+            due = _state["due"] if _state["forcing"] and _state["generation"] == generation else None
             _state.update(pipe=None, generation=generation + 1)
         os.close(w)  # the watcher reads the end of the pipe, closes it and ends
+        for s in (signal.SIGINT, signal.SIGTERM):  # the command is on its way out: only the interpreter's end is
+            if signal.getsignal(s) is ignore:      # left, which puts Python handlers back to the default (a late
+                signal.signal(s, signal.SIG_IGN)   # Ctrl-C would kill it by the signal, not the exit status said)
+        if due is not None:  # a forced exit was due within GRACE_S: now, not after Python's own end (seconds
+            for stream in (sys.stdout, sys.stderr):  # once torch is loaded, and no daemon thread runs during it)
+                with contextlib.suppress(Exception):
+                    stream.flush()
+            _force(*due, generation=None)
 
 
 def said(code: int) -> None:
@@ -101,8 +117,8 @@ def on_forced_exit(cleanup: Callable[[], str | None]) -> Iterator[None]:
 @contextlib.contextmanager
 def native_step(what: str, cleanup: Callable[[], str | None] | None = None) -> Iterator[None]:
     """A step the program cannot break off and that is not worth waiting for (``what``, as the exit
-    line says it: "while building the Anny body model's cache"): inside, the first SIGINT or SIGTERM already ends the command
-    (after :data:`GRACE_S`), calling ``cleanup`` first (see :func:`on_forced_exit`). A stop asked for
+    line says it: "while building the Anny body model's cache"): inside, the first SIGINT or SIGTERM
+    already ends the command (after :data:`GRACE_S`), calling ``cleanup`` first (see :func:`on_forced_exit`). A stop asked for
     before the step began ends the command as the step begins. Where SIGTERM would kill the process
     outright (its default action: no clean-up), it is handled by the watcher inside the step."""
     with contextlib.ExitStack() as stack:
@@ -129,14 +145,14 @@ def now(signum: int) -> None:
     that knows this signal is the second one (``lit3d-train``'s Ctrl-C during training). Outside
     :func:`watching`: returns (the caller goes on with its own stop)."""
     if _state["pipe"] is not None:
-        _force(int(signum), _state["generation"], None)
+        _force(int(signum), None, None)
 
 
 def _watch(r: int, generation: int) -> None:
     try:
         while data := os.read(r, 64):
             for signum in data:  # one byte per signal
-                if signum in LABELS and _state["generation"] == generation:
+                if signum in LABELS and _state["generation"] == generation and _state["pipe"] is not None:
                     with _lock:
                         _state["count"] += 1
                         _state["last"] = signum
@@ -157,7 +173,8 @@ def _schedule(signum: int, first: bool) -> None:
             return
         _state["forcing"] = True
         generation, step = _state["generation"], (_state["steps"] or [None])[-1]
-    timer = threading.Timer(GRACE_S, _force, (signum, generation, step if first else None))
+        _state["due"] = (signum, step if first else None)
+    timer = threading.Timer(GRACE_S, _force, (*_state["due"], generation))
     timer.daemon = True
     timer.start()
 
@@ -171,9 +188,16 @@ def exit_line(signum: int, step: str | None, notes: list[str]) -> str:
             "and the next run clears what an interrupted one leaves")
 
 
-def _force(signum: int, generation: int, step: str | None) -> None:
-    if _state["generation"] != generation or _state["pipe"] is None:
-        return  # the scope ended: the command is on its way out by itself
+def _force(signum: int, step: str | None, generation: int | None) -> None:
+    """The forced exit (module doc); ``generation``: the scope it was due in (None: now, whatever the scope)."""
+    with _lock:
+        if generation is not None and _state["generation"] != generation:
+            return  # the scope ended (and forced the exit itself), or a forked child
+        ending = _state["exiting"]
+        _state["exiting"] = True
+    if ending:  # another thread is ending the process: wait for it
+        threading.Event().wait(5.0)
+        return
     notes = []
     for cleanup in list(_state["cleanups"].values()):
         try:
@@ -196,7 +220,7 @@ def _off_in_child() -> None:
     global _lock
     _lock = threading.Lock()
     pipe = _state["pipe"]
-    _state.update(pipe=None, generation=_state["generation"] + 1, steps=[], cleanups={}, forcing=False)
+    _state.update(pipe=None, generation=_state["generation"] + 1, steps=[], cleanups={}, forcing=False, exiting=False)
     if pipe is not None:
         with contextlib.suppress(ValueError, OSError):
             signal.set_wakeup_fd(-1)
