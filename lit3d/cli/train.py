@@ -144,7 +144,9 @@ def fit(trainer, task, datamodule, ckpt_path: str | None, output_dir: Path) -> N
     main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGINT, on_sigint) if main_thread else None
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), forced_exit.advice(
+                f"the last saved checkpoints are kept: resume with the same overrides plus hydra.run.dir={output_dir} "
+                "ckpt_path=last"):
             if ckpt_path is not None:  # a resumed run writes into its own checkpoints/ on purpose
                 warnings.filterwarnings("ignore", message=r"Checkpoint directory .* exists and is not empty")
             trainer.fit(task, datamodule=datamodule, ckpt_path=ckpt_path, weights_only=True)

@@ -46,7 +46,8 @@ _lock = threading.Lock()
 # thread is ending the process; steps: the native steps under way,
 # innermost last; cleanups: token -> clean-up; said: the exit status of a command that has said its last line
 _state: dict = {"pipe": None, "prefix": "", "count": 0, "last": int(signal.SIGINT), "generation": 0, "forcing": False,
-                "due": None, "exiting": False, "steps": [], "cleanups": {}, "said": None}
+                "due": None, "exiting": False, "steps": [], "cleanups": {}, "said": None,
+                "advice": None}
 
 
 def ignore(signum, frame) -> None:
@@ -75,7 +76,7 @@ def watching(prefix: str = "") -> Iterator[None]:
         return
     with _lock:  # a new generation: a forced exit still pending from an earlier scope is void
         generation = _state["generation"] + 1
-        _state.update(pipe=(r, w), prefix=prefix, count=0, forcing=False, said=None, generation=generation)
+        _state.update(pipe=(r, w), prefix=prefix, count=0, forcing=False, said=None, advice=None, generation=generation)
     threading.Thread(target=_watch, args=(r, generation), name="lit3d-forced-exit", daemon=True).start()
     try:
         yield
@@ -99,6 +100,18 @@ def said(code: int) -> None:
     """The command has said its last line and ends with ``code``: a forced exit from now on adds no
     line and exits with ``code`` (the stop line already said what is kept)."""
     _state["said"] = code
+
+
+@contextlib.contextmanager
+def advice(text: str) -> Iterator[None]:
+    """Inside the block the forced exit's line ends with ``text`` (what is kept and how to go on: "resume
+    with ... ckpt_path=last") instead of the general "files finished before are kept ..."."""
+    before = _state["advice"]
+    _state["advice"] = text
+    try:
+        yield
+    finally:
+        _state["advice"] = before
 
 
 @contextlib.contextmanager
@@ -179,13 +192,16 @@ def _schedule(signum: int, first: bool) -> None:
     timer.start()
 
 
-def exit_line(signum: int, step: str | None, notes: list[str]) -> str:
-    """The forced exit's line (without the command's prefix): what stopped it and what is left."""
+GENERAL_ADVICE = "files finished before are kept, and the next run clears what an interrupted one leaves"
+
+
+def exit_line(signum: int, step: str | None, notes: list[str], advice_text: str | None = None) -> str:
+    """The forced exit's line (without the command's prefix): what stopped it, what was left unfinished,
+    and ``advice_text`` (default :data:`GENERAL_ADVICE`)."""
     label = LABELS.get(signum, signal.Signals(signum).name)
     what = f"stopped by {label} {step}" if step else f"stopped by a second {label}"
     kept = "; ".join(notes) if notes else "nothing was half-written"
-    return (f"error: {what}; ended at once, without the clean stop: {kept}; files finished before are kept, "
-            "and the next run clears what an interrupted one leaves")
+    return f"error: {what}; ended at once, without the clean stop: {kept}; {advice_text or GENERAL_ADVICE}"
 
 
 def _force(signum: int, step: str | None, generation: int | None) -> None:
@@ -209,7 +225,7 @@ def _force(signum: int, step: str | None, generation: int | None) -> None:
     code = _state["said"]
     if code is None:
         code = 128 + signum
-        line = _state["prefix"] + exit_line(signum, step, notes) + "\n"
+        line = _state["prefix"] + exit_line(signum, step, notes, _state["advice"]) + "\n"
         with contextlib.suppress(OSError):
             os.write(2, line.encode("utf-8", "replace"))  # not sys.stderr: the main thread may hold its lock
     os._exit(code)
