@@ -129,6 +129,34 @@ def test_a_second_signal_during_a_native_call_ends_within_2_s(tmp_path):
                      "half-written; resume with ckpt_path=last"], lines
 
 
+@pytest.mark.parametrize("stage", ["staging", "committed"])
+def test_a_forced_exit_leaves_a_file_set_whole_or_absent(tmp_path, stage):
+    """lit3d-reconstruct's sets (lit3d.utils.io.write_file_set) stopped twice inside a native call: one still
+    being staged is removed (the earlier set stays), one committed is finished; never a mix, no staging folder."""
+    proc = _start(tmp_path, f"""
+        import lit3d.utils.io as io
+        (out / "a.obj").write_bytes(b"old")
+        (out / "a.json").write_bytes(b"old")
+
+        def stall(*args):
+            print("ready", flush=True)
+            native_call()
+
+        if "{stage}" == "committed":  # the journal is written: the renames come next
+            io.kill_point = lambda point: stall() if point == "file-set:committed" else None
+        else:  # the files are staged, the journal not yet written
+            io.atomic_write_bytes = stall
+        with forced_exit.watching():
+            io.write_file_set(out, {{"a.obj": b"new", "a.json": b"new"}})
+    """)
+    rc, took, lines = _stop_twice(proc, signal.SIGINT, signal.SIGINT)
+    assert rc == 130 and took < LIMIT_S, (rc, took, lines)
+    want = "new" if stage == "committed" else "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.json", "a.obj"], "a staging folder was left"
+    assert {p.read_text() for p in tmp_path.iterdir()} == {want}, "a mix of two sets"
+    assert len(lines) == 1 and ("was finished" if stage == "committed" else "was not written") in lines[0], lines
+
+
 def test_the_first_signal_inside_a_native_step_ends_within_2_s_and_cleans_up(tmp_path):
     """A native step (the Anny cache build) is not worth waiting for: the first SIGTERM ends the process
     within 2 s, after the step's clean-up removed what it was writing."""

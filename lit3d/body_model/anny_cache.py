@@ -5,8 +5,8 @@ anny builds its model data on its first start and keeps it in ``anny.paths.get_a
 (``$ANNY_CACHE_DIR``, default ``~/.cache/anny``) as ``v<data version>/<builder>_<hash>.safetensors``:
 three files of about 790 MB together (:data:`PARTS`). ``anny.Anny()`` loads the last one,
 :func:`model_file`, when it exists, and otherwise builds what is missing: about 2.5 min on 2 idle
-cores (:data:`BUILD_S`), most of it in ``load_data`` (:data:`PARTS`: the shares of one build, 1 min
-42 s on this project's 2-core machine under load), with no word on the console.
+cores (:data:`BUILD_S`), most of it in ``load_data`` (:data:`PARTS`), with no word of its own on the
+console (anny logs at INFO, which the argparse commands do not show).
 
 anny writes each file in place (``safetensors.torch.save_file``, no temp file and rename): a process
 killed while it writes one leaves a truncated file, which the next start takes for a complete one
@@ -35,8 +35,9 @@ from lit3d.utils.forced_exit import native_step
 from lit3d.utils.progress import duration, say_or_log, ticking
 
 BUILD_S = 150.0  # a whole first build on 2 idle cores (docs/data_formats.md)
-# anny's builders in the order they finish: (size in MiB, share of a whole build's time), measured
-# on one build (1 min 42 s, 2 busy cores): load_data 89 s, build_model_data 2 s, compacting 10 s
+# anny's builders in the order they finish: (size in MiB, share of a whole build's time), from anny's own
+# log times of one first build (102 s in all, nice 19 on 2 busy cores): load_data 89 s, build_model_data
+# 2 s, the compacting 10 s
 PARTS: dict[str, tuple[int, float]] = {
     "load_data": (535, 0.88),
     "build_model_data": (206, 0.02),
