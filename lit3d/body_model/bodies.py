@@ -16,7 +16,9 @@ out y-up, facing +z (towards lit3d's depth camera): ``(x, y, z) -> (x, z, -y)``.
     model.faces                                           # (F, 3) int64 triangles
 
 The first start of ``anny`` builds a cache of about 790 MB (about 2.5 min on 2 cores;
-``ANNY_CACHE_DIR`` moves it, default ``~/.cache/anny``); ``make install`` builds it once.
+``ANNY_CACHE_DIR`` moves it, default ``~/.cache/anny``); ``make install`` builds it once. That build
+says what it does and how long it has left, and the first Ctrl-C ends it within 2 s
+(:mod:`lit3d.body_model.anny_cache`).
 """
 from __future__ import annotations
 
@@ -173,14 +175,19 @@ class BodyModel:
         if self._model is None:
             import torch
 
+            from lit3d.body_model.anny_cache import first_build
+
             # warp (anny's skinning) notes from native code on stderr that a CPU machine has no CUDA
-            # driver, and prints a banner (devices, kernel cache) on every start
+            # driver, and prints a banner (devices, kernel cache) on every start: both at its init, done
+            # here, so that stderr is open again for the first build's lines
             with _native_stderr_closed(not torch.cuda.is_available()):
                 import warp
 
                 warp.config.log_level = warp.LOG_ERROR
                 import anny
 
+                warp.init()
+            with first_build():  # silent when anny's cache is there
                 self._model = anny.Anny().to(dtype=torch.float32)
         return self._model
 

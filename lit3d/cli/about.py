@@ -117,23 +117,29 @@ def _raise_stopped(signum, _frame) -> None:
 def run_argparse_cli(prog: str, parser, run: Callable, argv: Sequence[str] | None = None) -> int:
     """The argparse CLIs' ``main``: quiet third-party output, parse, ``run(args)``; Ctrl-C exits 130
     and SIGTERM 143, each with one line (:class:`Stopped`); any other error is
-    :func:`report_error`'s line (``--debug``: the traceback)."""
-    from lit3d.utils import quiet
+    :func:`report_error`'s line (``--debug``: the traceback). A second Ctrl-C or SIGTERM (or the first
+    one inside a native step) ends the command within 2 s wherever it is (:mod:`lit3d.utils.forced_exit`)."""
+    from lit3d.utils import forced_exit, quiet
 
     quiet.install()
     args = parser.parse_args(argv)
     main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _raise_stopped) if main_thread else None
     try:
-        return run(args)
-    except KeyboardInterrupt as exc:
-        stop = exc if isinstance(exc, Stopped) else Stopped("SIGINT")
-        print(stop.line(prog), file=sys.stderr, flush=True)
-        return stop.exit_code
-    except Exception as exc:
-        if args.debug:
-            raise
-        return report_error(prog, exc)
+        with forced_exit.watching(f"{prog}: "):
+            try:
+                return run(args)
+            except KeyboardInterrupt as exc:
+                stop = exc if isinstance(exc, Stopped) else Stopped("SIGINT")
+                forced_exit.said(stop.exit_code)
+                print(stop.line(prog), file=sys.stderr, flush=True)
+                return stop.exit_code
+            except Exception as exc:
+                if args.debug:
+                    raise
+                code = report_error(prog, exc)
+                forced_exit.said(code)
+                return code
     finally:
         if main_thread:  # None: the earlier handler was not set from Python
             signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)

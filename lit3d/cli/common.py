@@ -17,6 +17,8 @@ an option whose optional extra is missing (MissingExtra)   2      ``error: <opti
 NaN/Inf loss (FloatingPointError)                          1      ``error: non-finite loss at ... step``
 SIGTERM or Ctrl-C during training (last.ckpt saved)        143    ``error: <run dir>: stopped by SIGTERM``
 SIGTERM or Ctrl-C while preparing data / evaluating        143    ``error: <data_dir|run dir>: stopped by ...``
+a second one (or the first while the Anny cache builds)    130    ``error: stopped by a second SIGINT ...``
+  (:mod:`lit3d.utils.forced_exit`: within 2 s)             /143
 ========================================================  =====  =========================================
 
 ``--debug`` on the command line or ``HYDRA_FULL_ERROR=1`` shows the traceback instead.
@@ -39,7 +41,7 @@ from lit3d.runtime.errors import EXIT_SIGTERM, Interrupted, UserError
 from lit3d.runtime.key_hints import instantiation_problem
 from lit3d.runtime.extra_checks import check_data_extras, check_logger_extras, check_override_extras, default_logger
 from lit3d.cli.rundir import claim_run_dir, hold_output_dir
-from lit3d.utils import quiet
+from lit3d.utils import forced_exit, quiet
 from lit3d.utils.checkpoints import first_line
 from lit3d.utils.extras import MissingExtra
 from lit3d.utils.io import OutputError
@@ -58,6 +60,7 @@ def _debug_requested() -> bool:
 
 def fail(exc: BaseException, code: int) -> None:
     """Print ``error: <first line of exc>`` on stderr and exit with ``code``."""
+    forced_exit.said(code)  # a second Ctrl-C while the command exits adds no second line
     print(f"error: {first_line(exc, type(exc).__name__)}", file=sys.stderr, flush=True)
     sys.exit(code)
 
@@ -94,14 +97,15 @@ def cli_main(hydra_main: Callable[[], Any], argv: Sequence[str] | None = None, c
     (tracebacks); unknown config-group options (``experiment=``, ``task=``, ``data=`` ...)
     and overrides that do not compose (a misspelt key) stop with one line and exit 2 before
     Hydra runs anything, as does a choice whose optional extra is not installed (:mod:`lit3d.runtime.extra_checks`;
-    ``lit3d-train`` without ``wandb`` and no ``logger=``: ``logger=none``).
+    ``lit3d-train`` without ``wandb`` and no ``logger=``: ``logger=none``). A second Ctrl-C or SIGTERM (or the first one
+    inside a native step) ends the command within 2 s wherever it is (:mod:`lit3d.utils.forced_exit`).
     """
     quiet.install()
     args = about_flags(sys.argv[1:] if argv is None else argv, hydra_main)  # --version; --help: the command's page
     if "--debug" in args:
         args = [a for a in args if a != "--debug"]
         os.environ["HYDRA_FULL_ERROR"] = "1"
-    with start_up():  # a Ctrl-C lost during the start still stops the command at its first stage
+    with forced_exit.watching(), start_up():  # a Ctrl-C lost during the start still stops the command at its first stage
         try:
             check_group_overrides(args)
             check_override_extras(args)  # a launcher or sweeper plugin that is not installed: before Hydra composes

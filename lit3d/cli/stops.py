@@ -24,6 +24,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from lit3d.runtime.errors import Interrupted
+from lit3d.utils import forced_exit
 from lit3d.utils.stops import StopRequested, check_stop, on_signals, pending
 
 
@@ -43,7 +44,8 @@ def preparing(data_dir: str | Path) -> Iterator[None]:
     stop the command ignores further signals while it exits. A signal after the last item's stop point
     stops the command at the end of the block (it was forgotten there, and the command went on to train)."""
     try:
-        with on_signals(ignore_after_stop=True):
+        with on_signals(ignore_after_stop=True), forced_exit.advice(
+                f"the finished items in {data_dir} are kept; the same command again resumes"):
             yield
             check_stop()
     except StopRequested as stop:

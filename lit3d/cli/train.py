@@ -29,6 +29,7 @@ from lit3d.runtime.extra_checks import check_logger_extras
 from lit3d.cli.resume_checks import check_resume_config, check_weights_fit
 from lit3d.cli.run_log import with_csv_logger, write_run_curves
 from lit3d.cli.stops import preparing, testing_after_fit
+from lit3d.utils import forced_exit
 from lit3d.utils.io import atomic_write_text, write_json
 from lit3d.utils.log_images import WANDB, logger_kind
 from lit3d.utils.provenance import provenance
@@ -115,7 +116,8 @@ def fit(trainer, task, datamodule, ckpt_path: str | None, output_dir: Path) -> N
     Lightning stops on SIGTERM after the current batch (``SIGTERMException``; ``ResumeState`` saves
     ``last.ckpt``). Ctrl-C is made to take the same path: the first SIGINT only raises Lightning's
     SIGTERM flag (instead of its own KeyboardInterrupt handling, which exits 1 with no resume line);
-    a second Ctrl-C stops at once.
+    a second Ctrl-C stops at once (:func:`lit3d.utils.forced_exit.now`: exit 130, one line; a
+    checkpoint being written is not kept, the last one saved is).
     """
     import signal
     import threading
@@ -126,7 +128,8 @@ def fit(trainer, task, datamodule, ckpt_path: str | None, output_dir: Path) -> N
 
     def on_sigint(signum, frame):
         if got:  # a second Ctrl-C: stop now
-            raise KeyboardInterrupt
+            forced_exit.now(signum)
+            raise KeyboardInterrupt  # outside a command's watching scope
         got.append("SIGINT (Ctrl-C)")
         trainer._signal_connector.received_sigterm = True  # Lightning's SIGTERM flag
 
@@ -134,7 +137,9 @@ def fit(trainer, task, datamodule, ckpt_path: str | None, output_dir: Path) -> N
     main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGINT, on_sigint) if main_thread else None
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), forced_exit.advice(
+                f"the last saved checkpoints are kept: resume with the same overrides plus hydra.run.dir={output_dir} "
+                "ckpt_path=last"):
             if ckpt_path is not None:  # a resumed run writes into its own checkpoints/ on purpose
                 warnings.filterwarnings("ignore", message=r"Checkpoint directory .* exists and is not empty")
             trainer.fit(task, datamodule=datamodule, ckpt_path=ckpt_path, weights_only=True)

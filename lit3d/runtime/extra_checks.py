@@ -73,7 +73,7 @@ def default_logger(args: Sequence[str], composed: DictConfig | None) -> tuple[li
     ``wandb`` is not installed (``pip install lit3d`` without ``[wandb]``); else ``(args, None)``.
 
     A logger on the command line is kept (and checked by :func:`check_logger_extras`). ``composed``: the
-    config of ``args``; None where :func:`~lit3d.cli.compose.check_composes` composes nothing (Hydra's flags):
+    config of ``args``; None where :func:`~lit3d.runtime.compose.check_composes` composes nothing (Hydra's flags):
     then only a multirun (``-m``) gets ``logger=none``, the others (``--help``, ``--cfg job`` ...) run nothing.
     """
     args = list(args)

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, BinaryIO
 
 from lit3d.utils.errors import Lit3dError
+from lit3d.utils.forced_exit import on_forced_exit
 from lit3d.utils.kill_points import kill_point
 from lit3d.utils.temp_names import TMP_SUFFIX, temp_prefix, writer, writer_gone
 
@@ -64,17 +65,26 @@ def atomic_file(path: str | os.PathLike) -> Iterator[BinaryIO]:
     file in the same folder (the umask's mode, see :func:`file_mode`) + ``os.replace``; on any error
     the temp file is removed and ``path`` is left as it was. An OSError that names no file or only the
     temp file (``write()`` on a full disk names none) is raised again naming ``path``, so the entry
-    points can say which file could not be written (``<path>: cannot write here (no space ...)``)."""
+    points can say which file could not be written (``<path>: cannot write here (no space ...)``).
+    A forced exit (:mod:`lit3d.utils.forced_exit`) removes the temp file first."""
     path, tmp = Path(path), None
+
+    def forced() -> str | None:
+        if tmp is None or not os.path.lexists(tmp):
+            return None
+        Path(tmp).unlink(missing_ok=True)
+        return f"{path}: not written (its temp file was removed)"
+
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=temp_prefix(path.name), suffix=TMP_SUFFIX)
-        with os.fdopen(fd, "wb") as f:
-            os.fchmod(f.fileno(), file_mode())
-            yield f
-        kill_point(f"write:{path.name}")
-        os.replace(tmp, path)
-        tmp = None
+        with on_forced_exit(forced):
+            fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=temp_prefix(path.name), suffix=TMP_SUFFIX)
+            with os.fdopen(fd, "wb") as f:
+                os.fchmod(f.fileno(), file_mode())
+                yield f
+            kill_point(f"write:{path.name}")
+            os.replace(tmp, path)
+            tmp = None
         remove_left_temps(path)
     except BaseException as exc:
         if tmp is not None:
@@ -263,7 +273,9 @@ def write_file_set(out_dir: str | os.PathLike, files: dict[str, bytes],
     before the journal leaves the earlier set untouched; Ctrl-C during the renames finishes them
     (the new set is whole); any other failure during them removes the whole set (never a mix of
     two sets). A SIGKILL during the renames leaves the journal: :func:`repair_sets` (run by the
-    next ``lit3d-reconstruct`` on the folder) finishes the renames. Files get the umask's mode.
+    next ``lit3d-reconstruct`` on the folder) finishes the renames; a forced exit
+    (:mod:`lit3d.utils.forced_exit`) finishes a committed set and removes one still being staged. Files
+    get the umask's mode.
     ``protected``: input files the set must not replace (:func:`check_targets`). Raises
     :class:`OutputError`.
     """
@@ -278,30 +290,44 @@ def write_file_set(out_dir: str | os.PathLike, files: dict[str, bytes],
     except OSError as exc:
         raise output_error(out, exc) from None
     committed = False
-    try:
-        for name, data in files.items():
-            try:
-                with open(tmp / name, "wb") as f:  # an ordinary open(): the umask's mode
-                    f.write(data)
-            except OSError as exc:
-                raise output_error(out / name, exc) from None
-        try:
-            atomic_write_bytes(tmp / SET_JOURNAL, json.dumps({"files": names, "pid": os.getpid()}).encode("utf-8"))
-        except OSError as exc:
-            raise output_error(out / names[0], exc) from None
-        committed = True
-        kill_point("file-set:committed")
-        _move_set(tmp, out, names)
-    except KeyboardInterrupt:
-        if committed:  # the staged set is whole: finish it rather than leave a mix
-            _settle(tmp, out, names)
-        raise
-    except BaseException:
-        if committed:
-            _remove_set(out, names)
-        raise
-    finally:
+
+    def forced() -> str | None:
+        if not tmp.is_dir():
+            return None
+        if committed:  # whole: finish the renames (the main thread may be doing the same: either one wins)
+            for name in names:
+                with contextlib.suppress(OSError):
+                    os.replace(tmp / name, out / name)
+            shutil.rmtree(tmp, ignore_errors=True)
+            return f"{out}: the set {', '.join(names)} was finished"
         shutil.rmtree(tmp, ignore_errors=True)
+        return f"{out}: the set {', '.join(names)} was not written (its staging folder was removed)"
+
+    with on_forced_exit(forced):  # registered first: its clean-up runs before the journal's
+        try:
+            for name, data in files.items():
+                try:
+                    with open(tmp / name, "wb") as f:  # an ordinary open(): the umask's mode
+                        f.write(data)
+                except OSError as exc:
+                    raise output_error(out / name, exc) from None
+            try:
+                atomic_write_bytes(tmp / SET_JOURNAL, json.dumps({"files": names, "pid": os.getpid()}).encode("utf-8"))
+            except OSError as exc:
+                raise output_error(out / names[0], exc) from None
+            committed = True
+            kill_point("file-set:committed")
+            _move_set(tmp, out, names)
+        except KeyboardInterrupt:
+            if committed:  # the staged set is whole: finish it rather than leave a mix
+                _settle(tmp, out, names)
+            raise
+        except BaseException:
+            if committed:
+                _remove_set(out, names)
+            raise
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
     return [out / name for name in names]
 
 

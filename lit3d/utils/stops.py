@@ -9,7 +9,9 @@ The first signal is only recorded (:func:`pending`); the next :func:`check_stop`
 :class:`StopRequested`. A second signal (of either kind) raises it at once, where the program is
 (the atomic writers remove their temp file, so nothing half-written is kept), except inside
 :func:`shielded` (renames that must finish together) and once a stop is under way (a third
-Ctrl-C does not break off the clean-up of the second). Outside :func:`on_signals` nothing is
+Ctrl-C does not break off the clean-up of the second). Where the program cannot act on it (inside a
+long native call, or a stop whose exit hangs), the commands' watcher ends the process within 2 s
+of the second signal (:mod:`lit3d.utils.forced_exit`). Outside :func:`on_signals` nothing is
 recorded and :func:`check_stop` does nothing. The handlers are installed also where SIGINT came
 ignored from the parent (a background job of a non-interactive shell), as ``lit3d-train``'s training
 handler is. Used by data preparation (:class:`datamodules.cache.CacheBuilder`), by ``lit3d-data``,
@@ -22,6 +24,8 @@ import signal
 import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
+
+from lit3d.utils.forced_exit import ignore
 
 LABELS = {"SIGINT": "SIGINT (Ctrl-C)", "SIGTERM": "SIGTERM"}
 _state: dict = {"pending": None, "armed": False, "shielded": 0, "raised": False, "early": None}
@@ -101,7 +105,8 @@ def on_signals(notify: Callable[[str], object] | None = None, ignore_after_stop:
     handlers are put back after it, and a pending stop is forgotten. ``notify(signame)`` is called on
     the first signal. ``ignore_after_stop``: when the block ends in :class:`StopRequested`, ignore the
     two signals from then on instead (a command on its way out: another Ctrl-C must not break off its
-    exit with a traceback). Outside the main thread (where Python delivers signals) the block runs as is."""
+    exit with a traceback; :func:`lit3d.utils.forced_exit.ignore`, which the watcher still sees: a
+    second signal ends an exit that hangs). Outside the main thread (where Python delivers signals) the block runs as is."""
     if threading.current_thread() is not threading.main_thread() or _state["armed"]:
         yield
         return
@@ -129,4 +134,4 @@ def on_signals(notify: Callable[[str], object] | None = None, ignore_after_stop:
     finally:
         _state.update(pending=None, armed=False, raised=False)
         for s, handler in previous.items():
-            signal.signal(s, signal.SIG_IGN if stopped else signal.SIG_DFL if handler is None else handler)
+            signal.signal(s, ignore if stopped else signal.SIG_DFL if handler is None else handler)
