@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from lit3d.cli.common import cli_main, compose_config
+from lit3d.cli.common import cli_main
+from lit3d.runtime.compose import compose_config
 from lit3d.runtime.extra_checks import NO_WANDB_NOTE, default_logger
 from lit3d.utils.extras import EXTRAS, MissingExtra, has_extra, installed, require
 
