@@ -50,7 +50,7 @@ def lit_render_per_style(meshes, size: int, n_styles: int, shadings=("flat", "sm
     """Seconds to render ``n_styles`` lit passes per mesh x shading x 12 views (pyrender)."""
     from lit3d.render.convert import normalise
     from lit3d.render.egl import import_pyrender, offscreen_renderer
-    from lit3d.render.views import camera_poses
+    from lit3d.render.dodecahedron import camera_poses
 
     pyrender = import_pyrender()
     r = offscreen_renderer(size, size)
@@ -188,10 +188,10 @@ def point_rows(n: int = 300_000) -> list[dict]:
     import tempfile
     from pathlib import Path
 
-    from lit3d.features import points as point_features
+    from lit3d.features import point_table as point_features
     from lit3d.features.table import FeatureConfig, feature_table
     from lit3d.render.convert import to_mesh
-    from lit3d.render.points import load_points
+    from lit3d.render.point_clouds import load_points
 
     from dataclasses import replace
 

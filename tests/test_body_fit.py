@@ -14,7 +14,7 @@ from datamodules.canonical.rendering import PairRenderer
 from datamodules.canonical.settings import RenderSettings, parse
 from lit3d.body.errors import BodyFitError
 from lit3d.body.model import DOFS
-from lit3d.body.points import backproject, observe
+from lit3d.body.depth_points import backproject, observe
 from lit3d.body.results import canonical_depth
 from lit3d.body.surface import silhouette_excess
 from lit3d.body_model import bodies

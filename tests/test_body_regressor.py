@@ -11,7 +11,7 @@ from PIL import Image
 from lit3d.body.errors import BodyCheckpointError
 from lit3d.body.fit import FitConfig, fit_body
 from lit3d.body.model import DOFS, PHENOTYPES
-from lit3d.body.points import observe
+from lit3d.body.depth_points import observe
 from lit3d.body.regressor import (BodyRegressor, Preprocess, Regressor, checkpoint, crop, fit_from_regressor,
                                   load_regressor, refine_config, rotmat_6d)
 from lit3d.body.synthetic import Camera, sensed_depth

@@ -12,7 +12,7 @@ from lit3d.geometry.canonical_forms import canonical_forms
 from lit3d.geometry.geodesics import geodesic_matrix, landmark_geodesics
 from lit3d.geometry.mds import classical_mds, landmark_mds
 from lit3d.geometry.spectral import shape_dna, shape_dna_distances
-from lit3d.geometry.views import base_azimuth, broadside_azimuth
+from lit3d.geometry.broadside import base_azimuth, broadside_azimuth
 from lit3d.render.depth import render_depth, rotate_y
 
 TOSCA = Path(__file__).resolve().parents[2] / "shared" / "data" / "tosca8k"

@@ -16,7 +16,7 @@ from datamodules.completion.depth_voxels import (
 )
 from datamodules.completion.furniture import GENERATORS, Shape, box, make_shape
 from datamodules.completion.voxel_cache import load_pair, save_pair
-from lit3d.sensing.views import camera_rotation
+from lit3d.sensing.placement import camera_rotation
 from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, UNSEEN_CATEGORIES
 
 SMALL = {"train": 8, "val": 4, "test_same": 4, "test_cross": 4, "test_unseen": 24}

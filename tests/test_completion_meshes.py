@@ -19,7 +19,7 @@ from datamodules.completion.mesh_shapes import MeshShape
 from datamodules.completion.meshes import attach_models
 from datamodules.completion.sweethome3d import assign_category, credits_markdown, index_sweethome3d
 from lit3d.geometry.solid_voxels import solid_voxels, surface_voxels
-from lit3d.sensing.views import camera_rotation
+from lit3d.sensing.placement import camera_rotation
 
 RES = 48
 

@@ -203,7 +203,7 @@ def _ply(path: Path, colours: np.ndarray, kind: str, binary: bool) -> Path:
 
 @pytest.mark.parametrize("binary", [False, True])
 def test_ply_colours_are_read_by_their_declared_type(tmp_path, binary):
-    from lit3d.render.points import load_points
+    from lit3d.render.point_clouds import load_points
 
     rgb8 = np.random.default_rng(1).integers(0, 256, (50, 3))
     a = load_points(_ply(tmp_path / "u8.ply", rgb8, "uchar", binary))

@@ -11,7 +11,7 @@ from lit3d.features.table import FeatureConfig, feature_table, overall_score
 from lit3d.metrics.pointcloud import pointcloud_baselines, psnr_db
 from lit3d.render.convert import ShapeError
 from lit3d.render.gbuffer import RenderConfig
-from lit3d.render.points import PointShape, is_point_source, load_points, local_frames, smallest_eigenvector
+from lit3d.render.point_clouds import PointShape, is_point_source, load_points, local_frames, smallest_eigenvector
 
 
 def sphere_points(n: int = 20000, seed: int = 0) -> np.ndarray:
@@ -183,7 +183,7 @@ def test_zbuffer_equals_a_bounds_tested_scatter_per_splat_pixel():
 
 
 def test_local_frames_column_form_is_the_row_form_bit_for_bit():
-    """local_frames gathers the neighbour offsets one coordinate at a time (lit3d.render.points.column_covariance);
+    """local_frames gathers the neighbour offsets one coordinate at a time (lit3d.render.point_clouds.column_covariance);
     the normals are bit-identical to those of the (N, k, 3) offsets' covariance (its mean over the middle axis
     and row-wise products), on a lattice with duplicate points and on points of very different scales."""
     from scipy.spatial import cKDTree
@@ -278,11 +278,11 @@ def test_point_order_does_not_change_the_renders():
 
 def test_cached_frames_is_thread_safe(monkeypatch):
     """Many threads asking for a few clouds at once: each cloud's frames computed once, every
-    caller gets that one result, and the memo keeps its bound (lit3d.features.points._FRAMES)."""
+    caller gets that one result, and the memo keeps its bound (lit3d.features.point_table._FRAMES)."""
     import threading
     import time
 
-    from lit3d.features import points as pf
+    from lit3d.features import point_table as pf
 
     calls: dict[int, int] = {}
 

@@ -10,14 +10,14 @@ import torch.nn.functional as F
 from tests.helpers.piq import piq_functions
 
 from lit3d.features.common import UNLEARNED_COLOUR_STYLES, overall_score
-from lit3d.features.points import PIQ_STYLES
+from lit3d.features.point_table import PIQ_STYLES
 from lit3d.features.table import FeatureConfig, feature_table
 from lit3d.metrics.pcqm import pcqm
 from lit3d.metrics.pointcloud import pointcloud_baselines
 from lit3d.metrics.pointssim import pointssim
 from lit3d.render.colour_styles import apply_colour_styles
 from lit3d.render.gbuffer import RenderConfig
-from lit3d.render.points import PointShape, load_points, local_frames
+from lit3d.render.point_clouds import PointShape, load_points, local_frames
 from lit3d.render.splat import point_frame, render_point_gbuffers
 from lit3d.render.styles import apply_styles
 
@@ -97,7 +97,7 @@ def test_field_metrics_enter_the_table_and_the_unlearned_score_keeps_its_styles(
 @pytest.mark.parametrize("workers", [1, 2])
 def test_point_metrics_in_the_table_equal_each_metric_computed_alone(tmp_path, workers):
     """The table computes PointSSIM and PCQM on one KD-tree per cloud, on worker threads beside the frames and
-    renders (lit3d.features.points._point_metrics), the reference's frames while the distorted cloud loads
+    renders (lit3d.features.point_table._point_metrics), the reference's frames while the distorted cloud loads
     (no cache folder) or after the cache look-up: each value bit-identical to the metric run alone, building its
     own trees, and to the D1/D2/Y-PSNR baselines from the clouds' own local frames. The clouds lie on a lattice
     (duplicate and equidistant points), where a different neighbour search would break ties differently."""

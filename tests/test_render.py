@@ -9,7 +9,7 @@ import torch
 import trimesh
 
 from lit3d.render.convert import ShapeError, mesh_hash, normalise, to_mesh
-from lit3d.render.views import camera_poses, dodecahedron_directions
+from lit3d.render.dodecahedron import camera_poses, dodecahedron_directions
 
 
 def test_dodecahedron_directions_unit_twelve_and_angles():

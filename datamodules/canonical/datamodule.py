@@ -11,7 +11,7 @@ Every shape is centred on its bounding-box centre and scaled so that its longest
 (``"subject"``), then rendered with pyrender (EGL) by an orthographic camera on
 +z looking down -z (after turning the shape by each azimuth in ``render.azimuths``). Depth is
 normalised to [0, 1]: 0 = background, foreground in [0.1, 1], nearer = larger.
-``render.view_mode`` (:mod:`lit3d.geometry.views`): ``fixed`` = the azimuths as given; ``broadside`` = each
+``render.view_mode`` (:mod:`lit3d.geometry.broadside`): ``fixed`` = the azimuths as given; ``broadside`` = each
 shape (posed and canonical alike) first turned so that its broad side faces the camera, then
 by each azimuth. ``training.flip_lr``: training inputs mirrored left-right with probability 1/2; the target
 with them under ``fixed`` only (:class:`~datamodules.canonical.dataset.CanonicalPairDataset` says why).

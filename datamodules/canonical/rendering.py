@@ -25,7 +25,7 @@ from datamodules.canonical.flow import flow_targets
 from datamodules.canonical.images import depth_image_problem
 from datamodules.canonical.settings import RenderSettings
 from lit3d.geometry.normalise import bounding_frame
-from lit3d.geometry.views import base_azimuth
+from lit3d.geometry.broadside import base_azimuth
 from lit3d.render.depth import render_depth, rotate_y
 
 log = logging.getLogger("lit3d")

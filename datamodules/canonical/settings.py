@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from datamodules.cache import DataError
-from lit3d.geometry.views import VIEW_MODES
+from lit3d.geometry.broadside import VIEW_MODES
 from lit3d.utils.settings_nodes import parse_node
 
 SCALE_MODES = ("shape", "subject")

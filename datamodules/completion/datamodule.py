@@ -44,7 +44,7 @@ from lit3d.utils.shapenet_categories import (
     select_seen_categories,
     select_unseen_categories,
 )
-from lit3d.utils.voxel_images import BACK_VIEW, FRONT_VIEW, render_voxels, to_resolution
+from lit3d.render.voxel_images import BACK_VIEW, FRONT_VIEW, render_voxels, to_resolution
 
 log = logging.getLogger("lit3d.data")
 
@@ -270,7 +270,7 @@ class CompletionDataModule(pl.LightningDataModule):
     def show(self, n: int, path: str | Path, cell: int = 256) -> Path:
         """PNG of ``n`` samples spread over the splits: per sample the input (nearest-upsampled to
         the target's grid) and the target as shaded marching-cubes renders
-        (:func:`lit3d.utils.voxel_images.render_voxels`), seen from the depth camera's side and
+        (:func:`lit3d.render.voxel_images.render_voxels`), seen from the depth camera's side and
         from behind, ``cell`` px each, labelled with split, name and the input's fill."""
         if not self.datasets:
             self.setup()

@@ -4,9 +4,9 @@ Grid convention (view-aligned, the same as the real 3D-RecGAN++ files, where the
 2.5D surface lies within about one voxel of the target's low-z face):
 arrays are indexed ``[i, j, k]`` = ``[x, y, depth]``; x to the camera's right, y
 up in the image, ``k`` grows away from the camera (the camera looks along +k).
-The object is rotated into the camera frame (:func:`lit3d.sensing.views.camera_rotation`) and
+The object is rotated into the camera frame (:func:`lit3d.sensing.placement.camera_rotation`) and
 scaled/centred so that its longest side spans ``res - 2 * margin`` voxels (``margin`` =
-:data:`lit3d.sensing.views.GRID_MARGIN` unless given).
+:data:`lit3d.sensing.placement.GRID_MARGIN` unless given).
 
 Steps for one sample:
 1. camera rotation from (azimuth, elevation, roll) in degrees;
@@ -16,7 +16,7 @@ Steps for one sample:
 4. depth image (pyrender, EGL) through the sensor's camera (:mod:`lit3d.sensing.sensor`:
    orthographic at ``render_factor * res`` pixels a side, or 3D-RecGAN++'s pinhole camera);
 5. back-projection: each foreground pixel's surface point (with the sensor's range noise and
-   holes), pushed :data:`~lit3d.sensing.views.SURFACE_PUSH` (a quarter voxel) along its ray
+   holes), pushed :data:`~lit3d.sensing.placement.SURFACE_PUSH` (a quarter voxel) along its ray
    into the object, marks its voxel -> partial surface grid at ``res`` (noise-free, >95% of these voxels are
    target voxels with the conservative target of step 3); the sensor may misregister the points by a sub-voxel
    shift and mirror ``i`` (3D-RecGAN++'s handedness);
@@ -34,7 +34,7 @@ from datamodules.completion.voxel_cache import max_pool_bool
 from lit3d.geometry.solid_voxels import solid_voxels
 from lit3d.render.camera import OrthoCamera, look_at, render_ortho_depth
 from lit3d.sensing.sensor import Sensor, bin_points, make_sensor, render_perspective, sensed_points
-from lit3d.sensing.views import GRID_MARGIN, SURFACE_PUSH, camera_rotation
+from lit3d.sensing.placement import GRID_MARGIN, SURFACE_PUSH, camera_rotation
 
 # Analogues of the 3D-RecGAN++ view sets: same-view 5x5x5 (125 views), cross-view
 # 6x6x6 (216 views), as (azimuth, elevation, roll) grids. The two sets share no view.

@@ -14,7 +14,7 @@ empty and whose stimulus has no file under ROOT is a stimulus of the study that 
 does not hold: it is left out and listed in ``skipped`` (no warning). Everything else that
 is wrong is one :class:`datamodules.quality.mos.MosDataError` naming the file and row
 (``on_error="skip"`` turns bad rows into warnings). The clouds themselves are read when
-the features are computed (:func:`lit3d.render.points.load_points`).
+the features are computed (:func:`lit3d.render.point_clouds.load_points`).
 """
 from __future__ import annotations
 

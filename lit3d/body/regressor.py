@@ -4,7 +4,7 @@ Trained on Anny people drawn and rendered on the fly (:mod:`studies.body.train_r
 ``lit3d-reconstruct --body --body-init CKPT`` and ``python -m studies.body.evaluate --init CKPT``.
 
 **Input** (:func:`crop`, the same for training and use): the foreground of the
-:class:`~lit3d.body.points.Observation` (the points the fit sees) cropped to a square around its
+:class:`~lit3d.body.depth_points.Observation` (the points the fit sees) cropped to a square around its
 bounding box (``margin`` of its longest side added on each side, centred; outside the image is
 background), area-resampled to ``size x size``: channel 0 the foreground coverage in [0, 1],
 channel 1 the depth minus the points' median depth, in units of ``depth_unit`` metres (0 on the
@@ -33,7 +33,7 @@ from torch import nn
 from lit3d.body.errors import BodyCheckpointError
 from lit3d.body.fit import FitConfig, FitResult, fit_body, start_centre
 from lit3d.body.model import DOFS, PHENOTYPES, Body, Params
-from lit3d.body.points import Observation
+from lit3d.body.depth_points import Observation
 from lit3d.body.results import fit_quality, render_mask
 from lit3d.utils.checkpoints import load_checkpoint
 from lit3d.utils.extras import require
@@ -79,7 +79,7 @@ def crop(mask: np.ndarray, points: np.ndarray, fx: float, fy: float, prep: Prepr
 
 
 def crop_observation(obs: Observation, prep: Preprocess) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`crop` of an :class:`~lit3d.body.points.Observation`."""
+    """:func:`crop` of an :class:`~lit3d.body.depth_points.Observation`."""
     return crop(obs.mask, obs.points, obs.fx, obs.fy, prep)
 
 

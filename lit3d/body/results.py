@@ -23,7 +23,7 @@ import torch
 
 from lit3d.body.fit import FitResult
 from lit3d.body.model import DOFS, PHENOTYPES, Body
-from lit3d.body.points import Observation
+from lit3d.body.depth_points import Observation
 from lit3d.body.surface import point_to_surface
 from lit3d.geometry.normalise import normalise_vertices
 from lit3d.render.camera import render_pinhole_depth

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from lit3d.body.points import Observation
+from lit3d.body.depth_points import Observation
 from lit3d.sensing.camera import pixel_coordinates
 
 

@@ -228,7 +228,7 @@ def _run_pairs(args) -> int:
 def _load_pair(ref: str | Path, dist: str | Path):
     """Two point clouds are rendered as points; anything else as meshes (:func:`to_mesh`)."""
     from lit3d.render.convert import to_mesh
-    from lit3d.render.points import is_point_source, load_points
+    from lit3d.render.point_clouds import is_point_source, load_points
 
     if is_point_source(ref) and is_point_source(dist):
         return load_points(ref), load_points(dist)

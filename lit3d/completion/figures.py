@@ -6,7 +6,7 @@ depth camera's side, and back view), columns ``input | stage 1 | stage 2 | predi
 validation-chosen threshold). Coarse grids (the r^3 input and intermediate stages) are
 nearest-upsampled to R^3 so they show as voxels at the same scale as the shapes. Each cell is a
 marching-cubes surface rendered with the project's G-buffer pass and a MatCap style
-(:func:`lit3d.utils.voxel_images.render_voxels`).
+(:func:`lit3d.render.voxel_images.render_voxels`).
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ import torch
 
 from lit3d.metrics.voxel import iou_at_thresholds
 from lit3d.utils.figures import labelled_grid
-from lit3d.utils.voxel_images import BACK_VIEW, FRONT_VIEW, render_voxels, to_resolution
+from lit3d.render.voxel_images import BACK_VIEW, FRONT_VIEW, render_voxels, to_resolution
 
 CELL = 256          # px per rendered cell (each view)
 HEADER, LEFT = 44, 210

@@ -1,5 +1,5 @@
 """What the mesh table (:mod:`lit3d.features.table`) and the point-cloud table
-(:mod:`lit3d.features.points`) share, imported by both (neither imports the other's internals):
+(:mod:`lit3d.features.point_table`) share, imported by both (neither imports the other's internals):
 
 - the configuration and result types: :class:`FeatureConfig` (and :func:`feature_config`, one
   from plain options), :class:`ShapeViews`,

@@ -9,11 +9,11 @@ the whole batch of ``shadings x styles x views`` grey image pairs (in chunks of
 Feature names are ``measure/style/shading`` (``mask_ssim_window/ceramic_lightbulb/flat``)
 plus the 3-D features ``chamfer`` and ``hausdorff``. Images are grey (BT.601 luma
 of the RGB MatCap) in ``[0, 1]`` on a black background. Two point clouds go to
-:func:`lit3d.features.points.point_feature_table` instead (rendered as points).
+:func:`lit3d.features.point_table.point_feature_table` instead (rendered as points).
 
 The measures use exact crop shortcuts (see :mod:`lit3d.features.common`, which also holds
 :class:`FeatureConfig`, :class:`FeatureTable`, the cache and the worker threads that this
-module and :mod:`lit3d.features.points` share; they are re-exported here).
+module and :mod:`lit3d.features.point_table` share; they are re-exported here).
 
 Tables are cached on disk as JSON (atomic temp file + rename) keyed by the SHA-256
 of both meshes' vertex/face arrays and the feature configuration.
@@ -46,11 +46,11 @@ from lit3d.features.common import (
     view_workers,
     write_cached_table,
 )
-from lit3d.features.points import point_feature_table
+from lit3d.features.point_table import point_feature_table
 from lit3d.metrics.mesh import chamfer_hausdorff
 from lit3d.render.convert import mesh_hash, to_mesh
 from lit3d.render.gbuffer import render_gbuffers
-from lit3d.render.points import is_point_source, load_points
+from lit3d.render.point_clouds import is_point_source, load_points
 from lit3d.render.splat import render_point_gbuffers
 from lit3d.render.styles import apply_styles
 
@@ -111,8 +111,8 @@ def feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_dir: str
                   device=None, keep_views: bool = False) -> FeatureTable:
     """Compute (or load from cache) the feature table of a shape pair.
 
-    Two point clouds (:func:`lit3d.render.points.is_point_source`) are rendered as points
-    (:func:`lit3d.features.points.point_feature_table`; ``keep_views`` is ignored there);
+    Two point clouds (:func:`lit3d.render.point_clouds.is_point_source`) are rendered as points
+    (:func:`lit3d.features.point_table.point_feature_table`; ``keep_views`` is ignored there);
     everything else goes through :func:`lit3d.render.convert.to_mesh` and the mesh G-buffer.
 
     Args:

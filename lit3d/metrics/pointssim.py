@@ -77,7 +77,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from lit3d.metrics.pointcloud import checked_tree, kd_tree
-from lit3d.render.points import smallest_eigenvalue, smallest_eigenvector
+from lit3d.render.point_clouds import smallest_eigenvalue, smallest_eigenvector
 
 EPS = float(np.finfo(np.float64).eps)  # the reference's CONST = eps(1)
 Y709 = np.array([0.2126, 0.7152, 0.0722])
@@ -107,7 +107,7 @@ def luma8(colours: np.ndarray) -> np.ndarray:
 def _covariance(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
     """Scatter matrices ``(N, 3, 3) float64`` of neighbourhoods given as ``(N, k)`` coordinate columns.
 
-    :func:`lit3d.render.points.neighbour_covariance` written for separate columns, which are
+    :func:`lit3d.render.point_clouds.neighbour_covariance` written for separate columns, which are
     cheaper to gather than ``(N, k, 3)`` rows.
     """
     k = x.shape[1]

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lit3d.render.points import smallest_eigenvector
+from lit3d.render.point_clouds import smallest_eigenvector
 
 K_PROJECTION = 20  # reference -knn: points of the projection fit (and most of the curvature fit)
 K_MIN_CURVATURE = 6  # fewest points of a curvature fit (not in the reference)
@@ -16,7 +16,7 @@ K_MIN_CURVATURE = 6  # fewest points of a curvature fit (not in the reference)
 def _refined_normal(cov: np.ndarray, n: np.ndarray) -> np.ndarray:
     """Float64 unit eigenvectors ``(E, 3)`` of the smallest eigenvalues of ``cov (E, 3, 3)`` from approximations ``n``.
 
-    :func:`lit3d.render.points.smallest_eigenvector` returns float32; one refinement in float64: the
+    :func:`lit3d.render.point_clouds.smallest_eigenvector` returns float32; one refinement in float64: the
     eigenvalue as the Rayleigh quotient of ``n`` (error quadratic in ``n``'s), the vector as the longest
     cross product of two rows of ``cov - lambda I`` (written out entry by entry), signed like ``n``
     (``n`` kept where all three are ~0: isotropic neighbourhoods).

@@ -27,7 +27,7 @@ import numpy as np
 
 from lit3d.body.fit import fit_body
 from lit3d.body.model import Body  # noqa: F401 (re-exported for lit3d.cli.reconstruct)
-from lit3d.body.points import observe
+from lit3d.body.depth_points import observe
 from lit3d.body.regressor import Regressor, fit_from_regressor, load_regressor, refine_config
 from lit3d.body.results import BodyOutputs, fit_outputs
 from lit3d.geometry.normalise import bounding_frame

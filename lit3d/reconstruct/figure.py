@@ -13,7 +13,7 @@ import io
 import numpy as np
 
 from lit3d.utils.figures import font
-from lit3d.render.views import camera_poses
+from lit3d.render.dodecahedron import camera_poses
 
 # view directions (towards the camera) in the GL frame of the input camera (x right, y up, z back)
 VIEWS = {"camera view": (0.0, 0.0, 1.0), "side view": (1.0, 0.25, 0.15), "back view": (-0.35, 0.35, -1.0)}

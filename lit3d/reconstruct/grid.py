@@ -1,6 +1,6 @@
 """Camera-frame points <-> the completion network's voxel grids, in the training geometry.
 
-Grid convention (as in :mod:`lit3d.sensing.views` and the 3D-RecGAN++ files):
+Grid convention (as in :mod:`lit3d.sensing.placement` and the 3D-RecGAN++ files):
 ``[i, j, k]`` = ``[x right, y up in the image, depth away from the camera]``. From the
 camera frame of :mod:`lit3d.reconstruct.backproject` (``y`` down, ``z`` forward, metres)::
     i = (x - c_x) s + R/2,   j = -(y - c_y) s + R/2,   k = (z - c_z) s + R/2
@@ -28,7 +28,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from lit3d.sensing.sensor import make_sensor
-from lit3d.sensing.views import GRID_MARGIN, SURFACE_PUSH
+from lit3d.sensing.placement import GRID_MARGIN, SURFACE_PUSH
 from lit3d.metrics.mesh import surface_samples
 
 

@@ -13,7 +13,7 @@ import numpy as np
 from lit3d.reconstruct.backproject import Intrinsics
 from lit3d.geometry.normalise import normalise_vertices
 from lit3d.render.camera import render_pinhole_depth
-from lit3d.sensing.views import camera_rotation
+from lit3d.sensing.placement import camera_rotation
 
 
 def pose_in_front(mesh, distance: float = 1.5, size: float = 0.6, azimuth: float = 30.0,

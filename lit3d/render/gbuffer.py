@@ -30,7 +30,7 @@ import torch
 from lit3d.render.convert import normalise as normalise_mesh
 from lit3d.render.camera import OrthoCamera, render_ortho
 from lit3d.render.egl import import_pyrender, new_offscreen_renderer
-from lit3d.render.views import camera_poses, dodecahedron_directions
+from lit3d.render.dodecahedron import camera_poses, dodecahedron_directions
 
 SHADINGS = ("flat", "smooth")
 

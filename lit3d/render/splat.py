@@ -1,10 +1,10 @@
 """Native point rendering: splat a point cloud into the G-buffers the MatCap styles read.
 
 No meshing: every point is a screen-aligned disc splat of its local spacing
-(:func:`lit3d.render.points.local_frames`; radius ``SPLAT_SCALE x`` the mean distance
+(:func:`lit3d.render.point_clouds.local_frames`; radius ``SPLAT_SCALE x`` the mean distance
 to its 8 nearest neighbours, at least its own pixel, at most ``MAX_RADIUS_PX``), seen
 from the same 12 orthographic dodecahedron cameras as meshes
-(:mod:`lit3d.render.views`, half-width ``extent``, image row 0 at the top). Visibility
+(:mod:`lit3d.render.dodecahedron`, half-width ``extent``, image row 0 at the top). Visibility
 is a z-buffer in torch (:func:`nearest_splats`): each splat pixel carries the key
 ``depth * N + index`` and ``scatter_reduce(amin)`` keeps the nearest point, so the winner's PCA
 normal, depth and colour fill the pixel. Shadings: ``flat`` uses normals from 8 neighbours,
@@ -22,8 +22,8 @@ import numpy as np
 import torch
 
 from lit3d.render.gbuffer import GBuffer, RenderConfig
-from lit3d.render.points import PointShape, local_frames
-from lit3d.render.views import camera_poses, dodecahedron_directions
+from lit3d.render.point_clouds import PointShape, local_frames
+from lit3d.render.dodecahedron import camera_poses, dodecahedron_directions
 
 SPLAT_SCALE = 0.75
 MAX_RADIUS_PX = 8

@@ -9,7 +9,7 @@ places an object in the grid exactly as the training data did, from named consta
   the named settings :data:`~lit3d.sensing.sensor.SENSORS`, 3D-RecGAN++'s field of view.
 - :mod:`lit3d.sensing.camera`: pinhole :class:`~lit3d.sensing.camera.Intrinsics`, back-projection
   of a depth image and projection (``lit3d-reconstruct`` and the body fit).
-- :mod:`lit3d.sensing.views`: the view geometry: :data:`~lit3d.sensing.views.GRID_MARGIN` and
-  :data:`~lit3d.sensing.views.SURFACE_PUSH` (the placement every synthetic sample is made with) and
-  :func:`~lit3d.sensing.views.camera_rotation`.
+- :mod:`lit3d.sensing.placement`: the view geometry: :data:`~lit3d.sensing.placement.GRID_MARGIN` and
+  :data:`~lit3d.sensing.placement.SURFACE_PUSH` (the placement every synthetic sample is made with) and
+  :func:`~lit3d.sensing.placement.camera_rotation`.
 """

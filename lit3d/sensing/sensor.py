@@ -1,7 +1,7 @@
 """How the 2.5D input of a completion sample is sensed: camera, handedness, noise.
 
 Two cameras, both looking along ``+k`` of the view-aligned grid of
-:mod:`lit3d.sensing.views` (``[i, j, k]`` = ``[x, y up, depth]``):
+:mod:`lit3d.sensing.placement` (``[i, j, k]`` = ``[x, y up, depth]``):
 
 - ``ortho``: the project's original orthographic camera (rays parallel to ``k``).
 - ``perspective``: 3D-RecGAN++'s pinhole camera (``Data_preprocess/depth_2_pc_2_vox.py`` of its

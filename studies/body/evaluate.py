@@ -51,7 +51,7 @@ from lit3d.body_model.bodies import sample_phenotype, sample_pose
 from datamodules.canonical.posesets import index_faust
 from lit3d.body.fit import FitConfig, fit_best, fit_body
 from lit3d.body.model import PHENOTYPES, Body, Params
-from lit3d.body.points import observe
+from lit3d.body.depth_points import observe
 from lit3d.body.poses import POSE_MIXES, draw_pose
 from lit3d.body.regressor import REFINE_FULL_ITERS, REFINE_GLOBAL_ITERS, fit_from_regressor, load_regressor, \
     refine_config, regress

@@ -35,7 +35,7 @@ import torch
 from lit3d.body_model.bodies import adult_shape_distribution
 from lit3d.body.fit import start_centre
 from lit3d.body.model import PHENOTYPES, Body
-from lit3d.body.points import MIN_POINTS
+from lit3d.body.depth_points import MIN_POINTS
 from lit3d.body.poses import POSE_MIXES, draw_pose
 from lit3d.body.regressor import BodyRegressor, Preprocess, checkpoint, crop, loss, targets
 from lit3d.body.synthetic import HEIGHT, WIDTH, Camera, sensed_depth

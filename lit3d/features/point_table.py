@@ -54,7 +54,7 @@ from lit3d.metrics.pcqm import pcqm
 from lit3d.metrics.pointssim import pointssim
 from lit3d.metrics.pointcloud import kd_tree, pointcloud_baselines
 from lit3d.render.colour_styles import apply_colour_styles
-from lit3d.render.points import PointShape, load_points, local_frames
+from lit3d.render.point_clouds import PointShape, load_points, local_frames
 from lit3d.render.splat import point_frame, render_point_gbuffers
 from lit3d.render.styles import apply_styles
 
@@ -72,7 +72,7 @@ _FRAMES_PENDING: dict[str, Future] = {}  # key -> the frames being computed by a
 
 
 def cached_frames(shape: PointShape, key: str, workers: int = -1) -> dict[str, np.ndarray]:
-    """:func:`lit3d.render.points.local_frames` of ``shape`` (its KD-tree query on ``workers`` threads; the
+    """:func:`lit3d.render.point_clouds.local_frames` of ``shape`` (its KD-tree query on ``workers`` threads; the
     frames do not depend on them), memoised for the last few clouds.
 
     Thread-safe: the look-up, the insertion and the eviction of :data:`_FRAMES` run under
@@ -187,7 +187,7 @@ def point_feature_table(ref, dist, cfg: FeatureConfig | None = None, *, cache_di
     """Compute (or load from cache) the feature table of a point-cloud pair (see the module doc).
 
     Args:
-        ref, dist: anything :func:`lit3d.render.points.load_points` accepts.
+        ref, dist: anything :func:`lit3d.render.point_clouds.load_points` accepts.
         cfg: feature configuration (render size, styles, measures, shadings, workers).
         cache_dir: folder of cached JSON tables (None: no caching).
         device: torch device for the measures (default CPU).
