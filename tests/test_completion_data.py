@@ -263,3 +263,11 @@ def test_max_pool_matches_torch(res, factor):
     g = np.random.default_rng(res + factor).random((res, res, res)) < 0.01
     ref = torch.nn.functional.max_pool3d(torch.from_numpy(g.astype(np.float32))[None, None], factor)[0, 0] > 0
     np.testing.assert_array_equal(max_pool_bool(g, factor), ref.numpy())
+
+
+def test_the_task_names_the_data_test_splits():
+    """One list of test splits: the task's metric keys are the data's test splits without ``test_``."""
+    from datamodules.completion.voxel_cache import TEST_SPLITS
+    from lit3d.completion.module import TEST_SPLIT_KEYS
+
+    assert TEST_SPLIT_KEYS == tuple(s.removeprefix("test_") for s in TEST_SPLITS)

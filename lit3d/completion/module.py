@@ -52,7 +52,8 @@ from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, select_seen_categor
 
 log = logging.getLogger("lit3d.completion")
 
-TEST_SPLITS = ("same", "cross", "unseen", "unseen_cross")
+# the test splits as the metrics name them: datamodules.completion.voxel_cache.TEST_SPLITS without "test_"
+TEST_SPLIT_KEYS = ("same", "cross", "unseen", "unseen_cross")
 # predictions: the model, the partial input upsampled, the per-voxel training prior
 PREDICTION_SOURCES = ("model", "input", "prior", "extrusion")
 
@@ -154,7 +155,8 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
         self.val_metrics = torch.nn.ModuleDict(
             {s: VoxelSweepMetrics(self.eval_categories, thresholds) for s in PREDICTION_SOURCES})
         self.test_metrics = torch.nn.ModuleDict(
-            {f"{sp}_{s}": VoxelSweepMetrics(self.eval_categories, thresholds) for sp in TEST_SPLITS for s in PREDICTION_SOURCES}
+            {f"{sp}_{s}": VoxelSweepMetrics(self.eval_categories, thresholds)
+             for sp in TEST_SPLIT_KEYS for s in PREDICTION_SOURCES}
         )
 
     def setup(self, stage: str | None = None) -> None:
@@ -180,7 +182,7 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
         evaluation setting ``evaluation.surface``, set by :func:`lit3d.completion.evaluator.prepare`);
         None = off. Their states are not saved in checkpoints."""
         self._surface_settings = surface
-        self.test_surface = (SurfaceTestMetrics(TEST_SPLITS, PREDICTION_SOURCES, self.eval_categories, **surface)
+        self.test_surface = (SurfaceTestMetrics(TEST_SPLIT_KEYS, PREDICTION_SOURCES, self.eval_categories, **surface)
                              if surface else None)
 
     # ------------------------------------------------------------------ helpers
@@ -340,8 +342,8 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
     # ------------------------------------------------------------------ test
     def _split_name(self, dataloader_idx: int) -> str:
         dm = getattr(self.trainer, "datamodule", None)
-        names = list(getattr(dm, "test_split_names", TEST_SPLITS))
-        return split_key(names[dataloader_idx]) if dataloader_idx < len(names) else TEST_SPLITS[dataloader_idx]
+        names = list(getattr(dm, "test_split_names", TEST_SPLIT_KEYS))
+        return split_key(names[dataloader_idx]) if dataloader_idx < len(names) else TEST_SPLIT_KEYS[dataloader_idx]
 
     def test_step(self, batch: dict, batch_idx: int, dataloader_idx: int = 0) -> None:
         split = self._split_name(dataloader_idx)
@@ -349,16 +351,16 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
         preds = self._predictions(batch)
         for src, p in preds.items():
             self.test_metrics[f"{split}_{src}"].update(p, batch["target"], cats)
-        self.test_samples.update(TEST_SPLITS.index(split), cats, preds, batch["target"], self._source_thresholds())
+        self.test_samples.update(TEST_SPLIT_KEYS.index(split), cats, preds, batch["target"], self._source_thresholds())
         if self.test_surface is not None:
             self.test_surface.update(split, preds, batch["target"], cats, self._source_thresholds())
 
     def on_test_epoch_end(self) -> None:
         out: dict[str, float] = {"test/threshold": float(self.threshold)}
-        out.update(self.test_samples.summary(TEST_SPLITS, self.eval_categories))
+        out.update(self.test_samples.summary(TEST_SPLIT_KEYS, self.eval_categories))
         self.test_samples.reset()
-        out.update(split_values(self.test_metrics, TEST_SPLITS, PREDICTION_SOURCES, self._source_thresholds(), self.thresholds,
-                                self.eval_categories))
+        out.update(split_values(self.test_metrics, TEST_SPLIT_KEYS, PREDICTION_SOURCES, self._source_thresholds(),
+                                self.thresholds, self.eval_categories))
         out.update(self.test_surface.values() if self.test_surface is not None else {})
         self.log_dict(out, sync_dist=False)
 
