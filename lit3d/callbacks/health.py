@@ -22,6 +22,8 @@ import re
 import lightning.pytorch as pl
 import torch
 
+from lit3d.utils.task_hooks import HasHealthGroups
+
 
 def _key(name: str) -> str:
     return re.sub(r"[^0-9A-Za-z_.-]+", "_", name.strip())
@@ -29,7 +31,7 @@ def _key(name: str) -> str:
 
 def parameter_groups(module: torch.nn.Module) -> dict[str, list[torch.nn.Parameter]]:
     """``module.health_groups()`` if defined, else ``{child name: trainable params}``."""
-    if hasattr(module, "health_groups"):
+    if isinstance(module, HasHealthGroups):
         groups = module.health_groups()
     else:
         groups = {name: list(child.parameters()) for name, child in module.named_children()}

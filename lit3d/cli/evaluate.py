@@ -30,6 +30,7 @@ from omegaconf import DictConfig, OmegaConf
 from lit3d.runtime import eval_settings
 from lit3d.cli.about import EXIT_USER
 from lit3d.cli.common import cli_main, fail, run_cli
+from lit3d.utils.task_hooks import AdaptsDataConfig, validates_before_test
 from lit3d.cli.evaluation import run_evaluation
 from lit3d.runtime.build import build_datamodule, import_object, to_plain
 from lit3d.runtime.checkpoints import read_checkpoint
@@ -81,7 +82,7 @@ def _evaluate(cfg: DictConfig, out_dir: Path) -> dict[str, float]:
     del ckpt
     data_cfg = to_plain(cfg.data) if cfg.get("data") is not None else dict(meta["data"])
     data_cfg = with_data_overrides(data_cfg, to_plain(cfg.get(DATA_OVERRIDES)), cfg.ckpt_path)
-    if hasattr(task, "adapt_data_config"):
+    if isinstance(task, AdaptsDataConfig):
         data_cfg = task.adapt_data_config(data_cfg)
     datamodule = build_datamodule(data_cfg)
     trainer: pl.Trainer = instantiate(cfg.trainer, logger=False, enable_checkpointing=False,
@@ -93,7 +94,7 @@ def _evaluate(cfg: DictConfig, out_dir: Path) -> dict[str, float]:
 
     config = OmegaConf.to_yaml(OmegaConf.create({"task": task_cfg, "data": data_cfg, "evaluation": settings}))
     return run_evaluation(trainer, task, datamodule, task_cfg["name"], out_dir,
-                          validate=getattr(task, "validate_before_test", False), n_figures=cfg.n_figures,
+                          validate=validates_before_test(task), n_figures=cfg.n_figures,
                           extra=record, files={"config.yaml": config}, settings=settings)
 
 

@@ -25,6 +25,7 @@ from collections.abc import Callable, Mapping, Sequence
 from omegaconf import DictConfig, OmegaConf
 
 from lit3d.utils.evaluation import legacy_settings
+from lit3d.utils.task_hooks import evaluation_legacy
 
 log = logging.getLogger("lit3d")
 
@@ -82,7 +83,7 @@ def checkpoint_settings(ckpt: Mapping, meta: Mapping, task_cls) -> tuple[dict, s
     saved = meta.get(NODE)
     if isinstance(saved, Mapping):
         return dict(saved), "the checkpoint's (saved by lit3d-train)"
-    moved = dict(getattr(task_cls, "evaluation_legacy", {}) or {})
+    moved = evaluation_legacy(task_cls)
     hp = {**(meta.get("task") or {}), **(ckpt.get("hyper_parameters") or {})}  # an upgraded checkpoint: in the task config
     settings = legacy_settings(getattr(task_cls, "__name__", "task"), {k: hp[k] for k in moved if k in hp}, moved)
     return settings, "the checkpoint's task hyper-parameters (saved before evaluation settings had their own node)"
