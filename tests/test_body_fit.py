@@ -20,15 +20,7 @@ from lit3d.body.surface import silhouette_excess
 from lit3d.body_model import bodies
 from lit3d.cli.reconstruct import main
 from lit3d.reconstruct import backproject as recon_bp
-from lit3d.reconstruct.backproject import RECGAN_FOV_DEG, Intrinsics
-
-W, H = 160, 120
-INTR = Intrinsics.from_fov(RECGAN_FOV_DEG, W, H)
-
-
-def _save_mm(path, depth):
-    Image.fromarray(np.round(np.asarray(depth) * 1000).astype(np.uint16)).save(path)
-
+from tests.helpers.body import INTR, H, W, save_depth_mm
 
 # ------------------------------------------------------------------ parts (no Anny)
 def test_backprojection_is_the_reconstruct_one_and_too_few_points_are_refused():
@@ -94,10 +86,10 @@ def test_canonical_depth_is_rendered_as_the_canonical_task_renders_anny_targets(
 
 
 def test_cli_body_bad_input_gives_one_line_before_anny_loads(tmp_path, capsys):
-    _save_mm(tmp_path / "empty.png", np.zeros((H, W)))
+    save_depth_mm(tmp_path / "empty.png", np.zeros((H, W)))
     sparse = np.zeros((H, W))
     sparse[50:55, 70:80] = 2.0
-    _save_mm(tmp_path / "speck.png", sparse)
+    save_depth_mm(tmp_path / "speck.png", sparse)
     out = tmp_path / "out"
     assert main([str(tmp_path / "empty.png"), str(tmp_path / "speck.png"), "--body", "--out", str(out)]) == 2
     err = capsys.readouterr().err
@@ -172,10 +164,10 @@ def test_cli_body_writes_every_file_and_flags_a_box(body, tmp_path, capsys, monk
 
     monkeypatch.setattr(rb, "Body", lambda: body)  # the module's loaded Anny, not a second one
     _, depth = _person(body)
-    _save_mm(tmp_path / "person.png", depth)
+    save_depth_mm(tmp_path / "person.png", depth)
     box = trimesh.creation.box((0.6, 1.0, 0.5))
     box.apply_translation((0.0, 0.2, 2.8))
-    _save_mm(tmp_path / "box.png", render_depth_pinhole(box, INTR, W, H))
+    save_depth_mm(tmp_path / "box.png", render_depth_pinhole(box, INTR, W, H))
     out = tmp_path / "out"
     assert main([str(tmp_path / "person.png"), str(tmp_path / "box.png"), "--body", "--out", str(out)]) == 0
     err = capsys.readouterr().err

@@ -368,7 +368,7 @@ def test_ctrl_c_during_a_real_first_anny_build_ends_within_2_s(tmp_path):
     heartbeat on stderr, then one Ctrl-C ends it within 2 s with one line, exit 130, no part-written cache
     file and nothing in --out."""
     from lit3d.body_model.anny_cache import is_whole
-    from test_body_fit import INTR, H, W, _save_mm
+    from tests.helpers.body import INTR, H, W, save_depth_mm
 
     import trimesh
 
@@ -376,7 +376,7 @@ def test_ctrl_c_during_a_real_first_anny_build_ends_within_2_s(tmp_path):
 
     box = trimesh.creation.box((0.6, 1.0, 0.5))
     box.apply_translation((0.0, 0.2, 2.8))
-    _save_mm(tmp_path / "box.png", render_depth_pinhole(box, INTR, W, H))
+    save_depth_mm(tmp_path / "box.png", render_depth_pinhole(box, INTR, W, H))
     env = {**os.environ, "ANNY_CACHE_DIR": str(tmp_path / "anny"), "PYTHONPATH": str(REPO)}
     proc = subprocess.Popen([sys.executable, "-c", "import sys; from lit3d.cli.reconstruct import main; sys.exit(main())",
                              str(tmp_path / "box.png"), "--body", "--out", str(tmp_path / "out")],
