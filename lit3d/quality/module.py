@@ -42,7 +42,8 @@ from lit3d.quality.trainer import TrainConfig, init_mlp, make_optimizer
 from lit3d.utils.evaluation import legacy_settings
 
 CKPT_KEY = "quality"
-NET_DEFAULTS = {"hidden": 32, "blocks": 2, "dropout": 0.1, "batch_norm": True}
+# the MLP of a checkpoint saved without a net node: the thesis's (TrainConfig's defaults, written once there)
+NET_DEFAULTS = TrainConfig().net_kwargs()
 # the evaluation settings (the config's ``evaluation`` node, :mod:`lit3d.quality.evaluator`) that checkpoints
 # written before that node hold among the task's hyper-parameters, with the constructor's defaults then
 EVALUATION_LEGACY = {"baselines": None, "cv": False, "cv_epochs": None, "cv_methods": ("ours_all", "ours_sfs"),
