@@ -9,7 +9,7 @@ import torch
 import torch.nn.functional as F
 from tests.helpers.piq import piq_functions
 
-from lit3d.features.common import UNLEARNED_COLOUR_STYLES, overall_score
+from lit3d.features.config import UNLEARNED_COLOUR_STYLES, overall_score
 from lit3d.features.point_table import PIQ_STYLES
 from lit3d.features.table import FeatureConfig, feature_table
 from lit3d.metrics.pcqm import pcqm

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lit3d.body_model.anny_cache import first_build
+
 # Bump when the sampling below changes: it is part of every Anny cache's config hash.
 BODIES_VERSION = "anny-bodies-1"  # phenotypes="adult" adds its own tag (datamodules.canonical.datamodule)
 
@@ -174,8 +176,6 @@ class BodyModel:
     def model(self):
         if self._model is None:
             import torch
-
-            from lit3d.body_model.anny_cache import first_build
 
             # warp (anny's skinning) notes from native code on stderr that a CPU machine has no CUDA
             # driver, and prints a banner (devices, kernel cache) on every start: both at its init, done

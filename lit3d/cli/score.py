@@ -266,7 +266,7 @@ def _score(args, cfg, predictor, ref, dist):
     optional: a cache that cannot be written gives one warning line (once a run), the score is
     computed all the same. Memory that cannot be allocated for the renders is one line naming the
     render size (exit 2)."""
-    from lit3d.features.common import CacheWarning
+    from lit3d.features.cache import CacheWarning
     from lit3d.features.table import default_cache_dir, feature_table
 
     t0 = time.perf_counter()

@@ -23,7 +23,7 @@ of recently seen clouds are kept in memory, so a dataset with one reference comp
 the reference's once (:func:`cached_frames`, safe to call from several threads).
 
 The configuration, cache, worker threads and image measures are those of the mesh table,
-from :mod:`lit3d.features.common` (this module does not import :mod:`lit3d.features.table`,
+from :mod:`lit3d.features.view_measures` (this module does not import :mod:`lit3d.features.table`,
 which imports it to dispatch point-cloud pairs here).
 """
 from __future__ import annotations
@@ -35,19 +35,10 @@ from concurrent.futures import Future
 import numpy as np
 import torch
 
-from lit3d.features.common import (
-    FeatureConfig,
-    FeatureTable,
-    cache_path,
-    chunked_measures,
-    content_key,
-    pair_measures,
-    read_cached_table,
-    view_crop,
-    view_worker_count,
-    view_workers,
-    write_cached_table,
-)
+from lit3d.features.cache import cache_path, read_cached_table, write_cached_table
+from lit3d.features.config import FeatureConfig, FeatureTable, content_key
+from lit3d.features.view_measures import chunked_measures, pair_measures, view_crop
+from lit3d.features.workers import view_worker_count, view_workers
 from lit3d.metrics.image import PSNR_MAX_DB
 from lit3d.metrics.image.colour_measures import PIQ_MIN_SIZE, ciede2000, piq_measures
 from lit3d.metrics.pcqm import pcqm
@@ -125,7 +116,7 @@ def _rgb_measures(a: torch.Tensor, b: torch.Tensor, ma, mb, crop, measures) -> d
 def _colour_measures(a: torch.Tensor, b: torch.Tensor, ma, mb, crop, measures, styles: list[str], first: bool,
                      downsample: int) -> dict[tuple[str, str], torch.Tensor]:
     """``{(measure, style): (1,)}`` of the RGB colour styles ``a, b (S, 3, h, w)`` of one view (its crop, masks
-    ``(1, 1, h, w)``) for ``measures`` within :data:`lit3d.features.common.COLOUR_MEASURES`: CIEDE2000 inside
+    ``(1, 1, h, w)``) for ``measures`` within :data:`lit3d.features.config.COLOUR_MEASURES`: CIEDE2000 inside
     the masks for every style; piq's measures (``fsimc``: piq's chromatic FSIM) for :data:`PIQ_STYLES` under the
     first shading only (``first``), on the full canvas averaged down by ``downsample`` (piq's measures pool
     global statistics: 60 full-size images a pair would cost about 20 s on two cores), less where that would

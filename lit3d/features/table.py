@@ -11,7 +11,7 @@ plus the 3-D features ``chamfer`` and ``hausdorff``. Images are grey (BT.601 lum
 of the RGB MatCap) in ``[0, 1]`` on a black background. Two point clouds go to
 :func:`lit3d.features.point_table.point_feature_table` instead (rendered as points).
 
-The measures use exact crop shortcuts (see :mod:`lit3d.features.common`, which also holds
+The measures use exact crop shortcuts (see :mod:`lit3d.features.view_measures`, which also holds
 :class:`FeatureConfig`, :class:`FeatureTable`, the cache and the worker threads that this
 module and :mod:`lit3d.features.point_table` share; they are re-exported here).
 
@@ -27,25 +27,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lit3d.features.common import (
-    CROP_MARGIN,
-    FEATURE_VERSION,
-    IMAGE_MEASURES,
-    MESH_MEASURES,
-    FeatureConfig,
-    FeatureTable,
-    ShapeViews,
-    cache_path,
-    content_key,
-    crop_box,
-    feature_config,
-    overall_score,
-    pair_measures,
-    read_cached_table,
-    view_measures,
-    view_workers,
-    write_cached_table,
-)
+from lit3d.features.cache import cache_path, read_cached_table, write_cached_table
+from lit3d.features.config import (
+    CROP_MARGIN, FEATURE_VERSION, IMAGE_MEASURES, MESH_MEASURES, FeatureConfig, FeatureTable, ShapeViews, content_key,
+    feature_config, overall_score)
+from lit3d.features.view_measures import crop_box, pair_measures, view_measures
+from lit3d.features.workers import view_workers
 from lit3d.features.point_table import point_feature_table
 from lit3d.metrics.mesh import chamfer_hausdorff
 from lit3d.render.convert import mesh_hash, to_mesh
@@ -54,7 +41,7 @@ from lit3d.render.point_clouds import is_point_source, load_points
 from lit3d.render.splat import render_point_gbuffers
 from lit3d.render.styles import apply_styles
 
-__all__ = [  # with the names of lit3d.features.common that callers have always imported from here
+__all__ = [  # with the names of lit3d.features.config that callers have always imported from here
     "FEATURE_VERSION", "IMAGE_MEASURES", "MESH_MEASURES", "FeatureConfig", "FeatureTable", "ShapeViews",
     "content_key", "default_cache_dir", "feature_config", "feature_table", "image_measures", "overall_score",
     "pair_measures", "render_views",
@@ -87,7 +74,7 @@ def image_measures(a: torch.Tensor, b: torch.Tensor, mask_a: torch.Tensor, mask_
             (black background outside the masks).
         mask_a, mask_b: ``(N, 1, H, W) bool`` foreground masks.
         measures: subset of :data:`IMAGE_MEASURES`.
-        crop: use the bounding-box shortcut (see :mod:`lit3d.features.common`): exact for every
+        crop: use the bounding-box shortcut (see :mod:`lit3d.features.view_measures`): exact for every
             measure but FSIM, whose crop form is an approximation.
 
     Returns:

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import torch
 
-from lit3d.features.common import FeatureConfig, feature_config
+from lit3d.features.config import FeatureConfig, feature_config
 from lit3d.quality.nets import QualityMLP
 from lit3d.quality.protocol import TargetScaling
 from lit3d.utils.checkpoints import META_KEY, first_line, load_checkpoint
@@ -67,7 +67,7 @@ class QualityPredictor:
         return self.scaling.name if self.scaling else "distortion"
 
     def feature_config(self) -> FeatureConfig:
-        """:func:`lit3d.features.common.feature_config` of :attr:`feature_options`: the
+        """:func:`lit3d.features.config.feature_config` of :attr:`feature_options`: the
         configuration the training features were computed with."""
         return feature_config(self.feature_options)
 

@@ -4,7 +4,7 @@ with its card.
 
 The file holds ``{"name", "trained_on", "target": {"name", "lo", "hi", "higher_is_better"},
 "feature_options": {...}, "fusion": <the model>.to_dict(), "cross_validated": {...}, "command"}``:
-the feature options are those of :func:`lit3d.features.common.feature_config` (how the training
+the feature options are those of :func:`lit3d.features.config.feature_config` (how the training
 features were computed), the target says how the fusion's [0, 1] distortion maps back to the
 opinion scale. ``lit3d-score`` and :func:`lit3d.score` use :data:`DEFAULT_MODEL` unless told
 ``--unlearned`` / given a checkpoint. Model card: ``docs/quality_model.md``.
@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lit3d.features.common import FeatureConfig, feature_config
+from lit3d.features.config import FeatureConfig, feature_config
 from lit3d.features.matrix import TargetScaling
 from lit3d.quality.fusion import AnchoredFusion, LinearFusion, fusion_from_dict
 from lit3d.utils.errors import Lit3dError

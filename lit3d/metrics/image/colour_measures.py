@@ -189,7 +189,7 @@ def piq_measures(a: torch.Tensor, b: torch.Tensor, measures: Sequence[str] = PIQ
             VIF and MDSI are not symmetric).
         measures: subset of :data:`PIQ_MEASURES`.
         crop: ``(y0, x0, H, W)``: ``a``, ``b`` are the window at ``(y0, x0)`` of ``H x W``
-            canvases that are 0 outside it (as in :func:`lit3d.features.common.pair_measures`);
+            canvases that are 0 outside it (as in :func:`lit3d.features.view_measures.pair_measures`);
             they are zero-padded back to the canvas first, so the values are the full-canvas ones
             (all six measures pool global statistics; none has an exact crop shortcut).
         downsample: average ``downsample x downsample`` blocks of the (padded) images first (the
