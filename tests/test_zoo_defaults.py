@@ -94,6 +94,5 @@ def test_canonical_flag_without_value_names_the_zoo_model():
     assert args.canonical == ZOO_CANONICAL and args.ckpt is None
     args = _parser().parse_args(["d.png", "--out", "o", "--canonical", "my.ckpt"])
     assert args.canonical == "my.ckpt"
-    if ZOO_CANONICAL not in zoo.ZOO:  # until it ships: one line naming its recipe, not "checkpoint not found"
-        with pytest.raises(zoo.ZooError, match="not shipped yet.*canonical_people"):
-            zoo.resolve(ZOO_CANONICAL)
+    path, label = zoo.resolve(ZOO_CANONICAL)
+    assert path == zoo.zoo_model(ZOO_CANONICAL).path and label.startswith("shipped canonical-people")

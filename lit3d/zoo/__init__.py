@@ -54,11 +54,20 @@ ZOO: dict[str, ZooModel] = {m.name: m for m in (
              "OUT=logs/zoo_completion SEED=42 bash studies/zoo/remake_completion_furniture.sh "
              "(lit3d-train experiment=completion_furniture)",
              "docs/models/completion_furniture.md"),
+    ZooModel("canonical-people", "canonical", "zoo/canonical-people.pt",
+             "Anny people (data=anny): 200 adult phenotypes of Anny's shape distribution, each in 30 poses of its "
+             "own, split by subject and pose (140 training subjects, 3,360 pairs); experiment=canonical_people "
+             "(12 epochs) then canonical_people_identity (8 epochs with a subject classifier), seed 42, "
+             "one CPU thread (shared)",
+             "OUT=logs/zoo_people SEED=42 bash studies/zoo/remake_canonical_people.sh "
+             "(lit3d-train experiment=canonical_people, then experiment=canonical_people_identity)",
+             "docs/models/canonical_people.md"),
     ZooModel("body-regressor", "body", "zoo/body-regressor.pt",
-             "Anny people drawn and rendered on the fly (adult shape distribution, the 'varied' pose mix: upright, "
-             "turned, folded, lying, upside down), seed 7, one hour on one CPU thread",
+             "Anny people drawn and rendered on the fly (adult shape distribution, the 'upright' pose mix: standing "
+             "people in the fit's joint limits, turned up to 15 degrees), seed 7, 12,528 steps in one hour on one "
+             "CPU thread",
              "python -m studies.body.train_regressor --out CKPT --minutes 60 --steps 20000 --size 64 --width 24 "
-             "--hidden 256 --batch 64 --draw 32 --reuse 16 --seed 7 --poses varied",
+             "--hidden 256 --batch 64 --draw 32 --reuse 16 --seed 7 --poses upright",
              "docs/models/body_regressor.md"),
     ZooModel("cpcd2-phil-fusion", "quality", "quality/models/cpcd2-phil-fusion.json",
              "CPCD2.0 phil (30 coloured point clouds, MOS 1..5)",
@@ -73,9 +82,6 @@ def models() -> list[dict]:
     return [m.describe() for m in ZOO.values()]
 
 
-# names the CLIs use as defaults whose weights are not trained yet: their recipe, for the one-line refusal
-NOT_SHIPPED = {"canonical-people": "experiment=canonical_people then canonical_people_identity "
-                                   "(bash studies/zoo/remake_canonical_people.sh)"}
 
 
 def is_zoo_name(value) -> bool:
@@ -87,9 +93,6 @@ def resolve(value: str | Path) -> tuple[Path, str]:
     """``(path, label)`` of a checkpoint argument that may be a file or a zoo name: a file that exists wins
     over a zoo entry of the same name; a zoo name gives its installed file (a :class:`ZooError` line when
     the file is not installed). ``label`` says which, for the console ("shipped completion-furniture (PATH)")."""
-    if isinstance(value, str) and value in NOT_SHIPPED and value not in ZOO and not Path(value).exists():
-        raise ZooError(f"'{value}' is not shipped yet (docs/models.md): give a checkpoint of your own, trained "
-                       f"with {NOT_SHIPPED[value]}")
     if is_zoo_name(value):
         model = zoo_model(value)
         return model.path, f"shipped {model.name} ({model.path})"
