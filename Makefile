@@ -23,10 +23,12 @@ install: $(STAMP) $(EXTRAS)
 demo: $(STAMP)
 	bash scripts/demo.sh $(TASK)
 
+# the suite in TEST_WORKERS processes (pytest-xdist; a test file stays in one process); TEST_WORKERS=0: one process
+TEST_WORKERS ?= 2
 test: $(STAMP) $(EXTRAS)
 	$(BIN)/lint-imports
 	$(BIN)/ruff check lit3d datamodules studies benchmarks tests
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 test-all: $(STAMP) $(EXTRAS)
 	$(BIN)/python -m pytest -q -m "not gpu"
