@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
 import subprocess
 from pathlib import Path
 
@@ -22,7 +23,11 @@ os.environ.setdefault("WANDB_MODE", "offline")
 
 
 def pytest_configure(config):
-    """The entry points' filters for what lit3d cannot fix (lit3d.utils.quiet), in every test."""
+    """The entry points' filters for what lit3d cannot fix (lit3d.utils.quiet), in every test. A pytest-xdist
+    worker starts with SIGINT ignored, and a child process inherits an ignored signal (Python then installs no
+    Ctrl-C handler in it): the worker takes Python's own handler back, so the Ctrl-C tests' children get one."""
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     quiet.install()
     for line in quiet.pytest_filters():
         config.addinivalue_line("filterwarnings", line)
@@ -106,6 +111,15 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip)
 
 
+
+
+@pytest.fixture(autouse=True)
+def _signals_as_at_start():
+    """An entry point run in-process may leave SIGINT or SIGTERM ignored after its stop (a child process would
+    inherit that and not stop on it): each test starts with Python's own handlers."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    yield
 
 
 @pytest.fixture(autouse=True)

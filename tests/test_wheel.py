@@ -128,7 +128,7 @@ def test_installed_wheel_trains_outside_the_checkout(wheel, tmp_path):
     _run([python, "-m", "pip", "install", "--no-deps", "--no-index", "--ignore-installed",
           "--disable-pip-version-check", "-q", wheel], cwd=tmp_path)
 
-    where = _run([python, "-c", "import lit3d, lit3d.cli.common as c; print(lit3d.__file__); print(c.CONF_DIR)"],
+    where = _run([python, "-c", "import lit3d, lit3d.runtime.compose as c; print(lit3d.__file__); print(c.CONF_DIR)"],
                  cwd=tmp_path).stdout.split()
     assert Path(where[0]).resolve() == (site / "lit3d" / "__init__.py").resolve()
     assert Path(where[1]).resolve() == (site / "lit3d" / "conf").resolve()

@@ -17,6 +17,7 @@ line, e.g. ``--body needs the Anny body model: pip install 'lit3d[body]'`` (exit
 from __future__ import annotations
 
 import importlib.util
+import sys
 
 from lit3d.utils.errors import Lit3dError
 
@@ -38,6 +39,8 @@ class MissingExtra(Lit3dError, ImportError):
 def installed(module: str) -> bool:
     """True when ``module`` can be imported (found on the path, without importing it; a module set to
     ``None`` in ``sys.modules`` counts as missing, as ``import`` treats it)."""
+    if module in sys.modules:  # imported already (a stand-in package without a spec too), or None: blocked
+        return sys.modules[module] is not None
     try:
         return importlib.util.find_spec(module) is not None
     except (ImportError, ValueError):  # a parent package missing, or a module without a spec
