@@ -6,8 +6,7 @@ signal only when that work ended (``lit3d-reconstruct --body`` during the first 
 after SIGTERM). Now: exit 130 (SIGINT) / 143 (SIGTERM) within 2 s of the second signal, one line, and
 no temp file of an unfinished write left in the output folder. Inside a native step (the Anny cache
 build) the first signal already does so. The in-process tests at the end check the pieces of the Anny
-cache's first build (lit3d.body_model.anny_cache): the lines it says, silence when the cache is there,
-and the part-written files it removes.
+cache's first build (lit3d.body_model.anny_cache): its lines, silence when cached, the part-written files it removes.
 """
 from __future__ import annotations
 
@@ -129,9 +128,7 @@ def test_a_second_signal_during_a_native_call_ends_within_2_s(tmp_path):
                      "half-written; resume with ckpt_path=last"], lines
 
 
-# slow: beside another test process on 2 cores the child sometimes ends by the first KeyboardInterrupt (status -2)
-# before the forced exit (130) is due; a race to fix, seen 2 times in 7 runs under load, never alone
-@pytest.mark.slow
+@pytest.mark.slow  # under load the child may end by the first KeyboardInterrupt (-2) before the forced exit: a race
 @pytest.mark.parametrize("stage", ["staging", "committed"])
 def test_a_forced_exit_leaves_a_file_set_whole_or_absent(tmp_path, stage):
     """lit3d-reconstruct's sets (lit3d.utils.io.write_file_set) stopped twice inside a native call: one still
