@@ -35,20 +35,17 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+
 import numpy as np
-import torch
 
 from lit3d.completion.target_pairs import Shape, ShapePair, read_shape
 from lit3d.geometry.solid_voxels import solid_voxels
 from lit3d.metrics.bootstrap import mean_ci
-from lit3d.metrics.clouds import CHAMFER_CONVENTIONS, chamfer_from_distances, consistency_from_neighbours, \
-    precision_recall_fscore
-from lit3d.metrics.nearest import nearest
-from lit3d.metrics.surface import SurfaceSample, fscore_key, grid_surface, sample_mesh, sample_triangles
+from lit3d.metrics.surface import (CHAMFER_KEYS, SurfaceSample, fscore_key, grid_surface, sample_mesh, sample_triangles,
+                                   surface_scores)
 from lit3d.render.convert import ShapeError
 
 MESH_FRAMES = ("unit", "voxel")
-CHAMFER_KEYS = {"chamfer_l1": "l1", "chamfer_l2": "pytorch3d"}  # measure -> convention of lit3d.metrics.clouds
 
 
 @dataclass(frozen=True)
@@ -104,20 +101,15 @@ def surface_sample(shape: Shape, cfg: TargetScoring) -> SurfaceSample:
 
 def pair_surface_scores(pred: SurfaceSample, target: SurfaceSample, fscore_at: Sequence[float]) -> dict[str, float]:
     """Chamfer-L1/-L2, precision, recall and F-score at each of ``fscore_at`` and normal consistency of
-    one prediction's samples against its target's (module doc)."""
-    x, y = torch.from_numpy(pred.points)[None], torch.from_numpy(target.points)[None]  # (1, N, 3), (1, M, 3)
-    fwd, bwd = nearest(x, y, backend="kdtree", workers=1), nearest(y, x, backend="kdtree", workers=1)
-    out = {key: float(chamfer_from_distances(fwd.distance, bwd.distance, **CHAMFER_CONVENTIONS[conv]._asdict()))
-           for key, conv in CHAMFER_KEYS.items()}
-    tau = torch.tensor([float(f) for f in fscore_at], dtype=torch.float64) * target.diagonal
-    precision, recall, fscore = (v[0] for v in precision_recall_fscore(fwd.distance, bwd.distance, tau))
+    one prediction's samples against its target's (:func:`lit3d.metrics.surface.surface_scores`, one
+    value per key)."""
+    scores = surface_scores(pred, target, fscore_at)
+    out = {key: scores[key] for key in CHAMFER_KEYS}
     for k, f in enumerate(fscore_at):
         key = fscore_key(f)
-        out[key] = float(fscore[k])
-        out[key.replace("fscore", "precision", 1)] = float(precision[k])
-        out[key.replace("fscore", "recall", 1)] = float(recall[k])
-    out["normal_consistency"] = float(consistency_from_neighbours(
-        torch.from_numpy(pred.normals)[None], torch.from_numpy(target.normals)[None], fwd.index, bwd.index)[0])
+        for measure in ("fscore", "precision", "recall"):
+            out[key.replace("fscore", measure, 1)] = float(scores[measure][k])
+    out["normal_consistency"] = scores["normal_consistency"]
     return out
 
 

@@ -17,6 +17,8 @@ For a prediction and a target in one grid frame:
 
    - Chamfer-L1 = ``(mean d_pt + mean d_tp) / 2``, the mean of unsquared distances, the two directions
      averaged (Occupancy Networks' "L1"; ``convention="l1"``), in units of the grid side;
+   - Chamfer-L2 = ``mean d_pt^2 + mean d_tp^2``, squared distances, the two directions summed
+     (``convention="pytorch3d"``: ``pytorch3d.loss.chamfer_distance``'s defaults);
    - F-score@f = ``2 P R / (P + R)``, precision ``P = mean(d_pt <= tau)``, recall
      ``R = mean(d_tp <= tau)``, ``tau = f x`` the diagonal of the target surface's bounding box (of its
      mesh's vertices; ``threshold_mode="bbox_diagonal"``; not Tatarchenko et al.'s share of the
@@ -24,7 +26,8 @@ For a prediction and a target in one grid frame:
    - normal consistency = mean over both directions of ``|n . n_nearest|`` (unoriented; 1 = parallel).
 
 A prediction with no occupied voxel (or an empty mesh) has no surface: Chamfer-L1 = sqrt(3)
-(the unit cube's diagonal, the largest distance in the grid), F-score 0, normal consistency 0,
+(the unit cube's diagonal, the largest distance in the grid; Chamfer-L2 = 2 x 3, that distance squared
+in both directions), F-score 0, normal consistency 0,
 and it is counted as ``empty``. A target without a surface is left out (nothing to compare with).
 """
 from __future__ import annotations
@@ -46,6 +49,8 @@ if TYPE_CHECKING:
     import trimesh
 
 EMPTY_CHAMFER = float(np.sqrt(3.0))  # the unit cube's diagonal
+# the Chamfer measures of surface_scores -> their convention in lit3d.metrics.clouds
+CHAMFER_KEYS = {"chamfer_l1": "l1", "chamfer_l2": "pytorch3d"}
 
 
 @dataclass
@@ -151,24 +156,25 @@ def fscores(d_pt: np.ndarray, d_tp: np.ndarray, tau: np.ndarray) -> tuple[np.nda
 def surface_scores(pred: SurfaceSample | None, target: SurfaceSample, fractions: Sequence[float]) -> dict:
     """Chamfer-L1, F-scores and normal consistency of one prediction against its target (module doc).
 
-    Returns ``{"chamfer_l1": float, "fscore": (T,) float64, "precision": (T,), "recall": (T,),
-    "normal_consistency": float, "empty": bool}`` with ``T = len(fractions)``.
+    Returns ``{"chamfer_l1": float, "chamfer_l2": float, "fscore": (T,) float64, "precision": (T,),
+    "recall": (T,), "normal_consistency": float, "empty": bool}`` with ``T = len(fractions)``.
     """
     t = len(fractions)
     if pred is None:
         zeros = np.zeros(t)
-        return {"chamfer_l1": EMPTY_CHAMFER, "fscore": zeros, "precision": zeros, "recall": zeros,
-                "normal_consistency": 0.0, "empty": True}
+        return {"chamfer_l1": EMPTY_CHAMFER, "chamfer_l2": 2 * EMPTY_CHAMFER ** 2, "fscore": zeros,
+                "precision": zeros, "recall": zeros, "normal_consistency": 0.0, "empty": True}
     # one thread per query: the queries are short, and thread start-up dominated on a busy 2-core machine
     d_pt, i_pt = nearest(pred.points, target.points, target.tree(), workers=1)
     d_tp, i_tp = nearest(target.points, pred.points, pred.tree(), workers=1)
     precision, recall, fscore = fscores(d_pt, d_tp, np.asarray(fractions, dtype=np.float64) * target.diagonal)
-    chamfer = chamfer_from_distances(torch.from_numpy(d_pt)[None], torch.from_numpy(d_tp)[None],
-                                     **CHAMFER_CONVENTIONS["l1"]._asdict())
+    chamfers = {key: float(chamfer_from_distances(torch.from_numpy(d_pt)[None], torch.from_numpy(d_tp)[None],
+                                                  **CHAMFER_CONVENTIONS[convention]._asdict()))
+                for key, convention in CHAMFER_KEYS.items()}
     consistency = consistency_from_neighbours(torch.from_numpy(pred.normals)[None], torch.from_numpy(target.normals)[None],
                                               torch.from_numpy(np.asarray(i_pt, np.int64))[None],
                                               torch.from_numpy(np.asarray(i_tp, np.int64))[None])
-    return {"chamfer_l1": float(chamfer), "fscore": fscore, "precision": precision, "recall": recall,
+    return {**chamfers, "fscore": fscore, "precision": precision, "recall": recall,
             "normal_consistency": float(consistency), "empty": False}
 
 
@@ -247,5 +253,5 @@ class SurfaceMetrics(Metric):
         }
 
 
-__all__ = ["EMPTY_CHAMFER", "SurfaceMetrics", "SurfaceSample", "fscore_key", "grid_surface",
+__all__ = ["CHAMFER_KEYS", "EMPTY_CHAMFER", "SurfaceMetrics", "SurfaceSample", "fscore_key", "grid_surface",
            "sample_grids", "sample_mesh", "sample_triangles", "surface_scores"]
