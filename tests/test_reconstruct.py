@@ -12,7 +12,8 @@ from PIL import Image
 
 from lit3d.reconstruct.backproject import RECGAN_FOV_DEG, Intrinsics, backproject, project
 from lit3d.reconstruct.depth_io import InputError, read_depth
-from lit3d.reconstruct.grid import GridGeometry, Placement, fit_placement, occupancy_iou, voxelise_points
+from lit3d.metrics.voxel import occupancy_iou
+from lit3d.reconstruct.grid import GridGeometry, Placement, fit_placement, voxelise_points
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared" / "data"

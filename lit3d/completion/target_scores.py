@@ -41,6 +41,7 @@ import numpy as np
 from lit3d.completion.target_pairs import Shape, ShapePair, read_shape
 from lit3d.geometry.solid_voxels import solid_voxels
 from lit3d.metrics.bootstrap import mean_ci
+from lit3d.metrics.voxel import occupancy_iou
 from lit3d.metrics.surface import (CHAMFER_KEYS, SurfaceSample, fscore_key, grid_surface, sample_mesh, sample_triangles,
                                    surface_scores)
 from lit3d.render.convert import ShapeError
@@ -120,11 +121,6 @@ def is_watertight(mesh) -> bool:
     return bool(merged.is_watertight)
 
 
-def grid_iou(a: np.ndarray, b: np.ndarray) -> float:
-    """Intersection over union of two bool grids of one shape."""
-    return float(np.logical_and(a, b).sum() / np.logical_or(a, b).sum())
-
-
 def _mesh_arrays(mesh) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
 
@@ -158,14 +154,14 @@ def volume_iou(pred: Shape, target: Shape, cfg: TargetScoring) -> tuple[float | 
     if pred.grid is not None and target.grid is not None:
         if pred.grid.shape != target.grid.shape:
             return None, f"grids of shapes {pred.grid.shape} and {target.grid.shape}"
-        return grid_iou(pred.grid, target.grid), ""
+        return occupancy_iou(pred.grid, target.grid), ""
     if pred.mesh is not None and target.mesh is not None:
-        return grid_iou(*mesh_pair_grids(pred.mesh, target.mesh, cfg.resolution)), ""
+        return occupancy_iou(*mesh_pair_grids(pred.mesh, target.mesh, cfg.resolution)), ""
     grid, mesh = (pred.grid, target.mesh) if pred.grid is not None else (target.grid, pred.mesh)
     if len(set(grid.shape)) != 1:
         return None, f"a mesh beside a non-cubic grid of shape {grid.shape}"
     voxelised = mesh_on_grid(mesh, grid.shape[0], cfg.mesh_frame)
-    return grid_iou(*((grid, voxelised) if pred.grid is not None else (voxelised, grid))), ""
+    return occupancy_iou(*((grid, voxelised) if pred.grid is not None else (voxelised, grid))), ""
 
 
 def score_pair(pair: ShapePair, cfg: TargetScoring) -> dict:
@@ -201,6 +197,6 @@ def score_target_folder(pairs: Sequence[ShapePair], cfg: TargetScoring) -> tuple
     return rows, summarise(rows, measure_keys(cfg.fscore_at), cfg.seed)
 
 
-__all__ = ["CHAMFER_KEYS", "MESH_FRAMES", "TargetScoring", "grid_iou", "is_watertight", "measure_keys",
+__all__ = ["CHAMFER_KEYS", "MESH_FRAMES", "TargetScoring", "is_watertight", "measure_keys",
            "mesh_on_grid", "mesh_pair_grids", "pair_surface_scores", "score_pair", "score_target_folder",
            "summarise", "surface_sample", "volume_iou"]

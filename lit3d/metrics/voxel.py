@@ -16,12 +16,19 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import numpy as np
 import torch
 from torchmetrics import Metric
 
 EPS = 1e-7
 # voxels per bucketize/bincount call: keeps the int32 keys in cache (1M = 4 MB)
 CHUNK = 1 << 20
+
+
+def occupancy_iou(a: np.ndarray, b: np.ndarray) -> float:
+    """Intersection over union of two boolean grids of one shape (0 when both are empty)."""
+    union = np.logical_or(a, b).sum()
+    return float(np.logical_and(a, b).sum() / union) if union else 0.0
 
 
 def default_thresholds() -> torch.Tensor:

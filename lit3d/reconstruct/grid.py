@@ -163,9 +163,3 @@ def solid_voxels(mesh, placement: Placement, samples_per_voxel: float = 8.0) -> 
     occ[idx[:, 0], idx[:, 1], idx[:, 2]] = True
     closed = ndimage.binary_closing(np.pad(occ, 2), iterations=1)[2:-2, 2:-2, 2:-2] | occ
     return ndimage.binary_fill_holes(closed)
-
-
-def occupancy_iou(a: np.ndarray, b: np.ndarray) -> float:
-    """Intersection over union of two boolean grids of one shape (0 when both are empty)."""
-    union = np.logical_or(a, b).sum()
-    return float(np.logical_and(a, b).sum() / union) if union else 0.0

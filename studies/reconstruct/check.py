@@ -20,7 +20,8 @@ import sys
 import numpy as np
 
 from lit3d.reconstruct.backproject import RECGAN_FOV_DEG, Intrinsics
-from lit3d.reconstruct.grid import occupancy_iou, solid_voxels
+from lit3d.metrics.voxel import occupancy_iou
+from lit3d.reconstruct.grid import solid_voxels
 from lit3d.reconstruct.pipeline import Completer, Options, reconstruct
 from lit3d.reconstruct.synthetic import pose_in_front, render_depth_pinhole
 from lit3d.metrics.mesh import directed_distances, surface_samples
