@@ -1,11 +1,13 @@
-"""The body-fit evaluation's metrics (studies.body.evaluate) against independent references; no Anny."""
+"""The body-fit evaluation's metrics (lit3d.body.fit_scores, lit3d.body.report) against independent references; no Anny."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 from scipy.spatial.distance import cdist
 
-from studies.body.evaluate import Camera, chamfer_fscore, per_vertex_error, phenotype_error, sensed_depth, spread
+from lit3d.body.fit_scores import chamfer_fscore, per_vertex_error, phenotype_error
+from lit3d.body.report import spread
+from lit3d.body_fit.synthetic import Camera, sensed_depth
 from lit3d.reconstruct.backproject import RECGAN_FOV_DEG, Intrinsics
 
 
@@ -59,7 +61,7 @@ def test_sensed_depth_keeps_most_of_a_box_with_mm_noise():
     verts = np.asarray(box.vertices) + np.array([0.0, 0.0, 3.2])
     cam = Camera.default()
     depth, info = sensed_depth(verts, np.asarray(box.faces), cam, np.random.default_rng(0))
-    from studies.body.evaluate import render
+    from lit3d.body_fit.synthetic import render
 
     clean = render(verts, np.asarray(box.faces), cam)
     kept = (depth > 0).sum() / (clean > 0).sum()

@@ -1,4 +1,4 @@
-"""The Anny body fit (lit3d.body, lit3d-reconstruct --body): fast checks of its parts and of bad
+"""The Anny body fit (lit3d.body_fit, lit3d-reconstruct --body): fast checks of its parts and of bad
 input without Anny; the fits themselves (Anny loads in ~30 s) are ``slow``."""
 from __future__ import annotations
 
@@ -12,11 +12,11 @@ from PIL import Image
 
 from datamodules.canonical.rendering import PairRenderer
 from datamodules.canonical.settings import RenderSettings, parse
-from lit3d.body.errors import BodyFitError
-from lit3d.body.model import DOFS
-from lit3d.body.depth_points import backproject, observe
-from lit3d.body.results import canonical_depth
-from lit3d.body.surface import silhouette_excess
+from lit3d.body_fit.errors import BodyFitError
+from lit3d.body_fit.model import DOFS
+from lit3d.body_fit.depth_points import backproject, observe
+from lit3d.body_fit.results import canonical_depth
+from lit3d.body_fit.surface import silhouette_excess
 from lit3d.body_model import bodies
 from lit3d.cli.reconstruct import main
 from lit3d.reconstruct import backproject as recon_bp
@@ -104,7 +104,7 @@ def test_cli_body_bad_input_gives_one_line_before_anny_loads(tmp_path, capsys):
 # ------------------------------------------------------------------ fits (Anny)
 @pytest.fixture(scope="module")
 def body():
-    from lit3d.body.model import Body
+    from lit3d.body_fit.model import Body
 
     return Body()
 
@@ -122,12 +122,12 @@ def _person(body, subject=3, pose=2):
 
 def test_evaluation_people_of_either_pose_mix_agree_on_the_upright_draw(body, monkeypatch):
     """``anny_person``'s two paths (the data source's body model; theta and rotation through
-    ``Body.place``) give one body for an upright pose: the pose conventions of lit3d.body.poses hold."""
-    from studies.body.evaluate import anny_person
+    ``Body.place``) give one body for an upright pose: the pose conventions of lit3d.body_fit.poses hold."""
+    from lit3d.body.fit_scores import anny_person
 
     pheno = bodies.sample_phenotype(1000, 4, "adult", body.model.model)
     upright, rest = anny_person(body, pheno, 1000, 4, "upright")
-    import lit3d.body.poses as poses
+    import lit3d.body_fit.poses as poses
 
     monkeypatch.setitem(poses.POSE_MIXES, "upright_only", {"upright": 1.0})
     placed, rest2 = anny_person(body, pheno, 1000, 4, "upright_only")  # the same draw, through Body.place
@@ -138,8 +138,8 @@ def test_evaluation_people_of_either_pose_mix_agree_on_the_upright_draw(body, mo
 
 @pytest.mark.slow
 def test_fit_recovers_a_known_person_far_better_than_the_mean_body(body):
-    from lit3d.body.fit import FitConfig, fit_body
-    from lit3d.body.results import fit_outputs
+    from lit3d.body_fit.fit import FitConfig, fit_body
+    from lit3d.body_fit.results import fit_outputs
 
     truth, depth = _person(body)
     obs = observe(depth, INTR, label="person")

@@ -38,7 +38,7 @@ def test_the_body_path_imports_no_lightning(tmp_path):
     modules = set(probe["modules"])
     assert probe["rc"] == 2 and "speck.png: 50 foreground depth pixels" in res.stderr
     # the probe went down the body path: the fit, the regressor's loading and the body model were imported
-    assert {"lit3d.reconstruct.body", "lit3d.body.fit", "lit3d.body.regressor", "lit3d.body_model.bodies"} <= modules
+    assert {"lit3d.reconstruct.body", "lit3d.body_fit.fit", "lit3d.body_fit.regressor", "lit3d.body_model.bodies"} <= modules
     loaded = sorted(m for m in modules if m.split(".")[0] in LIGHTNING)
     assert not loaded, f"lit3d-reconstruct --body imported Lightning: {loaded[:5]}"
     assert not any(m.split(".")[0] == "datamodules" for m in modules)

@@ -1,4 +1,4 @@
-"""The regressor's pose mixes (lit3d.body.poses): ``upright`` is the Anny data source's draw unchanged;
+"""The regressor's pose mixes (lit3d.body_fit.poses): ``upright`` is the Anny data source's draw unchanged;
 ``varied`` draws each family at its share, keeps every joint within the fit's limits, folds hips and
 knees where it says so, and turns bodies upside down and onto their side. No Anny forward pass."""
 from __future__ import annotations
@@ -8,8 +8,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from lit3d.body_model.bodies import sample_pose
-from lit3d.body.model import DOFS
-from lit3d.body.poses import FAMILIES, KNEE_BENT, POSE_MIXES, draw_pose, pose_params
+from lit3d.body_fit.model import DOFS
+from lit3d.body_fit.poses import FAMILIES, KNEE_BENT, POSE_MIXES, draw_pose, pose_params
 
 LO = np.array([d.lo for d in DOFS])
 HI = np.array([d.hi for d in DOFS])

@@ -1,4 +1,4 @@
-"""The body regressor (lit3d.body.regressor, studies.body.train_regressor, --body-init): its parts
+"""The body regressor (lit3d.body_fit.regressor, its training people datamodules.body.people, --body-init): its parts
 without Anny, then a few Anny people (Anny loads once, ~15 s) for a tiny training run that must read
 the height off the image better than the mean does, and for the fit from a given start."""
 from __future__ import annotations
@@ -8,15 +8,16 @@ import pytest
 import torch
 from PIL import Image
 
-from lit3d.body.errors import BodyCheckpointError
-from lit3d.body.fit import FitConfig, fit_body
-from lit3d.body.model import DOFS, PHENOTYPES
-from lit3d.body.depth_points import observe
-from lit3d.body.regressor import (BodyRegressor, Preprocess, Regressor, checkpoint, crop, fit_from_regressor,
-                                  load_regressor, refine_config, rotmat_6d)
-from lit3d.body.synthetic import Camera, sensed_depth
-from lit3d.body.poses import pose_params
-from studies.body.train_regressor import Buffer, draw, render_people, shape_distribution, step
+from lit3d.body_fit.errors import BodyCheckpointError
+from lit3d.body_fit.fit import FitConfig, fit_body
+from lit3d.body_fit.model import DOFS, PHENOTYPES
+from lit3d.body_fit.depth_points import observe
+from lit3d.body_fit.regressor import (BodyRegressor, Preprocess, Regressor, checkpoint, crop, fit_from_regressor,
+                                  load_regressor, loss, refine_config, rotmat_6d)
+from lit3d.body_fit.synthetic import Camera, sensed_depth
+from lit3d.body_fit.poses import pose_params
+from datamodules.body.people import Placement, draw_people, render_people, shape_distribution
+from datamodules.body.replay import ReplayBuffer
 from lit3d.cli.reconstruct import main
 from lit3d.sensing.camera import backproject
 
@@ -111,7 +112,7 @@ def _people(body, cam, prep, n: int, seed: int) -> dict:
 
 @pytest.fixture(scope="module")
 def anny():
-    from lit3d.body.model import Body
+    from lit3d.body_fit.model import Body
 
     body = Body()
     cam, prep = Camera.default(W, H), Preprocess(size=16)
@@ -120,7 +121,7 @@ def anny():
 
 def test_drawn_people_follow_the_pose_draw_and_the_adult_shapes(anny):
     body, cam, prep, _, _ = anny
-    got = draw(body, shape_distribution(body), 11, 0, 3, cam, prep, image=(W, H))
+    got = draw_people(body, shape_distribution(body), 11, 0, 3, cam, prep, Placement(image=(W, H)))
     assert got["image"].shape == (3, 2, 16, 16) and got["extras"].shape == (3, 3)
     from lit3d.body_model.bodies import sample_pose
 
@@ -132,10 +133,10 @@ def test_drawn_people_follow_the_pose_draw_and_the_adult_shapes(anny):
 def test_varied_people_carry_their_drawn_rotation_as_the_target(anny):
     import roma
 
-    from lit3d.body.poses import draw_pose
+    from lit3d.body_fit.poses import draw_pose
 
     body, cam, prep, _, _ = anny
-    got = draw(body, shape_distribution(body), 11, 0, 6, cam, prep, image=(W, H), poses="varied")
+    got = draw_people(body, shape_distribution(body), 11, 0, 6, cam, prep, Placement(image=(W, H), poses="varied"))
     assert len(got["image"]) == 6  # lying or upside down, every body is still seen
     for i in range(6):
         theta, rot, _ = draw_pose(11, i, "varied")
@@ -144,15 +145,25 @@ def test_varied_people_carry_their_drawn_rotation_as_the_target(anny):
         assert torch.allclose(got["rotmat"][i], want, atol=1e-5)
 
 
+def _step(net, opt, batch) -> float:
+    """One Adam step on ``batch`` (:func:`lit3d.body_fit.regressor.loss`); the loss before it."""
+    net.train()
+    total, _ = loss(net.decode(net(batch["image"], batch["extras"])), batch)
+    opt.zero_grad()
+    total.backward()
+    opt.step()
+    return float(total.detach())
+
+
 def test_tiny_training_lowers_the_loss_and_beats_the_mean_height(anny):
     body, cam, prep, train, val = anny
     assert len(train["image"]) >= 90  # a body under MIN_POINTS pixels is left out
     torch.manual_seed(0)
     net = BodyRegressor(16, width=8, hidden=32)
     opt = torch.optim.Adam(net.parameters(), lr=3e-3)
-    buf, gen = Buffer(128), torch.Generator().manual_seed(0)
+    buf, gen = ReplayBuffer(128), torch.Generator().manual_seed(0)
     buf.add(train)
-    history = [step(net, opt, buf.sample(32, gen), 3e-3)["total"] for _ in range(150)]
+    history = [_step(net, opt, buf.sample(32, gen)) for _ in range(150)]
     assert np.mean(history[-20:]) < 0.2 * np.mean(history[:5])
     net.eval()
     with torch.no_grad():
@@ -164,7 +175,7 @@ def test_tiny_training_lowers_the_loss_and_beats_the_mean_height(anny):
 
 def test_fit_from_a_given_start_runs_the_requested_steps(anny):
     from lit3d.body_model.bodies import sample_pose
-    from lit3d.body.model import Params
+    from lit3d.body_fit.model import Params
 
     body, cam, prep, _, _ = anny
     theta, rot = pose_params(sample_pose(11, 0, subject=0))
@@ -183,7 +194,7 @@ def test_fit_from_a_given_start_runs_the_requested_steps(anny):
 
 
 def test_a_refinement_flagged_poor_goes_on_and_a_good_one_stops(anny, monkeypatch):
-    import lit3d.body.regressor as regressor
+    import lit3d.body_fit.regressor as regressor
 
     body, cam, prep, _, _ = anny
     truth = body.camera_vertices(regressor.Params.mean((0.0, 0.0, 3.2))).detach().double().numpy()

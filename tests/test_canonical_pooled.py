@@ -141,6 +141,6 @@ def test_pooled_table_keeps_every_depth_row(tmp_path):
               "data": {"source": "tosca"}, "n_items": 36, "n_subjects": 3, "seeds": [0, 1]}
     lines = write_pooled_results(result, tmp_path).read_text().splitlines()
     rows = [line.split(" |")[0].lstrip("| ") for line in lines if "ours)" in line and line.startswith("|")]
-    assert rows == ["posed input depth, no canonicalisation (ours)", "Anny body fit, its canonical depth (lit3d.body, ours)",
+    assert rows == ["posed input depth, no canonicalisation (ours)", "Anny body fit, its canonical depth (lit3d.body_fit, ours)",
                     "body_fit_refined: depth images from --depth-row (ours)", "chance: random distances (ours)"]
     assert "| 0.46 ± 0.04 |" in next(line for line in lines if "body_fit_refined" in line)

@@ -6,12 +6,13 @@ import inspect
 
 import pytest
 
+from datamodules.body import BodyDataModule
 from datamodules.canonical import CanonicalDataModule
 from datamodules.completion import CompletionDataModule
 from datamodules.protocol import InspectableDataModule
 from datamodules.quality import QualityDataModule
 
-DATAMODULES = (CompletionDataModule, QualityDataModule, CanonicalDataModule)
+DATAMODULES = (CompletionDataModule, QualityDataModule, CanonicalDataModule, BodyDataModule)
 
 
 def _required(fn) -> list[str]:

@@ -105,8 +105,8 @@ def test_the_data_module_and_the_body_fit_check_too(tmp_path, monkeypatch):
     """Paths that do not start at a command line (lit3d-eval on a checkpoint's own data config, the Python
     API): the DataModule of the Anny data, the body fit and the body regressor."""
     from datamodules.canonical import CanonicalDataModule
-    from lit3d.body.model import Body
-    from lit3d.body.regressor import load_regressor
+    from lit3d.body_fit.model import Body
+    from lit3d.body_fit.regressor import load_regressor
     from lit3d.zoo import ZOO
 
     _without(monkeypatch, "anny")

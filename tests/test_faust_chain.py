@@ -6,10 +6,10 @@ import numpy as np
 import trimesh
 
 import lit3d
-from lit3d.body.synthetic import Camera
+from lit3d.body_fit.synthetic import Camera
 from studies.body import body_fit_rows as rows
 from studies.body import faust_chain as chain
-from studies.body.evaluate import DISTANCE, FAUST_HEIGHT, camera_frame
+from lit3d.body.fit_scores import DISTANCE, FAUST_HEIGHT, camera_frame
 
 
 def test_a_standing_box_is_completed_and_scored(tmp_path, one_torch_thread):
@@ -24,7 +24,7 @@ def test_a_standing_box_is_completed_and_scored(tmp_path, one_torch_thread):
 
 
 def test_body_fit_rows_place_a_y_up_mesh_in_front_of_the_camera():
-    """studies.body.evaluate.camera_frame (FAUST and studies/body/body_fit_rows.py): a y-up mesh facing +z becomes
+    """lit3d.body.fit_scores.camera_frame (FAUST and studies/body/body_fit_rows.py): a y-up mesh facing +z becomes
     camera-frame (y down, z forward), centred on its box, its centre 3.2 m ahead, scaled; the script's
     regressor fits go beside its mean-body fits."""
     v = np.array([[0.0, 0.0, 0.0], [0.0, 2.0, 0.0], [1.0, 1.0, 0.5]])  # head up at y = 2, nose towards +z

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from lit3d.body.module import BodyRegressorTask
 from lit3d.canonical.module import CanonicalTask
 from lit3d.completion.module import CompletionTask
 from lit3d.quality.module import QualityTask
@@ -20,6 +21,7 @@ HOOKS = (AdaptsDataConfig, ValidatesBeforeTest, HasEvaluationLegacy, HasHealthGr
     (CompletionTask, {AdaptsDataConfig, ValidatesBeforeTest, HasEvaluationLegacy, HasHealthGroups}),
     (QualityTask, {HasEvaluationLegacy}),
     (CanonicalTask, {HasEvaluationLegacy}),
+    (BodyRegressorTask, set()),
 ])
 def test_each_task_offers_its_hooks(task_cls, offers):
     assert {h for h in HOOKS if isinstance(task_cls, h)} == offers

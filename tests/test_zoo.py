@@ -27,7 +27,7 @@ def test_every_zoo_model_is_installed_small_and_has_a_card():
 
 
 def test_load_takes_a_zoo_name():
-    from lit3d.body.regressor import Regressor
+    from lit3d.body_fit.regressor import Regressor
     from lit3d.quality.shipped import ShippedQualityModel
 
     assert isinstance(lit3d.load("body-regressor"), Regressor)
@@ -48,15 +48,16 @@ def test_body_start_defaults_to_the_zoo_regressor_and_none_means_the_mean_body(t
 
 
 def test_the_shipped_body_regressor_reads_held_out_people():
-    from lit3d.body.model import Body
-    from lit3d.body.regressor import BodyRegressor, loss
-    from lit3d.body.synthetic import HEIGHT, WIDTH, Camera
-    from studies.body.train_regressor import draw, shape_distribution
+    from lit3d.body_fit.model import Body
+    from lit3d.body_fit.regressor import BodyRegressor, loss
+    from lit3d.body_fit.synthetic import HEIGHT, WIDTH, Camera
+    from datamodules.body.people import Placement, draw_people, shape_distribution
 
     shipped = lit3d.load("body-regressor")
     body = Body()
-    people = draw(body, shape_distribution(body), 1000, 0, 16, Camera.default(WIDTH, HEIGHT), shipped.prep,
-                  poses="upright")  # the evaluation's held-out seed, never trained on; the pose mix it was trained on
+    # the evaluation's held-out seed, never trained on; the pose mix it was trained on
+    people = draw_people(body, shape_distribution(body), 1000, 0, 16, Camera.default(WIDTH, HEIGHT), shipped.prep,
+                         Placement(poses="upright"))
     torch.manual_seed(0)
     untrained = BodyRegressor(shipped.prep.size, **{k: v for k, v in _net_args(shipped).items()}).eval()
     with torch.no_grad():
@@ -106,7 +107,7 @@ PEOPLE_INPUT_MASK_IOU = 0.3924   # the posed input's own mask against the rest p
 
 def test_the_shipped_canonical_model_reproduces_its_card():
     """Fails when the weights, the rendering of the input or the mask threshold drift."""
-    from lit3d.body.results import canonical_depth
+    from lit3d.body_fit.results import canonical_depth
     from lit3d.body_model.bodies import BodyModel, sample_phenotype, sample_pose
     from lit3d.reconstruct.canonical import CanonicalMapper
 

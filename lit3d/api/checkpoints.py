@@ -18,7 +18,7 @@ import lightning.pytorch as pl
 import torch
 from omegaconf import DictConfig, open_dict
 
-from lit3d.body.regressor import load_regressor
+from lit3d.body_fit.regressor import load_regressor
 from lit3d.callbacks.metadata import MetadataCallback
 from lit3d.runtime.build import build_task, task_meta, to_plain
 from lit3d.runtime.compose import check_composes, check_group_overrides
@@ -63,7 +63,7 @@ def load(path: str | Path, device: str = "cpu") -> Model:
 
     ``path`` may also name a model of the zoo (:func:`lit3d.models`, :mod:`lit3d.zoo`) where no such file
     exists: ``completion-furniture`` loads as a :class:`Completer`, ``body-regressor`` as
-    :class:`lit3d.body.regressor.Regressor`, ``cpcd2-phil-fusion`` as
+    :class:`lit3d.body_fit.regressor.Regressor`, ``cpcd2-phil-fusion`` as
     :class:`lit3d.quality.shipped.ShippedQualityModel`.
 
     The completion and canonical nets go to :func:`lit3d.export`.

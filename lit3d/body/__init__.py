@@ -1,19 +1,13 @@
-"""Fit the Anny body model (:mod:`lit3d.body_model.bodies`) to one depth image of a person.
+"""The body regressor task: the CNN that starts the Anny body fit (:mod:`lit3d.body_fit.regressor`),
+trained and evaluated on the platform (``lit3d-train experiment=body_regressor``, ``lit3d-eval``).
 
-    points.py   depth + intrinsics -> camera-frame foreground points, silhouette distance map
-    model.py    differentiable Anny: phenotype, joint-limited bone rotations, global similarity
-                -> camera-frame vertices
-    fit.py      the optimisation (point-to-surface, silhouette, priors) from the mean body
-    results.py  what a fit gives: posed and rest-pose meshes, the canonical depth image (rendered
-                as the canonical task renders its targets), fit quality, the parameters as JSON
-    regressor.py  a small CNN: depth image -> the fit's parameters, the fit's start (--body-init)
-    poses.py      the pose mixes of the regressor's training people
-    synthetic.py  the evaluation's camera, rendering and sensor noise (evaluation and training)
+    module.py      the LightningModule: loss, optimiser, schedule, logging
+    evaluator.py   after the test: the body fit from the regressor on held-out Anny people and FAUST
+    fit_scores.py  the fit's measures (per-vertex errors, Chamfer, F-scores) and the held-out people
+    report.py      their tables
+    figures.py     the picture of held-out people and their fits
 
-The programs that train the regressor and evaluate the fit (held-out Anny people, FAUST) are a study
-beside the package: ``studies/body/``.
-
-A task room beside :mod:`lit3d.canonical` that imports the shared rooms only (the body model:
-:mod:`lit3d.body_model`), neither a DataModule nor Lightning; ``lit3d-reconstruct --body``
-(:mod:`lit3d.reconstruct.body`) is its user.
+The fit itself, the body model and the regressor's network are shared rooms (:mod:`lit3d.body_fit`,
+:mod:`lit3d.body_model`): ``lit3d-reconstruct --body`` uses them without Lightning. The data is
+:mod:`datamodules.body`.
 """

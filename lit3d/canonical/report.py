@@ -135,7 +135,7 @@ POOLED_ROWS = (("lit3d model (ours)", "model"), ("plain U-Net, same data and los
                ("posed input depth, no canonicalisation (ours)", "input"),
                ("true canonical depth, ceiling of the depth rows (ours)", "target"),
                ("warp oracle: true canonical where the posed view sees it, mean body elsewhere (ours)", "oracle"),
-               ("Anny body fit, its canonical depth (lit3d.body, ours)", "body_fit"),
+               ("Anny body fit, its canonical depth (lit3d.body_fit, ours)", "body_fit"),
                ("classical MDS, full mesh, landmark geodesics (ours)", "cmds"),
                ("SMACOF, full mesh, landmark geodesics (ours)", "smacof"),
                ("non-metric MDS, full mesh, landmark geodesics (ours)", "nmds"), ("GPS, full mesh (ours)", "gps"),

@@ -6,14 +6,14 @@ Per input NAME, DIR gets (written together, as one set: :func:`lit3d.reconstruct
   z forward), metres: it overlays the input points;
 - ``NAME_body_canonical.<fmt>``: the same mesh topology in Anny's rest pose (y up, metres);
 - ``NAME_body_canonical_depth.npy``: ``(128, 128) float32`` canonical depth image, rendered as the
-  canonical task renders its Anny targets (:mod:`lit3d.body.results`);
+  canonical task renders its Anny targets (:mod:`lit3d.body_fit.results`);
 - ``NAME_body.png``: input points | fit and points (camera view, side view) | canonical body;
 - ``NAME_body.json``: parameters, fit quality (``poor_fit``), timings, camera, request key.
 
-The fit starts from a body regressor's prediction (:mod:`lit3d.body.regressor`; the zoo's
+The fit starts from a body regressor's prediction (:mod:`lit3d.body_fit.regressor`; the zoo's
 ``body-regressor``, :mod:`lit3d.zoo`, or ``--body-init CKPT``; :func:`start_regressor`), refined by fewer steps
-(:func:`lit3d.body.regressor.fit_from_regressor`; ``--body-refine-poor N``: N more steps where those end
-flagged poor), or with ``--body-init none`` from the mean body (:mod:`lit3d.body.fit`). A poor fit (not a
+(:func:`lit3d.body_fit.regressor.fit_from_regressor`; ``--body-refine-poor N``: N more steps where those end
+flagged poor), or with ``--body-init none`` from the mean body (:mod:`lit3d.body_fit.fit`). A poor fit (not a
 person, a bad cut) is written with ``poor_fit: true`` and said on one line.
 """
 from __future__ import annotations
@@ -25,11 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-from lit3d.body.fit import fit_body
-from lit3d.body.model import Body  # noqa: F401 (re-exported for lit3d.cli.reconstruct)
-from lit3d.body.depth_points import observe
-from lit3d.body.regressor import Regressor, fit_from_regressor, load_regressor, refine_config
-from lit3d.body.results import BodyOutputs, fit_outputs
+from lit3d.body_fit.fit import fit_body
+from lit3d.body_fit.model import Body  # noqa: F401 (re-exported for lit3d.cli.reconstruct)
+from lit3d.body_fit.depth_points import observe
+from lit3d.body_fit.regressor import Regressor, fit_from_regressor, load_regressor, refine_config
+from lit3d.body_fit.results import BodyOutputs, fit_outputs
 from lit3d.geometry.normalise import bounding_frame
 from lit3d.reconstruct.depth_io import find_mask, read_depth_info, read_mask
 from lit3d.reconstruct.figure import LABEL_PX, mesh_panels, points_panels
@@ -144,10 +144,10 @@ def body_figure(points: np.ndarray, out: BodyOutputs, title: str, size: int = 25
 
 def body_one(args, path: Path, name: str, body, protected, intrinsics, camera: str, say, regressor=None) -> dict:
     """Fit one depth image and write its set (module doc). ``body()`` gives the
-    :class:`~lit3d.body.model.Body` (called once the image is read and cut: a bad image fails
+    :class:`~lit3d.body_fit.model.Body` (called once the image is read and cut: a bad image fails
     before Anny loads); ``intrinsics(w, h, label)`` gives its camera, ``camera`` says where that
     came from, ``say(line)`` prints a note; ``regressor``: a loaded
-    :class:`~lit3d.body.regressor.Regressor` to start from (None: the mean body). Returns the summary."""
+    :class:`~lit3d.body_fit.regressor.Regressor` to start from (None: the mean body). Returns the summary."""
     t_all = time.perf_counter()
     depth, units = read_depth_info(path, args.depth_scale)
     h, w = depth.shape

@@ -4,7 +4,8 @@
 - ``hydra/launcher=slurm|slurm_local`` needs ``lit3d[slurm]``, ``hparams_search=NAME`` (and
   ``hydra/sweeper=optuna``) ``lit3d[optuna]``: without them Hydra cannot even compose the config;
 - ``logger=wandb`` / ``logger=tensorboard`` (``lit3d-train``) need ``lit3d[wandb]`` / ``lit3d[tensorboard]``;
-- the Anny data (``data.source.kind=anny``: ``data=anny``, ``experiment=canonical_humans``) needs ``lit3d[body]``.
+- the Anny data (``data.source.kind=anny``: ``data=anny``, ``experiment=canonical_humans``) and the body
+  regressor task (``task_info.name=body``: ``experiment=body_regressor``) need ``lit3d[body]``.
 
 ``lit3d-train``'s default logger is W&B (offline); where ``wandb`` is not installed and the command line
 picks no logger, :func:`default_logger` picks ``logger=none`` (the CSV log every run keeps) and the
@@ -54,12 +55,17 @@ def check_logger_extras(cfg: DictConfig | None) -> None:
 
 
 def check_data_extras(cfg: DictConfig | None, args: Sequence[str] = ()) -> None:
-    """Raise :class:`~lit3d.utils.extras.MissingExtra` when ``cfg.data`` uses the Anny body model and
-    ``lit3d[body]`` is not installed (the line names the experiment that chose it, unless the command
-    line ``args`` chose the data)."""
-    if cfg is None or OmegaConf.select(cfg, "data.source.kind", default=None) != "anny":
+    """Raise :class:`~lit3d.utils.extras.MissingExtra` when ``cfg.data`` uses the Anny body model (the
+    canonical task's Anny source, or the body task) and ``lit3d[body]`` is not installed (the line names
+    the experiment that chose it, unless the command line ``args`` chose the data)."""
+    if cfg is None:
         return
     experiment = OmegaConf.select(cfg, "hydra.runtime.choices.experiment", default=None)
+    if OmegaConf.select(cfg, "task_info.name", default=None) == "body":
+        require("body", f"experiment={experiment} (the body task)" if experiment else "task=body")
+        return
+    if OmegaConf.select(cfg, "data.source.kind", default=None) != "anny":
+        return
     by_experiment = experiment and not any(_key_value(a)[0].split(".")[0] == "data" for a in args)
     require("body", f"experiment={experiment} (data.source.kind=anny)" if by_experiment else "data.source.kind=anny")
 

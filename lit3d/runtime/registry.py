@@ -26,6 +26,7 @@ EVALUATORS = {
     "completion": "lit3d.completion.evaluator",
     "quality": "lit3d.quality.evaluator",
     "canonical": "lit3d.canonical.evaluator",
+    "body": "lit3d.body.evaluator",
 }
 
 

@@ -1,7 +1,7 @@
 """Pinhole intrinsics, back-projection of a depth image to camera-frame points, and projection.
 
 Shared by ``lit3d-reconstruct`` (:mod:`lit3d.reconstruct.backproject` re-exports these names) and
-the body fit (:mod:`lit3d.body`).
+the body fit (:mod:`lit3d.body_fit`).
 
 Camera frame (OpenCV / depth-sensor convention): ``x`` right, ``y`` down in the image,
 ``z`` forward along the optical axis, in metres. Pixel ``(u, v)`` (column, row) has its

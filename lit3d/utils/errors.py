@@ -13,8 +13,8 @@ their older built-in bases (``ValueError`` mostly), so code that caught those st
     │   └── MosDataError       datamodules.quality.mos
     ├── MeshReadError          datamodules.canonical.tosca
     ├── InputError             lit3d.reconstruct.depth_io: a depth image or mask lit3d-reconstruct cannot use
-    ├── BodyFitError           lit3d.body.errors: a depth image a body cannot be fitted to (too few points)
-    ├── BodyCheckpointError    lit3d.body.errors: a body regressor checkpoint that cannot be used
+    ├── BodyFitError           lit3d.body_fit.errors: a depth image a body cannot be fitted to (too few points)
+    ├── BodyCheckpointError    lit3d.body_fit.errors: a body regressor checkpoint that cannot be used
     ├── CameraError            lit3d.sensing.camera: intrinsics that cannot describe an image
     ├── ShapeError             lit3d.render.convert: a mesh, cloud or grid that cannot be rendered
     ├── OutputError            lit3d.utils.io: an output path that cannot be written

@@ -66,8 +66,7 @@ ZOO: dict[str, ZooModel] = {m.name: m for m in (
              "Anny people drawn and rendered on the fly (adult shape distribution, the 'upright' pose mix: standing "
              "people in the fit's joint limits, turned up to 15 degrees), seed 7, 12,528 steps in one hour on one "
              "CPU thread",
-             "python -m studies.body.train_regressor --out CKPT --minutes 60 --steps 20000 --size 64 --width 24 "
-             "--hidden 256 --batch 64 --draw 32 --reuse 16 --seed 7 --poses upright",
+             "lit3d-train experiment=body_regressor (then its regressor's state dict in fp16)",
              "docs/models/body_regressor.md"),
     ZooModel("cpcd2-phil-fusion", "quality", "quality/models/cpcd2-phil-fusion.json",
              "CPCD2.0 phil (30 coloured point clouds, MOS 1..5)",

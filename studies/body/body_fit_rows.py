@@ -11,10 +11,10 @@ The Hydra overrides after ``--`` compose the canonical data as ``lit3d-train`` w
 held-out item of the folds) is taken at full resolution (``raw_mesh``: y up, facing +z), centred on its
 box, scaled so that the subject's rest pose stands ``--height`` m tall when the source is not metric
 (``--metric``: keep its units, e.g. Anny's metres), placed 3.2 m in front of the 3D-RecGAN++ camera and
-rendered as one 320x240 depth image (:mod:`lit3d.body.synthetic`, as ``python -m studies.body.evaluate
+rendered as one 320x240 depth image (:mod:`lit3d.body_fit.synthetic`, as ``python -m studies.body.evaluate
 --faust`` does). The body is fitted from the mean body (``DIR``) and, with ``--init``, from the regressor + its
 refinement (``DIR_refined``); each fit's canonical depth image, rendered as the canonical task renders its targets
-(:func:`lit3d.body.results.fit_outputs`), is saved as ``<subject>_pose<pose>_body_canonical_depth.npy`` (and
+(:func:`lit3d.body_fit.results.fit_outputs`), is saved as ``<subject>_pose<pose>_body_canonical_depth.npy`` (and
 its quality as ``_body.json``), the name :func:`lit3d.canonical.pooled.folder_depths` reads. Items already there are skipped (a
 stopped run resumes); ``--worker I --workers K`` takes every K-th item from the I-th (parallel runs).
 """
@@ -29,11 +29,11 @@ import numpy as np
 import torch
 from omegaconf import OmegaConf
 
-from studies.body.evaluate import FAUST_HEIGHT, camera_frame, fit
-from lit3d.body.model import Body
-from lit3d.body.regressor import load_regressor, refine_config
-from lit3d.body.results import fit_outputs
-from lit3d.body.synthetic import Camera, render
+from lit3d.body.fit_scores import FAUST_HEIGHT, camera_frame, fit
+from lit3d.body_fit.model import Body
+from lit3d.body_fit.regressor import load_regressor, refine_config
+from lit3d.body_fit.results import fit_outputs
+from lit3d.body_fit.synthetic import Camera, render
 from lit3d.canonical.pooled import FOLDER_DEPTH_SUFFIX, build_datamodule, compose
 
 
@@ -53,7 +53,7 @@ def main(argv: list[str] | None = None) -> None:
     ours, overrides = (argv[:argv.index("--")], argv[argv.index("--") + 1:]) if "--" in argv else (argv, [])
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, required=True, help="folder of the canonical depth images")
-    ap.add_argument("--init", type=Path, default=None, help="body regressor checkpoint (studies.body.train_regressor)")
+    ap.add_argument("--init", type=Path, default=None, help="body regressor checkpoint (lit3d-train experiment=body_regressor)")
     ap.add_argument("--refine-poor", type=int, default=0, help="with --init: full steps more where flagged poor")
     ap.add_argument("--metric", action="store_true", help="the source's units are metres (Anny): no rescaling")
     ap.add_argument("--height", type=float, default=FAUST_HEIGHT, help="rest-pose height in metres otherwise")

@@ -3,11 +3,11 @@
     python -m studies.body.faust_chain --faust ../shared/data/faust_a --ckpt COMPLETION_CKPT --out DIR
 
 Every ``faust_a`` mesh is scaled, placed and rendered exactly as ``python -m studies.body.evaluate --faust``
-does (:func:`studies.body.evaluate.faust_meshes`: the subject's pose 0 stands 1.7 m tall, 3.2 m in front of
+does (:func:`lit3d.body.fit_scores.faust_meshes`: the subject's pose 0 stands 1.7 m tall, 3.2 m in front of
 the 3D-RecGAN++ camera, one 320x240 front depth image). The depth image goes through
 :func:`lit3d.complete` (``lit3d-reconstruct``'s steps: cut the object, back-project, voxelise, complete,
 mesh in the camera frame); the completed mesh is scored against the whole FAUST surface (its back
-included) with the body fit's measures (:func:`studies.body.evaluate.chamfer_fscore`: two-sided Chamfer
+included) with the body fit's measures (:func:`lit3d.body.fit_scores.chamfer_fscore`: two-sided Chamfer
 in mm, F-score at 1% and 2% of the height), on ``--samples`` area-uniform samples of each mesh.
 
 Writes ``DIR/chain_eval.json`` (every mesh) and ``DIR/chain_eval.md`` (median [quartiles]), both rewritten
@@ -24,8 +24,9 @@ import numpy as np
 import torch
 
 import lit3d
-from studies.body.evaluate import FAUST_HEIGHT, chamfer_fscore, faust_meshes, in_mm, spread, surface_points
-from lit3d.body.synthetic import Camera, render
+from lit3d.body.fit_scores import FAUST_HEIGHT, chamfer_fscore, faust_meshes, in_mm, surface_points
+from lit3d.body.report import spread
+from lit3d.body_fit.synthetic import Camera, render
 
 TAUS = (0.01 * FAUST_HEIGHT, 0.02 * FAUST_HEIGHT)
 MEASURES = ("chamfer", "f@0.017", "f@0.034")

@@ -1,4 +1,4 @@
-"""Poses of the regressor's training people (:mod:`studies.body.train_regressor`), drawn from a mix of
+"""Poses of the regressor's training people (:mod:`datamodules.body.people`), drawn from a mix of
 pose families.
 
 The Anny data source (:func:`lit3d.body_model.bodies.sample_pose`) draws upright people: each
@@ -15,7 +15,7 @@ docs/results_canonical.md). The families (:data:`FAMILIES`):
 - ``any``: the same joints as ``upright``, the body in a rotation drawn uniformly over all of them
   (lying, on its side, upside down).
 
-The joint angles stay within the fit's limits (:data:`lit3d.body.model.DOFS`). A mix
+The joint angles stay within the fit's limits (:data:`lit3d.body_fit.model.DOFS`). A mix
 (:data:`POSE_MIXES`) gives each family's share; ``upright`` alone reproduces the draw of the
 first regressors.
 """
@@ -27,7 +27,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from lit3d.body_model.bodies import sample_pose
-from lit3d.body.model import ANNY_TO_CAMERA, DOFS
+from lit3d.body_fit.model import ANNY_TO_CAMERA, DOFS
 
 FAMILIES = ("upright", "turned", "folded", "any")
 POSE_MIXES: dict[str, dict[str, float]] = {
@@ -38,7 +38,7 @@ KNEE_BENT = 0.9  # radians: the least knee flexion of a folded pose
 
 
 def pose_params(pose: dict) -> tuple[np.ndarray, np.ndarray]:
-    """A :func:`sample_pose` pose -> ``(D,)`` joint angles of :data:`lit3d.body.model.DOFS` and the
+    """A :func:`sample_pose` pose -> ``(D,)`` joint angles of :data:`lit3d.body_fit.model.DOFS` and the
     ``(3,)`` camera-frame rotation vector of its ``root`` turn."""
     theta = np.array([float(np.dot(pose[d.bone], d.axis)) for d in DOFS])
     return theta, ANNY_TO_CAMERA @ np.asarray(pose.get("root", np.zeros(3)), np.float64)

@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 from lit3d.body_model.bodies import ELBOW, ELBOW_AXIS, JOINT_LIMITS, BodyModel, anny_to_y_up, right_of
-from lit3d.body.surface import incidence_matrix
+from lit3d.body_fit.surface import incidence_matrix
 from lit3d.utils.extras import require
 
 PHENOTYPES = ("gender", "age", "muscle", "weight", "height", "proportions")

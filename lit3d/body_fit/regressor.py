@@ -1,10 +1,10 @@
 """A small CNN from a person's depth image to the body fit's parameters: the fit's start.
 
-Trained on Anny people drawn and rendered on the fly (:mod:`studies.body.train_regressor`); used by
-``lit3d-reconstruct --body --body-init CKPT`` and ``python -m studies.body.evaluate --init CKPT``.
+Trained on Anny people drawn and rendered on the fly (``lit3d-train experiment=body_regressor``:
+:mod:`lit3d.body`, :mod:`datamodules.body`); used by ``lit3d-reconstruct --body --body-init CKPT``.
 
 **Input** (:func:`crop`, the same for training and use): the foreground of the
-:class:`~lit3d.body.depth_points.Observation` (the points the fit sees) cropped to a square around its
+:class:`~lit3d.body_fit.depth_points.Observation` (the points the fit sees) cropped to a square around its
 bounding box (``margin`` of its longest side added on each side, centred; outside the image is
 background), area-resampled to ``size x size``: channel 0 the foreground coverage in [0, 1],
 channel 1 the depth minus the points' median depth, in units of ``depth_unit`` metres (0 on the
@@ -14,7 +14,7 @@ height and width in metres at the median depth and the median depth, all in metr
 **Output** (:meth:`BodyRegressor.forward`, ``(B, 40)``; :func:`decode`): 6 phenotypes
 (sigmoid, [0, 1]), 25 joint angles (sigmoid mapped onto each angle's limits), the global
 rotation as 6 numbers (the first two columns of the matrix, Gram-Schmidt orthonormalised;
-Zhou et al. 2019) and the translation, metres, relative to :func:`lit3d.body.fit.start_centre`
+Zhou et al. 2019) and the translation, metres, relative to :func:`lit3d.body_fit.fit.start_centre`
 of the points with ``depth_offset``. The scale is not predicted (``log_scale = 0``: metric depth).
 
 **Checkpoint** (``torch.save``, read with ``weights_only``): ``{"format": FORMAT, "state_dict",
@@ -30,12 +30,12 @@ import numpy as np
 import torch
 from torch import nn
 
-from lit3d.body.errors import BodyCheckpointError
-from lit3d.body.fit import FitConfig, FitResult, fit_body, start_centre
-from lit3d.body.model import DOFS, PHENOTYPES, Body, Params
-from lit3d.body.depth_points import Observation
-from lit3d.body.results import fit_quality, render_mask
-from lit3d.utils.checkpoints import load_checkpoint
+from lit3d.body_fit.errors import BodyCheckpointError
+from lit3d.body_fit.fit import FitConfig, FitResult, fit_body, start_centre
+from lit3d.body_fit.model import DOFS, PHENOTYPES, Body, Params
+from lit3d.body_fit.depth_points import Observation
+from lit3d.body_fit.results import fit_quality, render_mask
+from lit3d.utils.checkpoints import META_KEY, load_checkpoint
 from lit3d.utils.extras import require
 
 FORMAT = "lit3d-body-regressor-1"
@@ -79,7 +79,7 @@ def crop(mask: np.ndarray, points: np.ndarray, fx: float, fy: float, prep: Prepr
 
 
 def crop_observation(obs: Observation, prep: Preprocess) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`crop` of an :class:`~lit3d.body.depth_points.Observation`."""
+    """:func:`crop` of an :class:`~lit3d.body_fit.depth_points.Observation`."""
     return crop(obs.mask, obs.points, obs.fx, obs.fy, prep)
 
 
@@ -157,7 +157,7 @@ class Regressor:
         return {k: v[0] for k, v in out.items()}
 
     def start(self, obs: Observation) -> Params:
-        """The predicted :class:`~lit3d.body.model.Params` of ``obs`` (``log_scale = 0``)."""
+        """The predicted :class:`~lit3d.body_fit.model.Params` of ``obs`` (``log_scale = 0``)."""
         import roma
 
         out = self.predict(obs)
@@ -168,14 +168,14 @@ class Regressor:
 
 def refine_config(global_iters: int = REFINE_GLOBAL_ITERS, full_iters: int = REFINE_FULL_ITERS,
                   base: FitConfig | None = None, poor_extra_iters: int = 0) -> FitConfig:
-    """``base`` (default :class:`~lit3d.body.fit.FitConfig`) with the refinement's step counts and
+    """``base`` (default :class:`~lit3d.body_fit.fit.FitConfig`) with the refinement's step counts and
     ``poor_extra_iters`` (:func:`fit_from_regressor`)."""
     return FitConfig(**{**(base or FitConfig()).__dict__, "global_iters": global_iters, "full_iters": full_iters,
                         "poor_extra_iters": poor_extra_iters})
 
 
 def regress(body: Body, regressor: Regressor, obs: Observation) -> FitResult:
-    """The regressor alone, as a :class:`~lit3d.body.fit.FitResult` (no step; ``seconds``: the
+    """The regressor alone, as a :class:`~lit3d.body_fit.fit.FitResult` (no step; ``seconds``: the
     crop, the network and the body's vertices)."""
     t0 = time.perf_counter()
     p = regressor.start(obs)
@@ -185,9 +185,9 @@ def regress(body: Body, regressor: Regressor, obs: Observation) -> FitResult:
 
 
 def fit_from_regressor(body: Body, regressor: Regressor, obs: Observation, cfg: FitConfig | None = None) -> FitResult:
-    """:func:`~lit3d.body.fit.fit_body` from the regressor's start with ``cfg`` (default
+    """:func:`~lit3d.body_fit.fit.fit_body` from the regressor's start with ``cfg`` (default
     :func:`refine_config`). Where ``cfg.poor_extra_iters`` > 0 and that fit is flagged poor
-    (:func:`lit3d.body.results.fit_quality`), the fit goes on from where it ended for that many more
+    (:func:`lit3d.body_fit.results.fit_quality`), the fit goes on from where it ended for that many more
     full steps (a fresh schedule). ``seconds`` counts the prediction and the check too."""
     cfg = cfg or refine_config()
     t0 = time.perf_counter()
@@ -207,15 +207,32 @@ def checkpoint(net: BodyRegressor, prep: Preprocess, net_args: dict, train: dict
             "train": train}
 
 
+def _from_task_checkpoint(ck: dict) -> dict:
+    """A ``lit3d-train experiment=body_regressor`` checkpoint (Lightning's: the task's hyper-parameters
+    and ``net.``-prefixed state dict) in this module's checkpoint form."""
+    hp = ck.get("hyper_parameters") or {}
+    state = {k[len("net."):]: v for k, v in ck["state_dict"].items() if k.startswith("net.")}
+    if not state:
+        raise KeyError("no net.* weights in its state dict")
+    return {"format": FORMAT, "state_dict": state, "preprocess": dict(hp.get("preprocess") or {}),
+            "net": dict(hp.get("net") or {})}
+
+
 def load_regressor(path: str | Path) -> Regressor:
-    """The :class:`Regressor` of a checkpoint; any problem is one :class:`BodyCheckpointError`
-    line naming the file; :class:`~lit3d.utils.extras.MissingExtra` without ``lit3d[body]`` (it fits Anny)."""
+    """The :class:`Regressor` of a checkpoint (this module's format, or a ``lit3d-train
+    experiment=body_regressor`` checkpoint); any problem is one :class:`BodyCheckpointError` line naming
+    the file; :class:`~lit3d.utils.extras.MissingExtra` without ``lit3d[body]`` (it fits Anny)."""
     require("body", "the body regressor")
     ck = load_checkpoint(path, BodyCheckpointError)
+    if isinstance(ck, dict) and ((ck.get(META_KEY) or {}).get("task") or {}).get("name") == "body":
+        try:
+            ck = _from_task_checkpoint(ck)
+        except (KeyError, TypeError, AttributeError) as exc:
+            raise BodyCheckpointError(f"{path}: body task checkpoint without its regressor: {exc}") from None
     if not isinstance(ck, dict) or ck.get("format") != FORMAT:
         found = ck.get("format") if isinstance(ck, dict) else type(ck).__name__
         raise BodyCheckpointError(f"{path}: not a body regressor checkpoint (format {found!r}, expected {FORMAT!r}; "
-                                  "made by python -m studies.body.train_regressor)")
+                                  "made by lit3d-train experiment=body_regressor)")
     try:
         prep = Preprocess(**ck["preprocess"])
         net = BodyRegressor(prep.size, **ck["net"])

@@ -21,10 +21,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from lit3d.body.fit import FitResult
-from lit3d.body.model import DOFS, PHENOTYPES, Body
-from lit3d.body.depth_points import Observation
-from lit3d.body.surface import point_to_surface
+from lit3d.body_fit.fit import FitResult
+from lit3d.body_fit.model import DOFS, PHENOTYPES, Body
+from lit3d.body_fit.depth_points import Observation
+from lit3d.body_fit.surface import point_to_surface
 from lit3d.geometry.normalise import normalise_vertices
 from lit3d.render.camera import render_pinhole_depth
 from lit3d.render.depth import render_depth
@@ -83,7 +83,7 @@ def fit_quality(body: Body, fit: FitResult, obs: Observation, rendered: np.ndarr
 
 
 def fit_params(body: Body, fit: FitResult) -> dict:
-    """The fitted parameters, JSON-ready (see :mod:`lit3d.body.model` for their meaning)."""
+    """The fitted parameters, JSON-ready (see :mod:`lit3d.body_fit.model` for their meaning)."""
     p = fit.params
     return {
         "phenotype": {k: float(v) for k, v in zip(PHENOTYPES, p.phenotype.tolist())},

@@ -1,5 +1,5 @@
-"""Synthetic depth images of people, as the body fit's evaluation (:mod:`studies.body.evaluate`) and the
-regressor's training (:mod:`studies.body.train_regressor`) both make them.
+"""Synthetic depth images of people, as the body fit's evaluation (:mod:`lit3d.body.fit_scores`) and the
+regressor's training people (:mod:`datamodules.body.people`) both make them.
 
 Camera: the ``lit3d-reconstruct`` default, the 3D-RecGAN++ pinhole (fov 49.124 degrees across both
 sides of a 320x240 image, centred; :class:`Camera`, a :class:`lit3d.sensing.camera.Intrinsics`).

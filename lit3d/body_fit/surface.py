@@ -1,4 +1,4 @@
-"""The fit's geometric loss terms on camera-frame body vertices ``(V, 3)`` (see :mod:`lit3d.body.fit`).
+"""The fit's geometric loss terms on camera-frame body vertices ``(V, 3)`` (see :mod:`lit3d.body_fit.fit`).
 
 - :func:`point_to_surface`: observed points -> the nearest front-facing vertex, a mix of the
   point-to-vertex and point-to-plane distances (approximates the point-to-triangle distance);
@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from lit3d.body.depth_points import Observation
+from lit3d.body_fit.depth_points import Observation
 from lit3d.sensing.camera import pixel_coordinates
 
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lit3d.body.errors import BodyFitError
+from lit3d.body_fit.errors import BodyFitError
 from lit3d.sensing.camera import backproject
 
 MIN_POINTS = 200  # fewer foreground pixels than this: no body is fitted

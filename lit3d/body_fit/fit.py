@@ -1,4 +1,4 @@
-"""Fit Anny (:class:`lit3d.body.model.Body`) to an :class:`lit3d.body.depth_points.Observation` by Adam,
+"""Fit Anny (:class:`lit3d.body_fit.model.Body`) to an :class:`lit3d.body_fit.depth_points.Observation` by Adam,
 from the mean body facing the camera.
 
 Loss (metres; ``X`` the camera-frame vertices ``(V, 3)``, ``P`` the sampled points ``(M, 3)``):
@@ -11,7 +11,7 @@ Loss (metres; ``X`` the camera-frame vertices ``(V, 3)``, ``P`` the sampled poin
   approximates the point-to-triangle distance on Anny's ~1-2 cm vertex spacing;
 - **silhouette**, rasterisation-free: every vertex projected through the camera samples (bilinear,
   :func:`torch.nn.functional.grid_sample`) the distance transform of the foreground mask's
-  outside (:attr:`~lit3d.body.depth_points.Observation.outside_px`), converted to metres at the vertex's
+  outside (:attr:`~lit3d.body_fit.depth_points.Observation.outside_px`), converted to metres at the vertex's
   depth (``px z / fx``); 0 for a vertex inside the silhouette. The reverse direction (the mask
   covered by the body) is the point-to-surface term's job;
 - **priors**: ``w_pose * sum(theta^2)`` (angles in radians), ``w_pheno * sum((phenotype - 0.5)^2)``,
@@ -35,9 +35,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from lit3d.body.model import DOFS, Body, Params
-from lit3d.body.depth_points import Observation
-from lit3d.body.surface import point_to_surface, silhouette_excess
+from lit3d.body_fit.model import DOFS, Body, Params
+from lit3d.body_fit.depth_points import Observation
+from lit3d.body_fit.surface import point_to_surface, silhouette_excess
 
 
 @dataclass
@@ -56,7 +56,7 @@ class FitConfig:
     w_scale: float = 0.3
     w_limits: float = 1.0
     depth_offset: float = 0.1    # metres: the start's centre lies this far behind the points' median
-    poor_extra_iters: int = 0    # lit3d.body.regressor.fit_from_regressor: full steps more when flagged poor
+    poor_extra_iters: int = 0    # lit3d.body_fit.regressor.fit_from_regressor: full steps more when flagged poor
 
 
 @dataclass

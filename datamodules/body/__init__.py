@@ -1,0 +1,4 @@
+"""The body regressor's data: Anny people drawn and rendered on the fly (:class:`BodyDataModule`)."""
+from datamodules.body.datamodule import BodyDataModule
+
+__all__ = ["BodyDataModule"]
