@@ -146,3 +146,19 @@ def test_a_moved_program_is_caught():
         "studies.canonical.pooled"]
     assert _is_program("studies.canonical.pooled") and _is_program("lit3d.api")
     assert not _is_program("lit3d.canonical.pooled") and not _is_program("lit3d.no_such_module")
+
+
+def _packages(top: str) -> list[str]:
+    return sorted(f"{p.parent.relative_to(ROOT).as_posix()}/" for p in (ROOT / top).glob("*/__init__.py"))
+
+
+def test_the_layout_sections_name_every_package():
+    """The README's architecture block and docs/design.md's tree name every package of lit3d/ (and design.md
+    every package of datamodules/): a new room cannot go unmentioned, a moved one leaves no stale line
+    (the paths they name exist: the tests above)."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    block = readme[readme.index("## Architecture"):]
+    design = (ROOT / "docs/design.md").read_text(encoding="utf-8")
+    missing = [f"README.md: {p}" for p in _packages("lit3d") if p not in block]
+    missing += [f"docs/design.md: {p}" for p in _packages("lit3d") + _packages("datamodules") if p not in design]
+    assert not missing, f"packages the layout sections do not name: {missing}"
