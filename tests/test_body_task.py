@@ -14,12 +14,12 @@ import torch
 
 pytest.importorskip("anny", reason="the body task needs lit3d[body] (anny, roma)")
 
-from datamodules.body import BodyDataModule  # noqa: E402
-from datamodules.body.replay import ReplayBuffer, ReplayStream  # noqa: E402
-from lit3d.body.evaluator import flat_metrics, write_results  # noqa: E402
-from lit3d.body.module import BodyRegressorTask  # noqa: E402
-from lit3d.body_fit.regressor import load_regressor  # noqa: E402
-from tests.helpers.runs import BIN, REPO, child_env, load_checkpoint, start_script  # noqa: E402
+from datamodules.body import BodyDataModule
+from datamodules.body.replay import ReplayBuffer, ReplayStream
+from lit3d.body.evaluator import flat_metrics, write_results
+from lit3d.body.module import BodyRegressorTask
+from lit3d.body_fit.regressor import load_regressor
+from tests.helpers.runs import BIN, REPO, child_env, load_checkpoint, start_script
 
 SMALL = {"preprocess": {"size": 32}, "batch_size": 16, "draw": 8, "reuse": 8.0, "buffer": 64, "val_people": 16,
          "test_people": 0}
