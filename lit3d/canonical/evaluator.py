@@ -43,6 +43,7 @@ from lit3d.canonical.smoothing import smooth_prediction, smoothing_of
 from lit3d.metrics.depth import composite_depth
 from lit3d.metrics.retrieval import chance_scores, retrieval_scores
 from lit3d.retrieval.descriptor import DescriptorConfig, distance_matrix_from_depths
+from lit3d.utils.data_hooks import GivesMeshes, ListsHeldOut, RendersTurnedCanonical
 from lit3d.utils.evaluation import Evaluation
 
 log = logging.getLogger("lit3d")
@@ -101,7 +102,7 @@ def heldout_items(task, outputs: dict[str, torch.Tensor], datamodule, settings: 
     the task's ``mask_threshold``); None off rank 0 or for a datamodule that does not list its
     held-out items."""
     trainer = getattr(task, "_trainer", None)
-    if (trainer is not None and not trainer.is_global_zero) or not hasattr(datamodule, "held_out_ids"):
+    if (trainer is not None and not trainer.is_global_zero) or not isinstance(datamodule, ListsHeldOut):
         return None
     return heldout_arrays(
         outputs, {i: s for s, i in datamodule.subject_index.items()}, datamodule.held_out_ids(),
@@ -167,7 +168,7 @@ def jittered_target(settings: Mapping, outputs: dict[str, torch.Tensor], labels:
     image is not pixel-identical. Empty when ``ceiling_jitter_deg`` is 0/absent or the datamodule cannot
     render (``canonical_turned``)."""
     jitter = float(settings.get("ceiling_jitter_deg") or 0.0)
-    if not jitter or datamodule is None or not hasattr(datamodule, "canonical_turned"):
+    if not jitter or not isinstance(datamodule, RendersTurnedCanonical):
         return {}
     names = {i: s for s, i in datamodule.subject_index.items()}
     turns = np.random.default_rng(0).uniform(-jitter, jitter, len(labels))
@@ -186,7 +187,7 @@ def mesh_baseline_retrieval(settings: Mapping, outputs: dict[str, torch.Tensor],
     methods = list(settings.get("mesh_baselines") or [])
     if not methods:
         return {}
-    if datamodule is None or not hasattr(datamodule, "normalized_mesh"):
+    if not isinstance(datamodule, GivesMeshes):
         log.info("mesh baselines skipped: the datamodule has no normalized_mesh()")
         return {}
     names = {i: s for s, i in datamodule.subject_index.items()}

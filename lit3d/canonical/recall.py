@@ -22,6 +22,7 @@ import torch
 import torch.nn as nn
 
 from lit3d.canonical.outputs import CanonicalOutput
+from lit3d.utils.data_hooks import HasEvaluationViews
 
 MASK_EPS = 1e-4  # mask probabilities are clamped to [eps, 1 - eps] before the logit
 
@@ -82,7 +83,7 @@ class RecallTemplates(pl.Callback):
 
     def on_fit_start(self, trainer: pl.Trainer, pl_module: pl.LightningModule) -> None:
         dm = getattr(trainer, "datamodule", None)
-        if dm is None or not hasattr(dm, "views"):
+        if not isinstance(dm, HasEvaluationViews):
             raise ValueError("arch=recall fills its templates from a canonical DataModule; fit with datamodule=...")
         depth, mask = dm.datasets["train"].canonical_templates(dm.views("test")[0])
         pl_module.net.set_templates(depth.to(pl_module.device), mask.to(pl_module.device))

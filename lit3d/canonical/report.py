@@ -11,6 +11,7 @@ from pathlib import Path
 
 
 from lit3d.canonical.figures import subject_sheets
+from lit3d.utils.data_hooks import NamesItsSource
 from lit3d.utils.tables import fmt, markdown_table
 from lit3d.utils.io import STAGE_PREFIX, atomic_write_bytes, atomic_write_text
 
@@ -211,7 +212,7 @@ def write_figures(task, datamodule, out_dir: Path, n: int = 4, evaluation=None) 
         sheet.save(buf, format="PNG")
         paths.append(atomic_write_bytes(out_dir / f"canonical_{subject}.png", buf.getvalue()))
     mpath = out_dir / "metrics.json"
-    source = getattr(datamodule, "source_kind", None)  # synth, tosca, ... (a DataModule without one: None)
+    source = datamodule.source_kind if isinstance(datamodule, NamesItsSource) else None  # synth, tosca, ...
     if mpath.is_file() and source:
         write_results(json.loads(mpath.read_text()), out_dir, dataset=source)
     return paths

@@ -48,6 +48,7 @@ from lit3d.completion.surface_eval import SurfaceTestMetrics
 from lit3d.metrics.gathered import compute_if_updated
 from lit3d.callbacks.nonfinite import NonFiniteLossError, guard_step, validate_mode  # noqa: F401 (re-exported)
 from lit3d.utils.evaluation import legacy_settings
+from lit3d.utils.data_hooks import HasLabelCategories
 from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, select_seen_categories, select_unseen_categories
 
 log = logging.getLogger("lit3d.completion")
@@ -164,12 +165,12 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
         ``label_categories`` of the DataModule) join the metrics; the classifier must have one class per
         label category (one clear error naming ``task.nets.n_classes`` otherwise)."""
         dm = getattr(self._trainer, "datamodule", None) if self._trainer is not None else None
-        labels = list(getattr(dm, "label_categories", None) or SEEN_CATEGORIES)
+        labels = list((dm.label_categories if isinstance(dm, HasLabelCategories) else None) or SEEN_CATEGORIES)
         if self.classifier is not None and len(labels) != self.net_cfg["n_classes"]:
             raise ValueError(f"task.nets.n_classes={self.net_cfg['n_classes']}, but the data's class labels are "
                              f"{len(labels)} categories ({', '.join(labels)}): set task.nets.n_classes={len(labels)} "
                              "or task.nets.classifier=false")
-        extra = [c for c in getattr(dm, "user_categories", ()) if c not in self.cat_index]
+        extra = [c for c in (dm.user_categories if isinstance(dm, HasLabelCategories) else ()) if c not in self.cat_index]
         if extra:
             self.eval_categories += extra
             self.cat_index = {c: i for i, c in enumerate(self.eval_categories)}

@@ -21,6 +21,7 @@ from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
 
+from lit3d.utils.data_hooks import HasManifest
 from lit3d.utils.io import write_json
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]  # lit3d/
@@ -79,7 +80,7 @@ def code_provenance() -> dict:
 def data_provenance(datamodule) -> dict:
     """``{"manifest_hash", "data_config_hash"}`` of a set-up lit3d DataModule (its ``manifest``:
     :mod:`datamodules.cache`); None values for None or a DataModule not yet set up."""
-    manifest = getattr(datamodule, "manifest", None)
+    manifest = datamodule.manifest if isinstance(datamodule, HasManifest) else None
     manifest = manifest if isinstance(manifest, dict) else {}
     return {"manifest_hash": manifest.get("manifest_hash"), "data_config_hash": manifest.get("config_hash")}
 
