@@ -13,7 +13,7 @@ existed.
 ``--heldout DIR`` (canonical task): also writes the validation items' predictions as
 ``DIR/<i>/heldout.npz`` (``i``: the checkpoint's place on the command line; the layout
 :mod:`lit3d.canonical.heldout` gives test items, with the checkpoint's evaluation settings), so that
-``python -m studies.canonical.pooled DIR/<i> --out ...`` ranks settings on validation people with the
+``lit3d-summary --pooled DIR/<i> --out ...`` ranks settings on validation people with the
 thesis descriptor, the measure the test reports, instead of on the test set.
 """
 from __future__ import annotations
