@@ -11,7 +11,7 @@ REF=${QUALITY_REF:-}
 if [ -z "$REF" ] && [ -f ../shared/data/meshes/bunny.obj ]; then REF=../shared/data/meshes/bunny.obj; fi
 rm -rf "$OUT"
 mkdir -p "$OUT/scores"
-"$BIN/python" -m lit3d.quality.demo prepare "$OUT" ${REF:+--ref "$REF"} > /dev/null
+"$BIN/python" scripts/demo_quality.py prepare "$OUT" ${REF:+--ref "$REF"} > /dev/null
 while IFS=$'\t' read -r name path text; do
   [ "$name" = reference ] && continue
   echo "lit3d-score reference.obj $name.obj   ($text)"
@@ -20,7 +20,7 @@ while IFS=$'\t' read -r name path text; do
 done < "$OUT/pairs.tsv"
 echo "lit3d-score $OUT/meshes/reference.obj $OUT/meshes/noise_strong.obj --styles $STYLES   (its summary; cached)"
 "$BIN/lit3d-score" "$OUT/meshes/reference.obj" "$OUT/meshes/noise_strong.obj" --styles "$STYLES" | tee "$OUT/noise_strong_summary.txt"
-"$BIN/python" -m lit3d.quality.demo report "$OUT" > /dev/null
+"$BIN/python" scripts/demo_quality.py report "$OUT" > /dev/null
 cat "$OUT/results.md"
 {
   echo "quality (rendering-based score of a shape against its reference; 1 = identical)"

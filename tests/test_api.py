@@ -14,7 +14,6 @@ import torch
 
 import lit3d
 from lit3d.api import InputError, checkpoint_task, export, load, untrained_checkpoint
-from lit3d.api.__main__ import main as api_main
 from lit3d.api.export import exportable
 from lit3d.reconstruct.canonical import CanonicalMapper
 from lit3d.reconstruct.pipeline import Completer
@@ -145,20 +144,10 @@ def test_exported_net_gives_the_eager_outputs(name, ckpts, tmp_path):
         assert np.abs(ts - lit3d.complete_grid(grid, model)).max() <= 1e-5
 
 
-def test_export_command_line(ckpts, tmp_path, capsys):
-    assert api_main(["export", str(ckpts["canonical"]), str(tmp_path / "canonical.pt")]) == 0
-    assert capsys.readouterr().out.strip() == str(tmp_path / "canonical.pt")
-    assert (tmp_path / "canonical.pt").is_file()
-    assert api_main(["export", str(tmp_path / "missing.ckpt"), str(tmp_path / "x.pt")]) == 2
-    err = capsys.readouterr().err.strip()
-    assert err == f"python -m lit3d.api export: error: {tmp_path / 'missing.ckpt'}: checkpoint not found"
-
-
-def test_export_never_writes_over_a_checkpoint(ckpts, tmp_path, capsys):
-    """``export(load(p), p)`` and ``python -m lit3d.api export CKPT CKPT`` once replaced the checkpoint
-    with TorchScript (exit 0). Now: its own checkpoint (also through a link), any other checkpoint and a
-    folder are refused with one line naming the file, before anything is written; an earlier export
-    is replaced through a temp file and a rename."""
+def test_export_never_writes_over_a_checkpoint(ckpts, tmp_path):
+    """``export(load(p), p)`` once replaced the checkpoint with TorchScript. Now: its own checkpoint (also
+    through a link), any other checkpoint and a folder are refused with one line naming the file, before
+    anything is written; an earlier export is replaced through a temp file and a rename."""
     from lit3d.utils.io import OutputError
 
     own, other = tmp_path / "own.ckpt", tmp_path / "other.ckpt"
@@ -176,9 +165,6 @@ def test_export_never_writes_over_a_checkpoint(ckpts, tmp_path, capsys):
         with pytest.raises(OutputError) as info:
             export(model, out)
         assert str(info.value).startswith(message) and "\n" not in str(info.value), str(info.value)
-        assert api_main(["export", str(own), str(out)]) == 2
-        err = capsys.readouterr().err.strip()
-        assert err.startswith(f"python -m lit3d.api export: error: {message}") and "\n" not in err, err
     assert {p: p.read_bytes() for p in (own, other)} == before  # both checkpoints as they were
     assert torch.load(own, weights_only=True)["lit3d"]  # still a checkpoint, not TorchScript
     assert sorted(p.name for p in tmp_path.iterdir()) == ["folder.pt", "link.pt", "other.ckpt", "own.ckpt"]

@@ -1,11 +1,20 @@
-"""Mean ± sd over training runs of pooled canonical results, against the standard library's statistics."""
+"""Mean ± sd over training runs of pooled canonical results (``lit3d-summary --over-runs``), against the
+standard library's statistics."""
 import json
 import statistics
 
 import pytest
 
-from studies.canonical.over_runs import load, main, markdown, over_runs
+from lit3d.canonical.over_runs import load, markdown, over_runs
 from lit3d.canonical.pooled import SCORES
+from lit3d.cli.summary import main as summary_main
+
+
+def main(argv):
+    """``lit3d-summary --over-runs ARGV...``: its exit status."""
+    with pytest.raises(SystemExit) as info:
+        summary_main(["--over-runs", *argv])
+    return info.value.code
 
 
 def _write(d, nn, iou, n_items=68, seeds=(0, 1, 2, 3, 4)):
@@ -34,17 +43,31 @@ def test_mean_and_sd_over_runs_match_statistics(tmp_path, capsys):
     text = markdown(table, ["a", "b", "c", "d"])
     assert "| model | 0.35 ± 0.07 (0.44 0.37 0.31 0.28) |" in text
     out = tmp_path / "over.md"
-    main([str(d) for d in dirs] + ["--out", str(out)])
-    assert out.read_text() == capsys.readouterr().out
+    assert main([str(d) for d in dirs] + ["--out", str(out)]) == 0
+    assert out.read_text() == capsys.readouterr().out and "| model | 0.35 ± 0.07" in out.read_text()
+    from studies.canonical.over_runs import main as study_main  # the LOG's command: the same code
+
+    assert study_main([str(d) for d in dirs]) == 0 and capsys.readouterr().out == out.read_text()
 
 
-def test_runs_of_different_protocols_or_missing_files_are_named(tmp_path):
+def test_runs_of_different_protocols_or_bad_files_are_one_line(tmp_path, capsys):
     a = _write(tmp_path / "a", 0.4, 0.6)
     b = _write(tmp_path / "b", 0.4, 0.6, n_items=26)
     with pytest.raises(ValueError, match=r"b: 26 items.*not the same protocol"):
         load([a, b])
-    with pytest.raises(SystemExit, match=r"missing.*pooled.json|pooled.json: missing"):
-        main([str(a), str(tmp_path / "nowhere")])
+    (tmp_path / "c").mkdir()
+    (tmp_path / "c" / "pooled.json").write_text('{"summary": {}, "n_items": 68')  # cut short
+    (tmp_path / "d").mkdir()
+    (tmp_path / "d" / "pooled.json").write_text('{"summary": {}}')
+    out = tmp_path / "over.md"
+    for other, message in [(b, f"{b}: 26 items, codebook seeds [0, 1, 2, 3, 4]; {a} has 68 items"),
+                           (tmp_path / "nowhere", f"{tmp_path / 'nowhere' / 'pooled.json'}: missing"),
+                           (tmp_path / "c", f"{tmp_path / 'c' / 'pooled.json'}: not a pooled result (not JSON"),
+                           (tmp_path / "d", f"{tmp_path / 'd' / 'pooled.json'}: not a pooled result (no n_items, seeds")]:
+        assert main([str(a), str(other), "--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith(f"lit3d-summary: error: {message}") and "\n" not in err, err
+    assert not out.exists()  # nothing written
 
 
 def test_confusion_counts_who_is_taken_for_whom(tmp_path):
@@ -53,7 +76,7 @@ def test_confusion_counts_who_is_taken_for_whom(tmp_path):
     import numpy as np
 
     from lit3d.canonical import heldout
-    from studies.canonical.over_runs import confusion, confusion_markdown
+    from lit3d.canonical.over_runs import confusion, confusion_markdown
 
     left, right = np.zeros((4, 4), np.float16), np.zeros((4, 4), np.float16)
     left[:, :2], right[:, 2:] = 1, 1

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from lightning.fabric.utilities.data import AttributeDict
 
-from lit3d.canonical import evaluator, heldout, pooled
+from lit3d.canonical import evaluator, heldout
 from lit3d.utils.evaluation import Evaluation
 from tests.helpers.canonical import RETRIEVAL, fold_outputs, pooled_datamodule
 
@@ -65,7 +65,18 @@ def test_pool_checks_coverage():
         assert len(heldout.pool(dirs, strict=False)["item"]) == 2
 
 
-def test_folds_write_heldout_and_the_pooled_evaluator_scores_every_row(tmp_path):
+def summary(argv: list[str]) -> int:
+    """``lit3d-summary ARGV...``: its exit status."""
+    from lit3d.cli.summary import main
+
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    return info.value.code
+
+
+def test_folds_write_heldout_and_the_pooled_evaluator_scores_every_row(tmp_path, capsys):
+    """The folds' heldout.npz pooled by ``lit3d-summary --pooled``: every row scored per seed; folds that do
+    not cover the data are one line, exit 2, nothing written."""
     hp = AttributeDict(arch="canonical", mask_threshold=0.5)  # the task's; the rest are evaluation settings
     settings = dict(retrieval=RETRIEVAL, chance_trials=5, mesh_baselines=["gps"], baseline_landmarks=30,
                     baseline_max_vertices=None, baseline_smacof_eps=1e-4)
@@ -79,10 +90,15 @@ def test_folds_write_heldout_and_the_pooled_evaluator_scores_every_row(tmp_path)
         assert (run / heldout.HELDOUT_FILE).is_file() and (run / "results.md").is_file()
         runs.append(run)
     assert evaluator.write_artefacts(Evaluation(), tmp_path / "none") == []  # nothing held out: no file
-    with pytest.raises(ValueError, match="never held out"):
-        pooled.run(runs[:2], [0], tmp_path / "partial")
-    path = pooled.run(runs, [0, 1], tmp_path / "pooled")
-    text = path.read_text()
+    capsys.readouterr()  # the folds' data preparation
+    assert summary(["--pooled", *map(str, runs[:2]), "--seeds", "0", "--out", str(tmp_path / "partial")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("lit3d-summary: error: pooled held-out items do not cover the data once:") and \
+        "never held out" in err and "\n" not in err, err
+    assert not (tmp_path / "partial").exists()  # nothing written
+    assert summary(["--pooled", *map(str, runs), "--seeds", "0", "1", "--out", str(tmp_path / "pooled")]) == 0
+    text = (tmp_path / "pooled" / "pooled_results.md").read_text()
+    assert capsys.readouterr().out.strip() == text.strip()
     res = json.loads((tmp_path / "pooled" / "pooled.json").read_text())
     assert res["n_items"] == 12 and res["seeds"] == [0, 1]
     for row in ("model", "input", "target", "gps", "shapedna", "chance"):
@@ -144,3 +160,25 @@ def test_pooled_table_keeps_every_depth_row(tmp_path):
     assert rows == ["posed input depth, no canonicalisation (ours)", "Anny body fit, its canonical depth (lit3d.body_fit, ours)",
                     "body_fit_refined: depth images from --depth-row (ours)", "chance: random distances (ours)"]
     assert "| 0.46 ± 0.04 |" in next(line for line in lines if "body_fit_refined" in line)
+
+
+def test_pooled_command_line_refuses_bad_input_in_one_line(tmp_path, capsys):
+    """``lit3d-summary --pooled`` (and the LOG's ``python -m studies.canonical.pooled``, the same code): a run
+    dir without heldout.npz, nothing to pool, a bad --depth-row, --out a file: one line, exit 2, nothing written."""
+    from studies.canonical.pooled import main as study_main
+
+    (tmp_path / "run").mkdir()
+    (tmp_path / "file").write_text("not a folder")
+    out = str(tmp_path / "out")
+    cases = [(["--pooled", str(tmp_path / "run"), "--out", out], f"{tmp_path / 'run' / heldout.HELDOUT_FILE}: "),
+             (["--pooled", "--out", out], "--pooled: give run dirs, or Hydra overrides after --"),
+             (["--pooled", str(tmp_path / "run"), "--depth-row", "body_fit", "--out", out],
+              "--depth-row body_fit: expected ROW=DIR"),
+             (["--pooled", str(tmp_path / "run"), "--out", str(tmp_path / "file")], f"{tmp_path / 'file'}: --out is a file")]
+    for argv, message in cases:
+        assert summary(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith(f"lit3d-summary: error: {message}") and "\n" not in err, err
+    assert study_main([str(tmp_path / "run"), "--out", out]) == 2
+    assert capsys.readouterr().err.startswith(f"python -m studies.canonical.pooled: error: {tmp_path / 'run'}")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file", "run"]

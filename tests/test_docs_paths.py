@@ -141,11 +141,15 @@ def _is_program(module: str) -> bool:
     return False
 
 
-def test_a_moved_program_is_caught():
+def test_a_moved_program_is_caught(tmp_path, monkeypatch):
     assert named_programs("run `python -m\nstudies.canonical.pooled DIR` or python -m lit3d.<task>.x") == [
         "studies.canonical.pooled"]
-    assert _is_program("studies.canonical.pooled") and _is_program("lit3d.api")
+    assert _is_program("studies.canonical.pooled") and not _is_program("lit3d.api")  # python -m lit3d.api: removed
     assert not _is_program("lit3d.canonical.pooled") and not _is_program("lit3d.no_such_module")
+    (tmp_path / "lit3d" / "tool").mkdir(parents=True)
+    (tmp_path / "lit3d" / "tool" / "__main__.py").write_text("print('a package program')\n")
+    monkeypatch.setitem(globals(), "ROOT", tmp_path)
+    assert _is_program("lit3d.tool") and not _is_program("lit3d")
 
 
 def _packages(top: str) -> list[str]:

@@ -172,7 +172,7 @@ def test_a_checkpoint_save_killed_half_way_leaves_nothing_after_the_resume(tmp_p
 @pytest.mark.slow
 def test_a_killed_export_and_a_killed_preparation_leave_nothing_after_the_next(tmp_path, checkpoint):
     out = tmp_path / "model.pt"
-    export = ["-m", "lit3d.api", "export", str(checkpoint), str(out)]
+    export = ["-c", f"import lit3d; lit3d.export(lit3d.load({str(checkpoint)!r}), {str(out)!r})"]
     _killed(_run(export, "write:model.pt"))
     assert [p.name.startswith(".model.pt.") for p in tmp_path.glob(".*.tmp")] == [True] and not out.exists()
     res = _run(export)

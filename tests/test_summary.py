@@ -75,3 +75,20 @@ def test_summary_works_inside_meta_context(completion_demo_nets):
     assert names[:2] == ["generator stage 1", "generator stage 2"]
     assert not any("selector" in n for n in names)
     assert {r["component"]: r for r in rows}["generator"]["output"] == (1, 1, 64, 64, 64)
+
+
+def test_the_canonical_summaries_are_options_of_lit3d_summary(capsys):
+    """``--pooled`` and ``--over-runs`` take the argparse path (their own pages and errors); anything else is
+    the Hydra ``lit3d-summary`` of a config."""
+    import pytest
+
+    from lit3d.cli import summary_canonical
+
+    assert summary_canonical.main(["experiment=completion_demo", "task.nets.k=50"]) is None
+    for option in summary_canonical.OPTIONS:
+        with pytest.raises(SystemExit) as info:
+            summary_canonical.main([option, "DIR", "--help"])
+        assert info.value.code == 0 and f"{option} " in capsys.readouterr().out
+    with pytest.raises(SystemExit) as info:
+        summary_canonical.main(["--pooled", "--over-runs", "x", "--out", "y"])
+    assert info.value.code == 2 and "unrecognized arguments: --over-runs x" in capsys.readouterr().err

@@ -4,8 +4,6 @@
     net = torch.jit.load(path)                  # no lit3d needed to run it
     probs = net(partial)                        # (B, 1, r, r, r) float32 -> (B, 1, R, R, R) probabilities
 
-    python -m lit3d.api export CKPT OUT.pt [--device cpu]
-
 What is exported (eval mode; the trace fixes the image / grid size, not the batch size):
 
 - completion: ``(B, 1, r, r, r) float32`` partial grid (0/1, in the training grids' frame) ->

@@ -1,7 +1,7 @@
 """Pooled, cross-validated retrieval of the canonical task: every held-out item scored once, every
 row on the same items and the same codebook seeds, mean +- sd over the seeds: :func:`run`, and at the
 end of ``+sweep=canonical_cv`` the Hydra callback :class:`PooledResults`. By hand, from the checkout:
-``python -m studies.canonical.pooled`` (``studies/canonical/pooled.py``).
+``lit3d-summary --pooled`` (:mod:`lit3d.cli.summary_canonical`).
 
 With run dirs (one per fold, each with the ``heldout.npz`` that
 :func:`lit3d.canonical.evaluator.protocol` writes), the folds are merged

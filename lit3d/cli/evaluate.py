@@ -3,6 +3,7 @@
     lit3d-eval ckpt_path=logs/completion/runs/X/checkpoints/last.ckpt
     lit3d-eval task=completion ckpt_path=... data=recgan data.root=../shared/data/recgan_sample
     lit3d-eval task=canonical ckpt_path=... evaluation.mesh_baselines=[]    # other evaluation settings
+    lit3d-eval ckpt_path=... split=val data.split.max_val_items=null         # the validation split's val/ metrics
 
 Without ``data=NAME`` the checkpoint's own data config is used; ``data.KEY=VALUE`` overrides
 (``data.num_workers=1``, ``data.sizes.test=4``) then change that config (:func:`data_overrides`):
@@ -11,6 +12,10 @@ each key must be one of the checkpoint's data config, and its value passes ``lit
 Evaluates with the evaluation settings the checkpoint was trained with (saved by lit3d-train), except
 those the command line sets (``evaluation.*``; with ``task=NAME``, whose config brings the node):
 :mod:`lit3d.runtime.eval_settings`.
+
+``split=val``: the validation split only, its ``val/`` metrics into metrics.json (with config.yaml; no
+results.md or figures): settings chosen on validation items, not on the test set
+(:func:`lit3d.cli.evaluation.run_validation`).
 
 Writes into the run dir: metrics.json, results.md (the thesis's table layout,
 with the thesis's figures beside ours), config.yaml and PNG figures, as one set (staged, then moved
@@ -31,7 +36,7 @@ from lit3d.runtime import eval_settings
 from lit3d.cli.about import EXIT_USER
 from lit3d.cli.common import cli_main, fail, run_cli
 from lit3d.utils.task_hooks import AdaptsDataConfig, validates_before_test
-from lit3d.cli.evaluation import run_evaluation
+from lit3d.cli.evaluation import run_evaluation, run_validation
 from lit3d.runtime.build import build_datamodule, import_object, to_plain
 from lit3d.runtime.checkpoints import read_checkpoint
 from lit3d.runtime.compose import CONF_DIR
@@ -40,6 +45,9 @@ from lit3d.runtime.config_checks import ConfigValueError, check_config_values
 from lit3d.cli.resume_checks import check_eval_data
 from lit3d.cli.stops import evaluating
 from lit3d.utils.provenance import provenance
+
+
+SPLITS = ("test", "val")  # split=val: the validation split's val/ metrics only (run_validation)
 
 
 def checkpoint_meta_for(cfg: DictConfig) -> tuple[dict, dict]:
@@ -63,6 +71,8 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
 
 
 def _evaluate(cfg: DictConfig, out_dir: Path) -> dict[str, float]:
+    if cfg.split not in SPLITS:
+        raise UserError(f"split={cfg.split}: expected one of {', '.join(SPLITS)}")
     ckpt, meta = checkpoint_meta_for(cfg)  # before the heavy imports: a wrong checkpoint fails fast
     import lightning.pytorch as pl
     import torch
@@ -93,6 +103,8 @@ def _evaluate(cfg: DictConfig, out_dir: Path) -> dict[str, float]:
                 "provenance": {**provenance(datamodule), "checkpoint": meta.get("provenance")}}
 
     config = OmegaConf.to_yaml(OmegaConf.create({"task": task_cfg, "data": data_cfg, "evaluation": settings}))
+    if cfg.split == "val":
+        return run_validation(trainer, task, datamodule, out_dir, extra=record, files={"config.yaml": config})
     return run_evaluation(trainer, task, datamodule, task_cfg["name"], out_dir,
                           validate=validates_before_test(task), n_figures=cfg.n_figures,
                           extra=record, files={"config.yaml": config}, settings=settings)

@@ -1,5 +1,5 @@
 """The evaluation of ``lit3d-eval`` and of ``lit3d-train`` after fitting: test, the task room's
-protocol, and its files written into the run dir as one set.
+protocol, and its files written into the run dir as one set (``lit3d-eval split=val``: :func:`run_validation`).
 
 :func:`run_evaluation` writes ``metrics.json``, ``results.md``, the artefacts, the figures (and the
 caller's own files, ``lit3d-eval``'s ``config.yaml``) into a hidden staging folder of the run dir
@@ -110,4 +110,23 @@ def run_evaluation(trainer, task, datamodule, task_name: str, out_dir: Path, *, 
             figures = (evaluator.write_figures(task, datamodule, stage, n=n_figures, evaluation=evaluation)
                        if n_figures > 0 else [])
         log.info("wrote %s, results.md and %d figures", out_dir / METRICS, len(figures))
+    return metrics
+
+
+def run_validation(trainer, task, datamodule, out_dir: Path, *, extra: dict | Callable[[], dict] | None = None,
+                   files: dict[str, str] | None = None) -> dict[str, float]:
+    """``lit3d-eval split=val``: validate ``task`` only (the task's ``val/`` metrics, e.g. the canonical
+    task's ``val/retrieval_nn``: choose settings on validation people, not on the test set) and on rank 0
+    write ``metrics.json`` (``extra`` first, ``"split": "val"``, the metrics) and ``files`` into ``out_dir``
+    as one set (:func:`staged_outputs`); no results.md, artefacts or figures (those are the test's)."""
+    trainer.validate(task, datamodule=datamodule, weights_only=True)
+    metrics = {k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("val/")}
+    check_stop()
+    if trainer.is_global_zero:
+        head = extra() if callable(extra) else dict(extra or {})
+        with staged_outputs(out_dir) as stage:
+            for name, text in (files or {}).items():
+                atomic_write_text(stage / name, text)
+            write_json(stage / METRICS, {**head, "split": "val", **metrics})
+        log.info("wrote %s (the validation split)", out_dir / METRICS)
     return metrics

@@ -1,12 +1,16 @@
 """``lit3d-summary experiment=NAME``: parameters, output shapes and activation memory per component.
 
-Nets are built on the meta device, so paper-scale configs cost no memory.
+Nets are built on the meta device, so paper-scale configs cost no memory. ``lit3d-summary --pooled`` and
+``lit3d-summary --over-runs``: the canonical task's cross-validation summaries (:mod:`lit3d.cli.summary_canonical`).
 """
 from __future__ import annotations
+
+import sys
 
 import hydra
 from omegaconf import DictConfig
 
+from lit3d.cli import summary_canonical
 from lit3d.cli.common import cli_main, run_cli
 from lit3d.runtime.build import _construct, import_object, task_kwargs
 from lit3d.runtime.compose import CONF_DIR
@@ -43,9 +47,14 @@ def hydra_main(cfg: DictConfig) -> None:
     run_cli(summary, cfg)
 
 
-def main() -> None:
-    """Console script ``lit3d-summary`` (``--debug``: tracebacks instead of one-line errors)."""
-    cli_main(hydra_main, command="summary")
+def main(argv: list[str] | None = None) -> None:
+    """Console script ``lit3d-summary`` (``--debug``: tracebacks instead of one-line errors); ``--pooled`` and
+    ``--over-runs``: :mod:`lit3d.cli.summary_canonical` (exits with its status)."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    status = summary_canonical.main(argv)
+    if status is not None:
+        sys.exit(status)
+    cli_main(hydra_main, argv, command="summary")
 
 
 if __name__ == "__main__":

@@ -3,7 +3,7 @@
 
     python -m studies.body.body_fit_rows --out DIR [--init REGRESSOR_CKPT] [--worker I --workers K] \\
         -- experiment=canonical_humans data.data_dir=... data.source.pose_draw=per_subject
-    python -m studies.canonical.pooled --fold-test --rows input body_fit chance --depth-row body_fit=DIR \\
+    lit3d-summary --pooled --fold-test --rows input body_fit chance --depth-row body_fit=DIR \\
         --seeds 0 1 2 3 4 --out POOLED -- experiment=canonical_humans data.data_dir=... data.source.pose_draw=per_subject
 
 The Hydra overrides after ``--`` compose the canonical data as ``lit3d-train`` would

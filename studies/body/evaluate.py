@@ -25,7 +25,7 @@ sides of a 320x240 image, centred), the person 3.2 m in front of it, facing it.
   ``--samples`` area-uniform surface samples of each mesh. Beside: the visible input points alone
   (as the predicted set) and the mean body. The canonical depth images (``<stem>_body_canonical_depth.npy``,
   :func:`lit3d.body_fit.results.canonical_depth`) go to ``DIR/faust_canonical`` for the retrieval
-  row (``python -m studies.canonical.pooled --depth-row body_fit=DIR/faust_canonical ...``).
+  row (``lit3d-summary --pooled --depth-row body_fit=DIR/faust_canonical ...``).
 
 ``--multi-start``: :func:`lit3d.body_fit.fit.fit_best` (four starts probed, the lowest loss goes on) in
 place of the single fit from the mean body; CPU seconds count every start.

@@ -8,12 +8,13 @@ loaded from the checkpoint. ``--all-val``: every validation item (``data.split.m
 training run's subset. Prints one JSON line per checkpoint (``val/...`` metrics, e.g. the canonical
 task's ``val/retrieval_nn``: validation subjects retrieved by mask IoU) and writes them all to ``--out``.
 Use it to compare settings on people never tested with checkpoints trained before a metric
-existed.
+existed. One checkpoint's ``val/`` metrics without ``--heldout`` are also ``lit3d-eval ckpt_path=CKPT split=val
+data.split.max_val_items=null`` (its metrics.json; that reads the data config from the checkpoint).
 
 ``--heldout DIR`` (canonical task): also writes the validation items' predictions as
 ``DIR/<i>/heldout.npz`` (``i``: the checkpoint's place on the command line; the layout
 :mod:`lit3d.canonical.heldout` gives test items, with the checkpoint's evaluation settings), so that
-``python -m studies.canonical.pooled DIR/<i> --out ...`` ranks settings on validation people with the
+``lit3d-summary --pooled DIR/<i> --out ...`` ranks settings on validation people with the
 thesis descriptor, the measure the test reports, instead of on the test set.
 """
 from __future__ import annotations

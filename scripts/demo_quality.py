@@ -1,11 +1,11 @@
 """The quality part of ``make demo``: one reference shape, a few distorted versions, ``lit3d-score``.
 
-``scripts/demo_quality.sh`` runs, in a folder ``OUT``::
+``scripts/demo_quality.sh`` runs, in a folder ``OUT`` (from the checkout, with lit3d installed)::
 
-    python -m lit3d.quality.demo prepare OUT [--ref MESH]   # OUT/meshes/*.obj, OUT/pairs.tsv
+    python scripts/demo_quality.py prepare OUT [--ref MESH]  # OUT/meshes/*.obj, OUT/pairs.tsv
     lit3d-score OUT/meshes/reference.obj OUT/meshes/<name>.obj --json --save-views OUT/views/<name>
         > OUT/scores/<name>.json                             # once per distorted version
-    python -m lit3d.quality.demo report OUT                  # OUT/results.md, OUT/quality_demo.png
+    python scripts/demo_quality.py report OUT                # OUT/results.md, OUT/quality_demo.png
 
 The reference is ``--ref`` (any mesh ``lit3d-score`` reads; vertices split by per-corner normals or
 texture coordinates are merged first, so that a distortion moves the surface, not the seams) or the
@@ -31,6 +31,7 @@ from lit3d.metrics.image import ssim_map, to_grey
 from lit3d.render.convert import to_mesh
 from lit3d.render.gbuffer import RenderConfig
 from lit3d.utils import quiet
+from lit3d.utils.checkpoints import first_line
 from lit3d.utils.figures import labelled_grid
 from lit3d.utils.io import atomic_write_bytes, atomic_write_text
 from lit3d.utils.tables import fmt, markdown_table
@@ -43,6 +44,7 @@ DISTORTIONS: dict[str, tuple[str, int, str]] = {
     "simplify": ("simplify", 3, "decimated to 6% of the faces"),
     "quantize": ("quantize", 1, "coordinates quantised to 8 bits"),
 }
+PROG = "demo_quality.py"
 FIGURE_STYLE = "clay_studio"
 FIGURE_VIEWS = (0, 4, 8)
 
@@ -75,7 +77,12 @@ def prepare(out: Path, ref: str | None = None) -> list[tuple[str, Path]]:
 
 
 def _pairs(out: Path) -> tuple[tuple[Path, str], list[tuple[str, Path, str]]]:
-    rows = [ln.split("\t") for ln in (out / "pairs.tsv").read_text().splitlines() if ln.strip()]
+    path = out / "pairs.tsv"
+    rows = [ln.split("\t") for ln in path.read_text().splitlines() if ln.strip()]
+    bad = [i for i, r in enumerate(rows, 1) if len(r) != 3]
+    if not rows or rows[0][0] != "reference" or bad:
+        raise ValueError(f"{path}: not the list that 'prepare' writes (name, path, description per line, "
+                         f"reference first{f'; line {bad[0]} has not 3 fields' if bad else ''})")
     (_, ref, source), rest = rows[0], rows[1:]
     return (Path(ref), source), [(n, Path(p), d) for n, p, d in rest]
 
@@ -85,16 +92,26 @@ def _mean(features: dict[str, float], measure: str) -> float:
     return sum(vals) / len(vals) if vals else float("nan")
 
 
+def read_score(path: Path, name: str) -> dict:
+    """The ``lit3d-score --json`` output at ``path``; FileNotFoundError or ValueError naming the file when
+    it is missing or is not that output (not JSON, or no ``overall_score``, ``features`` and ``config``)."""
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no lit3d-score output for '{name}' (run lit3d-score first)")
+    try:
+        score = json.loads(path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path}: not lit3d-score --json output ({first_line(exc)})") from None
+    missing = [k for k in ("overall_score", "features", "config") if not isinstance(score, dict) or k not in score]
+    if missing:
+        raise ValueError(f"{path}: not lit3d-score --json output (no {', '.join(missing)})")
+    return score
+
+
 def report(out: Path) -> str:
     """``out/results.md`` (one row per distorted version, best first) and ``out/quality_demo.png``
     from the ``lit3d-score --json`` outputs in ``out/scores/``. Returns the markdown."""
     (ref, source), pairs = _pairs(out)
-    scores = {}
-    for name, _path, _text in pairs:
-        f = out / "scores" / f"{name}.json"
-        if not f.is_file():
-            raise FileNotFoundError(f"{f}: no lit3d-score output for '{name}' (run lit3d-score first)")
-        scores[name] = json.loads(f.read_text())
+    scores = {name: read_score(out / "scores" / f"{name}.json", name) for name, _path, _text in pairs}
     order = sorted(pairs, key=lambda p: -scores[p[0]]["overall_score"])
     rows = []
     for rank, (name, path, text) in enumerate(order, 1):
@@ -162,7 +179,7 @@ def _wrap(text: str, width: int = 26) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m lit3d.quality.demo", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0])
     sub = p.add_subparsers(dest="cmd", required=True)
     pp = sub.add_parser("prepare", help="write the reference and distorted meshes and pairs.tsv")
     pp.add_argument("out", type=Path)
@@ -171,11 +188,15 @@ def main(argv: list[str] | None = None) -> int:
     pr.add_argument("out", type=Path)
     args = p.parse_args(argv)
     quiet.install()
-    if args.cmd == "prepare":
-        for name, path in prepare(args.out, args.ref):
-            print(f"{name}\t{path}")
-    else:
-        print(report(args.out))
+    try:
+        if args.cmd == "prepare":
+            for name, path in prepare(args.out, args.ref):
+                print(f"{name}\t{path}")
+        else:
+            print(report(args.out))
+    except (OSError, ValueError) as exc:  # a missing or bad score file or pairs.tsv, an unreadable reference mesh
+        print(f"{PROG} {args.cmd}: error: {first_line(exc, type(exc).__name__)}", file=sys.stderr)
+        return 2
     return 0
 
 
