@@ -58,8 +58,8 @@ DATA_HOOKS = (HasManifest, HasLabelCategories, NamesItsSource, HasEvaluationView
 @pytest.mark.parametrize("make, offers", [
     (lambda: CompletionDataModule(data_dir="unused", target_res=32), {HasManifest, HasLabelCategories}),
     (lambda: QualityDataModule(data_dir="unused"), {HasManifest}),
-    (lambda: CanonicalDataModule(data_dir="unused", image_size=32), {HasManifest, NamesItsSource, HasEvaluationViews, ListsHeldOut,
-                                                      RendersTurnedCanonical, GivesMeshes}),
+    (lambda: CanonicalDataModule(data_dir="unused", image_size=32),
+     {HasManifest, NamesItsSource, HasEvaluationViews, ListsHeldOut, RendersTurnedCanonical, GivesMeshes}),
     (lambda: BodyDataModule(), {HasManifest}),
 ], ids=["completion", "quality", "canonical", "body"])
 def test_each_datamodule_offers_its_interfaces(make, offers):
