@@ -23,13 +23,12 @@ NET = {"image_size": 48, "init": "he", "lfe_channels": [8, 12, 16], "lfe_out": 4
        "warp_normalise_depth": False, "warp_depth": "affine", "warp_parts": 0, "warp_attend_grid": 0,
        "warp_refine_steps": 1, "warp_affine_cell": 8, "unet_channels": [16, 32, 64, 128],
        "recall_channels": [16, 32, 64, 128]}
-# the same net in today's layout
+# the same net in today's layout (the parked head options, at their defaults, dropped)
 NET_NODES = {"image_size": 48, "init": "he", "lfe": {"use": True, "channels": [8, 12, 16], "out": 4},
              "msfe": {"use": True, "channels": [6, 6, 4], "grid": 6, "fuser_hidden": 64, "fuser_out": 48,
                       "dec_channels": [32, 16, 12, 8, 8, 8], "out": 4},
              "reconstruction": {"kind": "downup", "channels": [12, 16, 24]},
-             "head": {"kind": "warp", "hidden": 16, "normalise_depth": False, "depth": "affine", "parts": 0,
-                      "attend_grid": 0, "refine_steps": 1, "affine_cell": 8},
+             "head": {"kind": "warp", "hidden": 16},
              "unet_channels": [16, 32, 64, 128], "recall_channels": [16, 32, 64, 128]}
 # what the old code's net (seed 0, :func:`_inputs`) gave: sums of its parameters, of the predicted depth and mask
 # probability (2, 1, 48, 48), and of the identity head's logits (2, 9) (torch.manual_seed(0) before the net, the
@@ -117,11 +116,7 @@ def test_flat_hparams_become_the_nodes():
         "phases": {"use": True, "weights": OLD_HPARAMS["phases"], "unit": "fraction", "alpha": 1000.0, "beta": 100.0},
         "panels": {"every_n_epochs": 1, "n": 4},
         "identity": {"weight": 1.0, "classes": 9},
-        "warp": {"flow_weight": 1000.0, "flow_on": "visible", "flow_power": 1.0, "vis_on": "foreground",
-                 "vis_weight": 100.0, "smooth_weight": 100.0, "offset_smooth_weight": 0.0, "depth_grad_weight": 0.0},
-        "phenotype": {"weight": 0.0, "dims": 6},
-        "contrastive": {"weight": 0.0, "embed": "latent", "temperature": 0.1, "dim": 128,
-                        "channels": [16, 32, 64, 128]}}
+        "warp": {"flow_weight": 1000.0, "vis_weight": 100.0, "smooth_weight": 100.0}}
     assert upgrade_hparams(new) == new and upgrade_net(NET_NODES) == NET_NODES  # today's layout: unchanged
     # evaluation settings that older checkpoints hold among the hyper-parameters leave them (lit3d-eval reads
     # them from the task config, where they stay)
@@ -181,3 +176,55 @@ def test_a_checkpoint_of_another_task_is_left_alone():
     ckpt = {"hyper_parameters": {"lr": 1.0}, META_KEY: {"task": {"name": "completion"}, "data": {"source": "synth"}}}
     assert upgrade_checkpoint(ckpt) == {"hyper_parameters": {"lr": 1.0},
                                         META_KEY: {"task": {"name": "completion"}, "data": {"source": "synth"}}}
+
+
+def _with(ckpt_path, tmp_path, edit) -> str:
+    """A copy of the checkpoint at ``ckpt_path`` with ``edit(ckpt)`` applied, saved as ``tmp_path/parked.ckpt``."""
+    ckpt = torch.load(ckpt_path, map_location="cpu", weights_only=False)
+    edit(ckpt)
+    path = tmp_path / "parked.ckpt"
+    torch.save(ckpt, path)
+    return str(path)
+
+
+@pytest.mark.parametrize("flat,key,value", [("warp_parts", "task.net.head.parts", 8),
+                                            ("warp_depth", "task.net.head.depth", "offset"),
+                                            ("head", "task.net.head.kind", "splat"),
+                                            ("contrastive_weight", "task.contrastive.weight", 10.0),
+                                            ("flow_on", "task.warp.flow_on", "image")])
+def test_a_checkpoint_that_used_a_parked_option_is_refused_naming_file_key_and_tag(old_checkpoint, tmp_path, flat,
+                                                                                  key, value):
+    from lit3d.runtime.errors import UserError
+
+    def edit(ckpt):
+        for hp in (ckpt["hyper_parameters"], ckpt[META_KEY]["task"]):
+            (hp["net"] if flat in hp["net"] else hp)[flat] = value
+    path = _with(old_checkpoint[0], tmp_path, edit)
+    with pytest.raises(UserError, match=rf"^{path}: {key}={value!r} is a parked canonical option .*parked-canonical-options$"):
+        read_checkpoint(path)
+    with pytest.raises(ValueError, match=rf"{path}: {key}="):
+        CanonicalTask(net=NET_NODES, identity={"weight": 1.0, "classes": 9}).load_initial_weights(path)
+
+
+def test_a_parked_data_option_in_use_and_an_offset_depth_head_are_refused(old_checkpoint, tmp_path):
+    path = _with(old_checkpoint[0], tmp_path, lambda c: c[META_KEY]["data"].update(batch_poses=4))
+    with pytest.raises(ValueError, match=rf"^{path}: data.training.batch_poses=4 is a parked"):
+        upgrade_checkpoint(torch.load(path, weights_only=False), path)
+
+    def offset_head(ckpt):  # a warp head from before task.net.head.depth: flow 2 + offset 1 + vis and fills 3
+        ckpt["state_dict"]["net.head.out.weight"] = torch.zeros(6, 16, 1, 1)
+        for hp in (ckpt["hyper_parameters"], ckpt[META_KEY]["task"]):
+            hp["net"].pop("warp_depth", None)  # (one dict in both places after torch.load)
+    path = _with(old_checkpoint[0], tmp_path, offset_head)
+    with pytest.raises(ValueError, match=rf"^{path}: task.net.head.depth='offset' is a parked"):
+        upgrade_checkpoint(torch.load(path, weights_only=False), path)
+
+
+def test_parked_options_at_their_defaults_are_dropped_from_every_node(old_checkpoint):
+    ckpt = upgrade_checkpoint(torch.load(old_checkpoint[0], weights_only=False))
+    for hp in (ckpt["hyper_parameters"], ckpt[META_KEY]["task"]):
+        assert hp["net"]["head"] == {"kind": "warp", "hidden": 16}
+        assert "phenotype" not in hp and "contrastive" not in hp and set(hp["warp"]) == {"flow_weight", "vis_weight",
+                                                                                          "smooth_weight"}
+    assert "batch_poses" not in ckpt[META_KEY]["data"]["training"]
+    assert "forward_flow" not in ckpt[META_KEY]["data"]["render"]

@@ -185,8 +185,7 @@ def test_fine_tuning_starts_from_the_pretrained_net(tmp_path, tiny_net):
 
 
 def test_warp_terms_join_the_loss_with_their_weights(tiny_net):
-    """The warp head's terms: flow, visibility and smoothness always, the depth offset's total variation
-    only with offset_smooth_weight > 0, the depth's slope only with depth_grad_weight > 0, each times its weight."""
+    """The warp head's terms, flow, visibility and smoothness, each times its weight."""
     torch.manual_seed(0)
     net = tiny_net()
     kw = dict(net={**net, "head": {**net["head"], "kind": "warp"}}, phases={"use": False, "alpha": 1.0, "beta": 1.0},
@@ -198,28 +197,17 @@ def test_warp_terms_join_the_loss_with_their_weights(tiny_net):
     batch["vis"] = batch["canon_mask"].clone()
     batch["subject_idx"] = torch.tensor([0, 1])
     base = CanonicalTask(**kw)
-    torch.nn.init.normal_(base.net.head.out.weight, std=0.1)  # a non-zero flow and depth offset
+    torch.nn.init.normal_(base.net.head.out.weight, std=0.1)  # a non-zero flow and depth map
     base.log = base.log_dict = lambda *a, **k: None  # a direct training_step call logs nowhere
     out = base.net(batch["depth"], batch["mask"])
     terms = {k: v.detach() for k, v in warp_terms(out, batch).items()}
-    from lit3d.canonical.losses import canonical_loss, depth_gradient_loss, flow_smoothness
+    from lit3d.canonical.losses import canonical_loss
 
     image = canonical_loss(out.depth, out.mask, batch["canon_depth"], batch["canon_mask"], 1.0, 1.0, "mse",
                            out.mask_logits)["loss"]
     expected = image.detach() + 2.0 * terms["flow"] + 3.0 * terms["vis"] + 4.0 * terms["smooth"]
     assert float(base.training_step(batch, 0).detach()) == pytest.approx(float(expected), rel=1e-5)
-    optional = {"offset_smooth_weight": (5.0, flow_smoothness(out.depth_offset).detach()),
-                "depth_grad_weight": (6.0, depth_gradient_loss(out.depth, batch["canon_depth"],
-                                                               batch["canon_mask"]).detach())}
-    for name, (weight, term) in optional.items():
-        assert float(term) > 0, name
-        task = CanonicalTask(**{**kw, "warp": {**kw["warp"], name: weight}})
-        task.load_state_dict(base.state_dict())
-        task.log = task.log_dict = lambda *a, **k: None
-        got = float(task.training_step(batch, 0).detach())
-        assert got == pytest.approx(float(expected + weight * term), rel=1e-5), name
-        with pytest.raises(ValueError, match=rf"task.warp.{name}={weight:g} needs the warp head"):  # a term with no effect
-            CanonicalTask(**{**kw, "net": {**tiny_net(), "head": {"kind": "redraw"}}, "warp": {**kw["warp"], name: weight}})
+    assert all(float(terms[k]) > 0 for k in ("flow", "vis", "smooth"))
 
 
 def test_validation_retrieval_finds_each_subject_by_its_mask():

@@ -1,50 +1,43 @@
-"""The warp and splat heads' loss terms (lit3d.canonical.warp_loss): where the flow and the visibility are
-paid, the squared distance, the frame each head's targets live in."""
+"""The warp head's loss terms (lit3d.canonical.warp_loss): the flow is paid where the posed view shows the
+point, the visibility on the canonical foreground, and a batch without flow targets pays neither."""
+from types import SimpleNamespace
+
 import pytest
 import torch
 
+from lit3d.canonical.warp_loss import warp_terms
 
-def test_flow_and_visibility_are_paid_where_asked():
-    """``task.warp.flow_on``: ``visible`` pays the flow only where the posed view shows the point, ``foreground``
-    on every canonical foreground pixel; neither pays the background. ``task.warp.vis_on``: ``image`` pays the
-    visibility on the background too (target 0), ``foreground`` does not."""
-    from types import SimpleNamespace
 
-    from lit3d.canonical.warp_loss import warp_terms
-
+def _case():
     canon_mask = torch.zeros(1, 1, 8, 8)
     canon_mask[..., 2:6, 2:6] = 1
     vis = canon_mask.clone()
     vis[..., 2:4, 2:6] = 0  # the upper half of the body is hidden in the posed view
-    flow = torch.zeros(1, 2, 8, 8)
-    out = SimpleNamespace(flow=flow, vis_logits=torch.zeros(1, 1, 8, 8), mask=canon_mask, depth=canon_mask,
-                          depth_offset=None, flow_frame="canonical")
-    batch = {"flow": torch.zeros(1, 2, 8, 8), "vis": vis, "has_flow": torch.tensor([True]), "canon_mask": canon_mask,
-             "canon_depth": canon_mask, "mask": torch.ones_like(canon_mask)}
+    out = SimpleNamespace(flow=torch.zeros(1, 2, 8, 8), vis_logits=torch.zeros(1, 1, 8, 8), mask=canon_mask)
+    batch = {"flow": torch.zeros(1, 2, 8, 8), "vis": vis, "has_flow": torch.tensor([True]), "canon_mask": canon_mask}
+    return out, batch, canon_mask, vis
+
+
+def test_flow_is_paid_on_the_visible_pixels_only():
+    out, batch, _, _ = _case()
     batch["flow"][:, 0, 2:4, 2:6] = 4.0  # 4 px = 1 grid unit on 8 px: wrong only on the hidden pixels
-    batch["flow"][:, 0, 0, 0] = 4.0      # and on a background pixel, which neither pays
-    assert float(warp_terms(out, batch, "visible")["flow"]) == pytest.approx(0.0, abs=1e-3)
-    assert float(warp_terms(out, batch, "foreground")["flow"]) == pytest.approx(0.5, abs=1e-3)  # 8 of 16 pixels
-    with pytest.raises(ValueError, match="flow_on"):
-        warp_terms(out, batch, "everywhere")
-    # flow_power=2: the squared distance (1 grid unit on 8 of 16 pixels: 0.5 either way; 2 units: 2.0 against 1.0)
-    assert float(warp_terms(out, batch, "foreground", flow_power=2.0)["flow"]) == pytest.approx(0.5, abs=1e-3)
-    batch["flow"] = batch["flow"] * 2
-    assert float(warp_terms(out, batch, "foreground", flow_power=2.0)["flow"]) == pytest.approx(2.0, abs=1e-3)
-    assert float(warp_terms(out, batch, "foreground")["flow"]) == pytest.approx(1.0, abs=1e-3)
-    batch["flow"] = batch["flow"] / 2
-    # vis_on: "foreground" leaves the background's visibility free, "image" pays it with target 0
+    batch["flow"][:, 0, 0, 0] = 4.0      # and on a background pixel
+    assert float(warp_terms(out, batch)["flow"]) == pytest.approx(0.0, abs=1e-3)
+    batch["flow"][:, 0, 4:6, 2:6] = 4.0  # now wrong on the 8 visible pixels too: 1 grid unit each
+    assert float(warp_terms(out, batch)["flow"]) == pytest.approx(1.0, abs=1e-3)
+
+
+def test_visibility_is_paid_on_the_canonical_foreground_only():
+    out, batch, canon_mask, vis = _case()
     out.vis_logits = torch.where(canon_mask > 0.5, torch.where(vis > 0.5, 20.0, -20.0), 20.0)  # right on fg, 1 on bg
-    assert float(warp_terms(out, batch, vis_on="foreground")["vis"]) == pytest.approx(0.0, abs=1e-6)
-    assert float(warp_terms(out, batch, vis_on="image")["vis"]) == pytest.approx(20.0 * 48 / 64, rel=1e-4)
-    with pytest.raises(ValueError, match="vis_on"):
-        warp_terms(out, batch, vis_on="nowhere")
-    # the splat head's flow lives at the posed pixels: its targets are the forward ones, its foreground the posed mask
-    out.flow_frame = "posed"
-    batch.update(fflow=torch.zeros(1, 2, 8, 8), fvis=torch.zeros(1, 1, 8, 8), mask=canon_mask.clone())
-    batch["fflow"][:, 1, 2:6, 2:6] = -8.0  # 2 grid units upwards on the 16 posed body pixels
-    assert float(warp_terms(out, batch, "visible")["flow"]) == pytest.approx(0.0, abs=1e-3)  # none seen: nothing paid
-    assert float(warp_terms(out, batch, "foreground")["flow"]) == pytest.approx(2.0, abs=1e-3)
-    # a batch with backward targets only (data.render.forward_flow=false) cannot teach the splat head: said, not skipped
-    with pytest.raises(ValueError, match="data.render.forward_flow=true"):
-        warp_terms(out, {k: v for k, v in batch.items() if k not in ("fflow", "fvis")}, "foreground")
+    assert float(warp_terms(out, batch)["vis"]) == pytest.approx(0.0, abs=1e-6)
+    out.vis_logits = torch.full((1, 1, 8, 8), 20.0)  # the hidden 8 of 16 foreground pixels called seen
+    assert float(warp_terms(out, batch)["vis"]) == pytest.approx(20.0 * 8 / 16, rel=1e-4)
+
+
+def test_a_batch_without_flow_targets_pays_only_the_smoothness():
+    out, batch, _, _ = _case()
+    out.flow[:, 0, :, 4:] = 1.0  # a step in x: 1 on 8 of the 2 x 8 x 7 horizontal neighbour differences
+    terms = warp_terms(out, {"canon_mask": batch["canon_mask"]})
+    assert float(terms["flow"]) == 0.0 and float(terms["vis"]) == 0.0
+    assert float(terms["smooth"]) == pytest.approx(8 / 112, rel=1e-5)

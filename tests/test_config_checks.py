@@ -152,14 +152,3 @@ def test_summary_of_nets_that_cannot_run_at_their_size(compose_cfg, capsys, monk
     monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
     line = _summary_line(compose_cfg, capsys, ["experiment=canonical_tiny", "task.net.lfe.channels=[4,4,4,4,4,4]"])
     assert line.startswith("error: task config: the nets do not run at these sizes (") and "too small" in line, line
-
-
-def test_splat_head_without_the_forward_flow_is_one_config_error(compose_cfg):
-    """Valid values that do not go together: the splat head with a flow cache lacking the forward flow."""
-    from lit3d.runtime.config_checks import ConfigValueError, check_config_values
-
-    base = ["experiment=canonical_tiny", "task.net.head.kind=splat", "data.render.flow_targets=true"]
-    with pytest.raises(ConfigValueError, match=r"task.net.head.kind=splat .*expected data.render.forward_flow=true"):
-        check_config_values(compose_cfg(base))
-    check_config_values(compose_cfg([*base, "data.render.forward_flow=true"]))
-    check_config_values(compose_cfg(["experiment=canonical_tiny", "task.net.head.kind=warp", "data.render.flow_targets=true"]))

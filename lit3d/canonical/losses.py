@@ -48,44 +48,27 @@ def _per_item(weight: torch.Tensor, has_flow: torch.Tensor) -> torch.Tensor:
     return weight.float() * has_flow.float().view(-1, 1, 1, 1).to(weight.device)
 
 
-def flow_loss(flow: torch.Tensor, target: torch.Tensor, vis: torch.Tensor, has_flow: torch.Tensor,
-              power: float = 1.0) -> torch.Tensor:
+def flow_loss(flow: torch.Tensor, target: torch.Tensor, vis: torch.Tensor, has_flow: torch.Tensor) -> torch.Tensor:
     """Mean end-point distance (normalised grid units, the net's) between the predicted flow
     ``(B, 2, H, W)`` and the target ``(B, 2, H, W)`` (same units) over the pixels ``vis``
-    ``(B, 1, H, W)`` of the items with targets, each distance to the ``power`` (2: the squared distance,
-    which pays a pixel in proportion to its error); 0 when there are none. Scalar, fp32."""
+    ``(B, 1, H, W)`` of the items with targets; 0 when there are none. Scalar, fp32."""
     w = _per_item(vis, has_flow)
     epe = torch.sqrt(((flow.float() - target.float()) ** 2).sum(1, keepdim=True) + 1e-8)
-    return (w * epe ** power).sum() / w.sum().clamp_min(1.0)
+    return (w * epe).sum() / w.sum().clamp_min(1.0)
 
 
 def visibility_loss(vis_logits: torch.Tensor, vis: torch.Tensor, where: torch.Tensor,
                     has_flow: torch.Tensor) -> torch.Tensor:
     """Binary cross-entropy of the visibility logits ``(B, 1, H, W)`` against ``vis`` on the pixels
-    ``where`` ``(B, 1, H, W)`` (the canonical foreground, or all) of the items with targets; 0 when there
+    ``where`` ``(B, 1, H, W)`` (the canonical foreground) of the items with targets; 0 when there
     are none. Scalar, fp32."""
     w = _per_item(where, has_flow)
     bce = torch.nn.functional.binary_cross_entropy_with_logits(vis_logits.float(), vis.float(), reduction="none")
     return (w * bce).sum() / w.sum().clamp_min(1.0)
 
 
-def depth_gradient_loss(depth_hat: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-    """Mean absolute difference between the predicted and the true depth's finite differences (along x
-    and y), over the neighbour pairs inside the true mask ``(B, 1, H, W)``: the surface's slope, which
-    the retrieval descriptor reads and a per-pixel MSE barely weighs. A constant depth offset costs
-    nothing. Scalar, fp32; 0 when no pair is inside the mask."""
-    d, t, m = depth_hat.float(), depth.float(), (mask.float() > 0.5).float()
-    total = d.new_zeros(())
-    for dim in (-2, -1):
-        n = d.shape[dim] - 1
-        pair = m.narrow(dim, 1, n) * m.narrow(dim, 0, n)
-        diff = (d.narrow(dim, 1, n) - d.narrow(dim, 0, n)) - (t.narrow(dim, 1, n) - t.narrow(dim, 0, n))
-        total = total + (pair * diff.abs()).sum() / pair.sum().clamp_min(1.0)
-    return total
-
-
 def flow_smoothness(flow: torch.Tensor) -> torch.Tensor:
     """Mean absolute difference of neighbouring flow vectors ``(B, 2, H, W)`` (first-order total variation;
-    any ``(B, C, H, W)`` map, e.g. the depth offset ``(B, 1, H, W)``). Scalar."""
+    any ``(B, C, H, W)`` map). Scalar."""
     f = flow.float()
     return (f[..., 1:, :] - f[..., :-1, :]).abs().mean() + (f[..., :, 1:] - f[..., :, :-1]).abs().mean()

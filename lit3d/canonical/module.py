@@ -16,19 +16,16 @@ The settings are config nodes (:mod:`lit3d.canonical.settings`): ``net`` (the ne
 :func:`~lit3d.canonical.factory.build_canonical_net`), ``optimizer``, ``phases`` and the auxiliary objectives,
 each off at weight 0:
 
-- ``phenotype`` adds a linear regression of the body's phenotypes (``phenotype.dims``; Anny's 6,
-  ``data.phenotype_targets``) from the MSFE latent and its mean squared error, times ``phenotype.weight``: a
-  body-shape code that, unlike a closed-set subject classifier, means the same for people never seen
-  (``val/phenotype_mae`` on the validation subjects);
-- ``contrastive`` adds the supervised contrastive loss across the poses of one subject in the batch
-  (:mod:`lit3d.canonical.contrastive`; ``data.training.batch_poses``);
 - ``identity`` adds a subject classifier (one linear layer, ``identity.classes`` outputs) on the MSFE's fused
   latent and its cross-entropy, times ``identity.weight``: the latent names the subject too;
-- ``warp``: with ``net.head="warp"`` (:mod:`lit3d.canonical.warp`; it moves the posed pixels instead of
-  redrawing them; ``"splat"``, :mod:`lit3d.canonical.splat`: pushes them by a forward flow) its terms
-  (:data:`WARP_TERMS`, :mod:`lit3d.canonical.warp_loss`) times their ``warp.<term>_weight`` join the loss, the
-  flow and visibility where the batch has flow targets (``data.render.flow_targets``), paid where
-  ``warp.flow_on`` and ``warp.vis_on`` say.
+- ``warp``: with ``net.head.kind="warp"`` (:mod:`lit3d.canonical.warp`; it moves the posed pixels instead of
+  redrawing them) its terms (:data:`WARP_TERMS`, :mod:`lit3d.canonical.warp_loss`) times their
+  ``warp.<term>_weight`` join the loss, the flow and visibility where the batch has flow targets
+  (``data.render.flow_targets``).
+
+Options measured and not adopted (the splat head, the warp head's variants, the phenotype and contrastive
+objectives, ...) are at the git tag ``parked-canonical-options`` (studies/canonical/LOG.md); checkpoints that
+used one are refused by :func:`lit3d.canonical.checkpoint_upgrade.upgrade_checkpoint`.
 
 ``arch="recall"`` is the closed-set recall row (:mod:`lit3d.canonical.recall`): a subject classifier
 (``identity.classes`` subjects) whose output is the recalled training canonical image; its templates are
@@ -37,7 +34,7 @@ filled from the training data at fit start and saved in the checkpoint; its cros
 Checkpoints of the flat layout before these nodes load through
 :func:`lit3d.canonical.checkpoint_upgrade.upgrade_checkpoint`.
 
-Logged: ``train/loss|depth_loss|mask_loss|alpha|beta`` (``identity_loss`` with the classifier, ``contrastive_loss``;
+Logged: ``train/loss|depth_loss|mask_loss|alpha|beta`` (``identity_loss`` with the classifier;
 ``flow_loss|vis_loss|smooth_loss`` and ``val/flow_epe`` in pixels with the warp head); ``val/`` and ``test/`` ``depth_mse``
 (masked depth error, :class:`lit3d.metrics.depth.MaskedDepthMSE`), ``iou`` (mask IoU,
 :class:`lit3d.metrics.depth.MaskIoU`), and the same with suffix ``_input`` for the posed-input
@@ -59,16 +56,13 @@ import torch
 
 from lit3d.callbacks.nonfinite import guard_step, validate_mode
 from lit3d.canonical.checkpoint_upgrade import EVALUATION_LEGACY, upgrade_checkpoint
-from lit3d.canonical.contrastive import ContrastiveEmbedder, supervised_contrastive
 from lit3d.canonical.figures import validation_panel
 from lit3d.canonical.loss_phases import THESIS_FRACTIONS, LossPhases
 from lit3d.canonical.factory import build_canonical_net, summarize
 from lit3d.canonical.recall import RecallTemplates
-from lit3d.canonical.settings import (ContrastiveObjective, IdentityObjective, OptimizerSettings, PanelSettings,
-                                      PhaseSettings, PhenotypeObjective, WarpObjective, parse)
+from lit3d.canonical.settings import IdentityObjective, OptimizerSettings, PanelSettings, PhaseSettings, WarpObjective, parse
 from lit3d.canonical.losses import canonical_loss, flow_loss
-from lit3d.canonical.warp import require_warp_head
-from lit3d.canonical.warp_loss import check_choices, flow_targets, warp_terms
+from lit3d.canonical.warp_loss import flow_targets, warp_terms
 from lit3d.metrics.depth import MaskedDepthMSE, MaskIoU
 from lit3d.metrics.gathered import GatheredTensors, compute_if_updated
 from lit3d.metrics.retrieval import mask_retrieval
@@ -76,8 +70,8 @@ from lit3d.utils.checkpoints import load_checkpoint
 from lit3d.utils.log_images import log_image, media_loggers
 
 METRICS = ("depth_mse", "iou", "depth_mse_input", "iou_input")
-# the warp head's loss terms (flow_weight, vis_weight, smooth_weight, offset_smooth_weight, depth_grad_weight)
-WARP_TERMS = ("flow", "vis", "smooth", "offset_smooth", "depth_grad")
+# the warp head's loss terms (flow_weight, vis_weight, smooth_weight)
+WARP_TERMS = ("flow", "vis", "smooth")
 # per test item, gathered for the evaluator: prediction (depth, mask probability), posed input,
 # true canonical form ((N, 1, S, S) float32), subject index, pose and view ((N,) int64)
 # "index": the item's place in the test set, so the evaluator sees the items in one order under DDP too
@@ -113,11 +107,11 @@ class CanonicalTask(pl.LightningModule):
 
     def __init__(self, net: dict | None = None, arch: str = "canonical", optimizer: dict | None = None,
                  phases: dict | None = None, mask_loss: str = "mse", mask_threshold: float = 0.5,
-                 warp: dict | None = None, identity: dict | None = None, phenotype: dict | None = None,
-                 contrastive: dict | None = None, panels: dict | None = None, on_nonfinite: str = "raise",
+                 warp: dict | None = None, identity: dict | None = None, panels: dict | None = None,
+                 on_nonfinite: str = "raise",
                  init_weights: str | None = None):
         """``net``: the net's config (its parts ``lfe``, ``msfe``, ``reconstruction``, ``head``: :func:`build_canonical_net`);
-        ``optimizer``, ``phases``, ``warp``, ``identity``, ``phenotype``, ``contrastive``, ``panels``: the nodes of
+        ``optimizer``, ``phases``, ``warp``, ``identity``, ``panels``: the nodes of
         :mod:`lit3d.canonical.settings` (None: every default, the objectives off)."""
         super().__init__()
         self.save_hyperparameters()
@@ -126,10 +120,7 @@ class CanonicalTask(pl.LightningModule):
         self.phases = parse(PhaseSettings, phases, "phases")
         self.warp = parse(WarpObjective, warp, "warp")
         self.identity = parse(IdentityObjective, identity, "identity")
-        self.phenotype = parse(PhenotypeObjective, phenotype, "phenotype")
-        self.contrastive = parse(ContrastiveObjective, contrastive, "contrastive")
         self.panels = parse(PanelSettings, panels, "panels")
-        check_choices(self.warp.flow_on, self.warp.vis_on)
         cfg = dict(net or {})
         cfg["kind"] = arch
         if arch == "recall":  # closed-set recall row: the net is the subject classifier (lit3d.canonical.recall)
@@ -137,8 +128,6 @@ class CanonicalTask(pl.LightningModule):
         msfe = dict(cfg.get("msfe") or {})
         use_msfe = bool(msfe.get("use", True))
         self.net = build_canonical_net(cfg)
-        require_warp_head(self.net, offset_smooth_weight=self.warp.offset_smooth_weight,
-                          depth_grad_weight=self.warp.depth_grad_weight)
         latent = int(msfe.get("fuser_out", 500))
         self.identity_head = None  # subject classifier on the MSFE latent (identity.weight > 0)
         ident = self.identity
@@ -148,17 +137,6 @@ class CanonicalTask(pl.LightningModule):
                                  f">= 2 (the number of training subjects); got arch={arch}, use_msfe={use_msfe}, "
                                  f"classes={ident.classes}")
             self.identity_head = torch.nn.Linear(latent, int(ident.classes))
-        self.phenotype_head = None  # body-shape regression on the MSFE latent (phenotype.weight > 0)
-        pheno = self.phenotype
-        if pheno.weight > 0:
-            if arch != "canonical" or not use_msfe or pheno.dims < 1:
-                raise ValueError("task.phenotype.weight > 0 needs arch=canonical with the MSFE and task.phenotype.dims "
-                                 f">= 1 (Anny: 6); got arch={arch}, use_msfe={use_msfe}, dims={pheno.dims}")
-            self.phenotype_head = torch.nn.Linear(latent, int(pheno.dims))
-        self.contrastive_head = None  # poses of one subject pull together (contrastive.weight > 0)
-        con = self.contrastive
-        if con.weight > 0:
-            self.contrastive_head = ContrastiveEmbedder(con.embed, latent, int(con.dim), con.channels)
         # LossPhases sets them each epoch, if on
         self.loss_alpha, self.loss_beta = float(self.phases.alpha), float(self.phases.beta)
         self.val_metrics = self._image_metrics(mask_threshold)
@@ -182,7 +160,7 @@ class CanonicalTask(pl.LightningModule):
         """Start from the net of another canonical checkpoint ``path`` (pretraining, e.g. on Anny
         bodies): its ``net.*`` weights, every one present with the same shape, else one ValueError
         naming the file and the first mismatch. The optimiser starts afresh."""
-        state = upgrade_checkpoint(load_checkpoint(path)).get("state_dict", {})
+        state = upgrade_checkpoint(load_checkpoint(path), str(path)).get("state_dict", {})
         net = {k[len("net."):]: v for k, v in state.items() if k.startswith("net.")}
         own = self.net.state_dict()
         for k, v in own.items():
@@ -227,26 +205,16 @@ class CanonicalTask(pl.LightningModule):
         if self.identity.weight > 0:  # the MSFE's identity head, or the recall net's own logits
             terms["identity"] = self._identity_loss(out.latent, batch["subject_idx"])
             terms["loss"] = terms["loss"] + self.identity.weight * terms["identity"]
-        if self.phenotype_head is not None:
-            terms["phenotype"] = self._phenotype_error(out.latent, batch).pow(2).mean()
-            terms["loss"] = terms["loss"] + self.phenotype.weight * terms["phenotype"]
-        if self.contrastive_head is not None:
-            subjects = torch.as_tensor(batch["subject_idx"])  # (B,); the loss moves it to the embeddings' device
-            terms["contrastive"] = supervised_contrastive(self.contrastive_head(out), subjects,
-                                                          self.contrastive.temperature)
-            terms["loss"] = terms["loss"] + self.contrastive.weight * terms["contrastive"]
         if out.flow is not None:  # the warp head: each of its terms times its weight
-            w = self.warp
-            terms.update(warp := warp_terms(out, batch, w.flow_on, w.offset_smooth_weight > 0, w.depth_grad_weight > 0,
-                                            w.vis_on, w.flow_power))
-            terms["loss"] = terms["loss"] + sum(getattr(w, f"{k}_weight") * v for k, v in warp.items())
+            terms.update(warp := warp_terms(out, batch))
+            terms["loss"] = terms["loss"] + sum(getattr(self.warp, f"{k}_weight") * v for k, v in warp.items())
         where = f"step {self.global_step} (epoch {self.current_epoch}, batch {batch_idx})"
         if not guard_step(self, terms, where, self.hparams.on_nonfinite):
             return None  # no backward, no optimizer step
         bs = batch["depth"].shape[0]
         self.log_dict({"train/loss": terms["loss"], "train/depth_loss": losses["depth"],
                        "train/mask_loss": losses["mask"]}, on_step=True, on_epoch=True, batch_size=bs)
-        for k in ("identity", "phenotype", "contrastive", *WARP_TERMS):
+        for k in ("identity", *WARP_TERMS):
             if k in terms:
                 self.log(f"train/{k}_loss", terms[k], on_step=False, on_epoch=True, batch_size=bs)
         if not self.phases.use:
@@ -265,18 +233,6 @@ class CanonicalTask(pl.LightningModule):
                              "task.identity.classes to the number of subjects of the data")
         logits = latent.float() if self.identity_head is None else self.identity_head(latent.float())
         return torch.nn.functional.cross_entropy(logits, target)
-
-    def _phenotype_error(self, latent: torch.Tensor, batch: dict) -> torch.Tensor:
-        """Predicted minus true phenotypes ``(B, phenotype.dims)`` (the head on the MSFE latent ``(B, fuser_out)``;
-        targets ``batch["phenotype"]`` in [0, 1]); ValueError when the batch has none or another width."""
-        if "phenotype" not in batch:
-            raise ValueError("task.phenotype.weight > 0 needs phenotype targets in the batch: data.phenotype_targets=true "
-                             "(data.source.kind=anny)")
-        target = batch["phenotype"].float()
-        if target.shape[-1] != self.phenotype_head.out_features:
-            raise ValueError(f"the data has {target.shape[-1]} phenotypes, task.phenotype.dims="
-                             f"{self.phenotype_head.out_features}")
-        return self.phenotype_head(latent.float()) - target
 
     # ------------------------------------------------------------------ evaluation
     @staticmethod
@@ -300,9 +256,6 @@ class CanonicalTask(pl.LightningModule):
             target, vis, has = flow_targets(out, batch)
             epe = flow_loss(out.flow, target, vis, has) * batch["depth"].shape[-1] / 2
             self.log("val/flow_epe", epe, on_epoch=True, batch_size=bs)
-        if self.phenotype_head is not None and "phenotype" in batch:  # new people's body shape, mean |error|
-            self.log("val/phenotype_mae", self._phenotype_error(out.latent, batch).abs().mean(), on_epoch=True,
-                     batch_size=bs)
         every = self.panels.every_n_epochs
         if batch_idx == 0 and every and self.current_epoch % every == 0:
             self._log_panels(batch, out)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-HEADS = ("redraw", "warp", "splat")
+HEADS = ("redraw", "warp")
 RECONSTRUCTIONS = ("downup", "unet")
 
 
@@ -63,23 +63,15 @@ class ReconstructionSettings:
 
 @dataclass(frozen=True)
 class HeadSettings:
-    """``kind``: ``redraw`` (a 1x1 conv draws depth and mask), ``warp`` (moves the posed pixels by a backward flow,
-    :class:`~lit3d.canonical.warp.WarpHead`) or ``splat`` (pushes them by a forward flow); the moving heads:
-    ``hidden`` channels, ``depth`` model (``offset`` or ``affine`` with ``affine_cell`` px cells),
-    ``normalise_depth``, ``parts`` rigid parts, ``refine_steps``, an attention flow on an ``attend_grid`` raster."""
+    """``kind``: ``redraw`` (a 1x1 conv draws depth and mask) or ``warp`` (moves the posed pixels by a backward
+    flow, :class:`~lit3d.canonical.warp.WarpHead`, of ``hidden`` channels)."""
 
     kind: str = "redraw"
     hidden: int | None = None
-    normalise_depth: bool = False
-    depth: str = "offset"
-    affine_cell: int = 8
-    parts: int = 0
-    refine_steps: int = 1
-    attend_grid: int = 0
 
     def __post_init__(self):
         if self.kind not in HEADS:
             raise ValueError(f"unknown canonical net head '{self.kind}' ({', '.join(HEADS)})")
-        if self.kind in ("warp", "splat") and self.hidden is None:
+        if self.kind == "warp" and self.hidden is None:
             raise ValueError(f"the {self.kind} head needs its width: set task.net.head.hidden")
 

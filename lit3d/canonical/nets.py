@@ -26,7 +26,6 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from lit3d.canonical.outputs import CanonicalOutput, OutputHead
-from lit3d.canonical.splat import SplatHead
 from lit3d.canonical.warp import WarpHead
 from lit3d.canonical.net_settings import HeadSettings, LFESettings, MSFESettings, ReconstructionSettings
 from lit3d.canonical.settings import parse
@@ -165,11 +164,7 @@ class CanonicalNet(nn.Module):
     ``msfe.use=False`` drops the MSFE. Reconstruction input = [depth, mask, Y_LFE, Y_MSFE].
     ``head.kind``: ``redraw`` (the thesis: a 1x1 conv draws depth and mask) or ``warp``
     (:class:`~lit3d.canonical.warp.WarpHead`: moves the posed pixels, ``head.hidden`` channels; its
-    coarse flow comes from the MSFE's fused latent; ``head.parts`` > 0: its flow starts from that many
-    rigid parts, :class:`~lit3d.canonical.warp.PartFlow`; ``head.refine_steps``: refinement steps of its
-    flow; ``head.attend_grid`` > 0: a coarse flow found by attention over the posed cells,
-    :class:`~lit3d.canonical.warp.AttendFlow`; ``head.depth``/``head.affine_cell``: how the moved depth
-    becomes the canonical depth) or ``splat`` (:class:`~lit3d.canonical.splat.SplatHead`).
+    coarse flow comes from the MSFE's fused latent).
     """
 
     def __init__(self, image_size: int, lfe: dict | LFESettings, msfe: dict | MSFESettings,
@@ -193,11 +188,7 @@ class CanonicalNet(nn.Module):
         # the input is given to the head again (skip link)
         latent = msfe.fuser_out if msfe.use else 0
         if head.kind == "warp":
-            self.head = WarpHead(hidden + 2, head.hidden, latent, normalise_depth=head.normalise_depth,
-                                 depth_model=head.depth, affine_cell=head.affine_cell, parts=head.parts,
-                                 refine_steps=head.refine_steps, attend_grid=head.attend_grid)
-        elif head.kind == "splat":
-            self.head = SplatHead(hidden + 2, head.hidden, latent, depth_model=head.depth, affine_cell=head.affine_cell)
+            self.head = WarpHead(hidden + 2, head.hidden, latent)
         else:
             self.head = OutputHead(hidden + 2)
 

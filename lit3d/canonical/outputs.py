@@ -3,8 +3,7 @@
 Tensors (B = batch, H x W = image size): depth ``(B, 1, H, W)`` in [0, 1], mask probability and
 mask logits ``(B, 1, H, W)``; the warp head (:mod:`lit3d.canonical.warp`) also returns its flow
 ``(B, 2, H, W)`` (normalised grid units: 2 = the image width) and visibility logits ``(B, 1, H, W)`` at
-the canonical pixels, the splat head (:mod:`lit3d.canonical.splat`) its forward flow and seen logits at
-the posed pixels.
+the canonical pixels.
 """
 from __future__ import annotations
 
@@ -26,8 +25,6 @@ class CanonicalOutput:
     latent: torch.Tensor | None = None
     flow: torch.Tensor | None = None
     vis_logits: torch.Tensor | None = None
-    depth_offset: torch.Tensor | None = None  # the warp head's (B,1,H,W) depth change of the moved pixels
-    flow_frame: str = "canonical"  # where flow and vis_logits live: canonical pixels (warp head) | posed (splat head)
 
 
 class OutputHead(nn.Module):

@@ -2,10 +2,8 @@
 
     task.optimizer    Adam and its rate's schedule (:class:`OptimizerSettings`)
     task.phases       the depth and mask weights alpha/beta over the run (:class:`PhaseSettings`)
-    task.warp         the warp (or splat) head's terms (:class:`WarpObjective`)
+    task.warp         the warp head's terms (:class:`WarpObjective`)
     task.identity     a subject classifier on the MSFE latent (:class:`IdentityObjective`)
-    task.phenotype    a body-shape regression on the MSFE latent (:class:`PhenotypeObjective`)
-    task.contrastive  poses of one subject pulled together (:class:`ContrastiveObjective`)
     task.panels       validation image panels (:class:`PanelSettings`)
 
 An objective with ``weight`` 0 is off. :func:`parse` turns a node (a mapping, None for the defaults, or the
@@ -60,19 +58,13 @@ class PhaseSettings:
 
 @dataclass(frozen=True)
 class WarpObjective:
-    """The warp (or splat) head's terms (:mod:`lit3d.canonical.warp_loss`), each ``<term>_weight`` times its
-    loss: the flow's end-point distance to the power ``flow_power`` where ``flow_on`` says, the
-    visibility where ``vis_on`` says, the flow's total variation (``smooth``), the depth offset's
-    (``offset_smooth``) and the depth slope's error (``depth_grad``)."""
+    """The warp head's terms (:mod:`lit3d.canonical.warp_loss`), each ``<term>_weight`` times its loss: the
+    flow's end-point distance on the visible pixels, the visibility on the canonical foreground and the flow's
+    total variation (``smooth``)."""
 
     flow_weight: float = 0.0
-    flow_on: str = "visible"
-    flow_power: float = 1.0
     vis_weight: float = 0.0
-    vis_on: str = "foreground"
     smooth_weight: float = 0.0
-    offset_smooth_weight: float = 0.0
-    depth_grad_weight: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -82,32 +74,6 @@ class IdentityObjective:
 
     weight: float = 0.0
     classes: int = 0
-
-
-@dataclass(frozen=True)
-class PhenotypeObjective:
-    """A linear regression of the body's ``dims`` phenotypes (Anny's 6) from the MSFE latent, its mean squared
-    error x ``weight`` (targets: ``data.phenotype_targets``)."""
-
-    weight: float = 0.0
-    dims: int = 0
-
-
-@dataclass(frozen=True)
-class ContrastiveObjective:
-    """The supervised contrastive loss across the poses of one subject in a batch
-    (:mod:`lit3d.canonical.contrastive`; ``data.training.batch_poses``) x ``weight``: embeddings of what
-    ``embed`` names (``latent`` or ``output``) of width ``dim`` (``output``: a CNN of ``channels``), at
-    ``temperature``. (Not ``on``: YAML reads that key as true.)"""
-
-    weight: float = 0.0
-    embed: str = "latent"
-    temperature: float = 0.1
-    dim: int = 0
-    channels: tuple[int, ...] = ()
-
-    def __post_init__(self):
-        object.__setattr__(self, "channels", _tuple(self.channels))
 
 
 @dataclass(frozen=True)

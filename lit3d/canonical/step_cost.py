@@ -2,10 +2,10 @@
 
 The step of :meth:`lit3d.canonical.module.CanonicalTask.training_step` (automatic optimisation): the
 net's forward on the posed depth + mask, the depth/mask loss (:func:`lit3d.canonical.losses.canonical_loss`)
-and, with the warp or splat head, its terms (:func:`lit3d.canonical.warp_loss.warp_terms`, on a batch without
+and, with the warp head, its terms (:func:`lit3d.canonical.warp_loss.warp_terms`, on a batch without
 flow targets, as ``benchmarks/bench_canonical.py`` times it), then the backward, on meta tensors under
-:class:`lit3d.utils.step_cost.CostCounter` and :class:`lit3d.utils.step_cost.SavedBytes`. The identity,
-phenotype and contrastive heads (off in the shipped configs) are refused rather than left out silently.
+:class:`lit3d.utils.step_cost.CostCounter` and :class:`lit3d.utils.step_cost.SavedBytes`. The identity
+head (off in the shipped configs) is refused rather than left out silently.
 The optimiser update and element-wise work are not counted.
 """
 from __future__ import annotations
@@ -33,10 +33,8 @@ def _measure(task, size: int, batch: int) -> dict:
         loss = canonical_loss(out.depth, out.mask, b["canon_depth"], b["canon_mask"], task.loss_alpha, task.loss_beta,
                               hp.mask_loss, out.mask_logits)["loss"]
         if out.flow is not None:
-            w = task.warp
-            warp = warp_terms(out, b, w.flow_on, w.offset_smooth_weight > 0, w.depth_grad_weight > 0, w.vis_on,
-                              w.flow_power)
-            loss = loss + sum(getattr(w, f"{k}_weight") * v for k, v in warp.items())
+            warp = warp_terms(out, b)
+            loss = loss + sum(getattr(task.warp, f"{k}_weight") * v for k, v in warp.items())
         peak = saved.peak
         loss.backward()
     task.zero_grad(set_to_none=True)
@@ -49,8 +47,7 @@ def canonical_step_cost(task, size: int) -> dict:
     (FLOPs and saved bytes: the slope between batch 1 and 2; ops: kernel-like aten ops of one step)."""
     if any(p.device.type != "meta" for p in task.parameters()):
         raise ValueError("step cost: build the task on the meta device (with torch.device('meta'): ...)")
-    extra = [f"{k}.weight" for k in ("identity", "phenotype", "contrastive") if getattr(task, k).weight > 0]
-    if extra:
-        raise ValueError(f"canonical step cost counts the net, depth/mask and warp terms only; {extra} > 0")
+    if task.identity.weight > 0:
+        raise ValueError("canonical step cost counts the net, depth/mask and warp terms only; identity.weight > 0")
     one, two = _measure(task, size, 1), _measure(task, size, 2)
     return {"flops": two["flops"] - one["flops"], "ops": one["ops"], "saved_bytes": two["saved"] - one["saved"]}

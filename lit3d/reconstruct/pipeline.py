@@ -71,7 +71,10 @@ def load_task(path: str | Path, device: str, want: str):
         from lit3d.canonical.checkpoint_upgrade import upgrade_checkpoint
         from lit3d.canonical.module import CanonicalTask as cls
 
-        ckpt = upgrade_checkpoint(ckpt)  # one written before the canonical settings were nodes, as today's
+        try:  # one written before the canonical settings were nodes, as today's
+            ckpt = upgrade_checkpoint(ckpt, str(path))
+        except ValueError as err:  # a parked option it used: the message names the file, the key and the git tag
+            raise InputError(str(err)) from err
     task = cls(**ckpt["hyper_parameters"])
     task.on_load_checkpoint(ckpt)
     load_state(task, ckpt)  # a zoo file may be slim: fp16, training-only parts left out (lit3d.zoo.slim)

@@ -22,7 +22,10 @@ def read_checkpoint(ckpt_path: str | Path) -> tuple[dict, dict]:
     if (meta.get("task") or {}).get("name") == "canonical":  # maybe written before its settings were nodes
         from lit3d.canonical.checkpoint_upgrade import upgrade_checkpoint  # (imports its DataModule: only here)
 
-        ckpt = upgrade_checkpoint(ckpt)
+        try:
+            ckpt = upgrade_checkpoint(ckpt, str(ckpt_path))
+        except ValueError as err:  # a parked option it used: the message names the file, the key and the git tag
+            raise UserError(str(err)) from err
     return ckpt, ckpt[META_KEY]
 
 

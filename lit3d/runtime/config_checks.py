@@ -119,7 +119,6 @@ RULES: tuple[Rule, ...] = (
     Rule("task.phases.use",                    "bool"),
     Rule("task.*.weight",                      "number",  ">= 0"),
     Rule("task.warp.*_weight",                 "number",  ">= 0"),
-    Rule("task.warp.flow_power",               "number",  "> 0"),
     Rule("task.critic_steps",                  "int",     ">= 1"),
     Rule("task.gp_every",                      "int",     ">= 1"),
     Rule("task.adversarial_start_epoch",       "int",     ">= 0"),
@@ -129,7 +128,6 @@ RULES: tuple[Rule, ...] = (
     Rule("task.mesh_every_n_epochs",           "int",     ">= 0"),
     Rule("task.identity.classes",              "int",     ">= 0"),
     Rule("task.panels.n",                      "int",     ">= 0"),
-    Rule("task.phenotype.dims",                "int",     ">= 0"),
     Rule("task.seed",                          "int",     ">= 0"),
     Rule("task.adversarial",                   "bool"),
     Rule("task.critic_concat",                 "bool"),
@@ -155,15 +153,10 @@ RULES: tuple[Rule, ...] = (
     Rule("task.net.image_size",                "int?",    ">= 8"),  # null: no data in the config (lit3d-eval task=NAME)
     Rule("task.net.dropout",                   "number",  "[0, 1)"),
     Rule("task.net.batch_norm",                "bool"),
-    Rule("task.net.head.normalise_depth",      "bool"),
     Rule("task.net.*_out",                     "int",     ">= 1"),
     Rule("task.net.msfe.fuser_hidden",         "int",     ">= 1"),
     Rule("task.net.msfe.grid",                 "int",     ">= 1"),
     Rule("task.net.head.hidden",               "int",     ">= 1"),
-    Rule("task.net.head.affine_cell",          "int",     ">= 1"),
-    Rule("task.net.head.parts",                "int",     ">= 0"),
-    Rule("task.net.head.refine_steps",         "int",     ">= 1"),
-    Rule("task.net.head.attend_grid",          "int",     ">= 0"),
     Rule("task.net.hidden",                    "int",     ">= 1"),
     Rule("task.net.blocks",                    "int",     ">= 1"),
     # the body task's data and net (datamodules.body, lit3d.body)
@@ -316,23 +309,12 @@ def config_problems(cfg: DictConfig, rules: tuple[Rule, ...] = RULES) -> list[st
     return found
 
 
-def combination_problems(cfg: DictConfig) -> list[str]:
-    """Values that are each valid but do not go together: the splat head's flow terms read the forward flow,
-    which a flow cache holds only with ``data.render.forward_flow=true``."""
-    head = OmegaConf.select(cfg, "task.net.head.kind", default=None)
-    flows, forward = (OmegaConf.select(cfg, f"data.render.{k}", default=None) for k in ("flow_targets", "forward_flow"))
-    if head == "splat" and flows is True and forward is not True:
-        return ["task.net.head.kind=splat with data.render.flow_targets=true: "
-                "expected data.render.forward_flow=true (its flow targets)"]
-    return []
-
-
 def check_config_values(cfg: DictConfig | None) -> None:
     """Raise :class:`ConfigValueError` (one line, the first problem) when a value of ``cfg`` has the
     wrong type or is out of range (:data:`RULES`); ``None`` (nothing composed) passes."""
     if cfg is None:
         return
-    found = config_problems(cfg) + combination_problems(cfg)
+    found = config_problems(cfg)
     if found:
         more = f" (and {len(found) - 1} more)" if len(found) > 1 else ""
         raise ConfigValueError(found[0] + more)

@@ -60,7 +60,7 @@ def predict(net, batch: dict) -> dict[str, torch.Tensor]:
     p = net.head.parts(*net.features(batch["depth"], batch["mask"]))
     p["vis"] = torch.sigmoid(p["vis_logits"])
     p["mask"] = warp_compose(batch["depth"], batch["mask"], p["flow"], p["coeffs"], p["vis"], p["fill_depth"],
-                             p["fill_mask"], net.head.normalise_depth)[1]
+                             p["fill_mask"])[1]
     return p
 
 
@@ -80,7 +80,7 @@ def breakdown(net, batch: dict, pred: dict | None = None) -> dict[str, torch.Ten
     fills = {"pred": (p["fill_depth"], p["fill_mask"]), "true": (batch["canon_depth"].float(), target)}
     out = {ROWS[0][0]: per_sample_mask_iou(p["mask"], target)}  # the model: the output itself
     for name, f, v, fill in ROWS[1:]:
-        _, m = warp_compose(depth, mask, flows[f], p["coeffs"], vis[v], *fills[fill], net.head.normalise_depth)
+        _, m = warp_compose(depth, mask, flows[f], p["coeffs"], vis[v], *fills[fill])
         out[name] = per_sample_mask_iou(m, target)
     out["posed input"] = per_sample_mask_iou(mask, target)
     model = p["mask"]
@@ -151,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     try:
         check_targets([p for p in (args.out, args.picture) if p], protected=[args.ckpt])
-        ckpt = upgrade_checkpoint(load_checkpoint(args.ckpt, ValueError))
+        ckpt = upgrade_checkpoint(load_checkpoint(args.ckpt, ValueError), str(args.ckpt))
         data = dict(ckpt.get(META_KEY, {}).get("data") or {})
         data.pop("_target_", None)
         if not (data.get("render") or {}).get("flow_targets"):
