@@ -10,8 +10,8 @@ def read_checkpoint(ckpt_path: str | Path) -> tuple[dict, dict]:
     """``(checkpoint dict, its lit3d metadata)`` (task, data config, W&B id).
 
     Loads with ``weights_only=True`` (see :func:`lit3d.utils.checkpoints.load_checkpoint`): a
-    checkpoint that pickles arbitrary objects is refused, never executed. A canonical checkpoint comes in
-    today's config layout (:func:`lit3d.canonical.checkpoint_upgrade.upgrade_checkpoint`).
+    checkpoint that pickles arbitrary objects is refused, never executed. A checkpoint written before its
+    task's or data's settings were config nodes comes in today's layout (:func:`upgrade_checkpoint`).
     """
     from lit3d.utils.checkpoints import META_KEY, load_checkpoint
 
@@ -19,11 +19,27 @@ def read_checkpoint(ckpt_path: str | Path) -> tuple[dict, dict]:
     meta = ckpt.get(META_KEY) if isinstance(ckpt, dict) else None
     if not isinstance(meta, dict):
         raise UserError(f"{Path(ckpt_path)}: not a lit3d checkpoint (no '{META_KEY}' metadata)")
-    if (meta.get("task") or {}).get("name") == "canonical":  # maybe written before its settings were nodes
-        from lit3d.canonical.checkpoint_upgrade import upgrade_checkpoint  # (imports its DataModule: only here)
-
-        ckpt = upgrade_checkpoint(ckpt)
+    ckpt = upgrade_checkpoint(ckpt)
     return ckpt, ckpt[META_KEY]
+
+
+def upgrade_checkpoint(ckpt: dict) -> dict:
+    """``ckpt`` (a loaded lit3d checkpoint dict) with its hyper-parameters, task config and data config in
+    today's layout, by its task (:mod:`lit3d.completion.checkpoint_upgrade`,
+    :mod:`lit3d.canonical.checkpoint_upgrade`, :mod:`lit3d.quality.checkpoint_upgrade`); in place, returned.
+    Each upgrade is imported only for its own task (it imports that task's DataModule)."""
+    from lit3d.utils.checkpoints import META_KEY
+
+    name = ((ckpt.get(META_KEY) or {}).get("task") or {}).get("name")
+    if name == "completion":
+        from lit3d.completion.checkpoint_upgrade import upgrade_checkpoint as upgrade
+    elif name == "canonical":
+        from lit3d.canonical.checkpoint_upgrade import upgrade_checkpoint as upgrade
+    elif name == "quality":
+        from lit3d.quality.checkpoint_upgrade import upgrade_checkpoint as upgrade
+    else:
+        return ckpt
+    return upgrade(ckpt)
 
 
 def read_checkpoint_meta(ckpt_path: str | Path) -> dict:
