@@ -69,7 +69,7 @@ def test_quality_data_config_and_datamodule_hyper_parameters_are_upgraded():
             "feature_workers": 2, "test_shapes": None, "val_shapes": [], "groups": "shape", "batch_size": 3}
     nested = upgrade_quality_data(flat)
     assert nested == {"source": "synth", "batch_size": 3, "synth": {"shapes": ["blob"], "n_levels": 2},
-                      "features": {"fn": None, "options": {"size": 32}, "workers": 2},
+                      "feature_tables": {"fn": None, "options": {"size": 32}, "workers": 2},
                       "split": {"test_shapes": None, "val_shapes": [], "groups": "shape"}}
     assert upgrade_quality_data(nested) == nested
     ckpt = {META_KEY: {"task": {"name": "quality"}, "data": dict(flat)}, "datamodule_hyper_parameters": dict(flat)}

@@ -24,7 +24,7 @@ QUALITY_RUN = [
     "experiment=quality_demo", "logger=none", "callbacks.progress_bar=null", "+trainer.enable_progress_bar=false",
     "data.synth.shapes=[blob,torus]", "+data.synth.distortions=[noise,taubin]", "data.synth.n_levels=2",
     "data.synth.subdivisions=2",
-    "data.features.options={size:32,styles:[toon],measures:[mask_ssim,mse],n_samples:500}",
+    "data.feature_tables.options={size:32,styles:[toon],measures:[mask_ssim,mse],n_samples:500}",
     "task.sfs.epochs=2", "task.sfs.max_features=2", "evaluation.cv=false", "trainer.max_epochs=2",
     "trainer.log_every_n_steps=1",
 ]

@@ -108,7 +108,7 @@ def test_lit3d_train_remakes_the_shipped_quality_model(tmp_path):
     run = tmp_path / "run"
     out = subprocess.run([sys.executable, "-m", "lit3d.cli.train", "experiment=quality_cpcd2_fusion",
                           f"data.root={PHIL}", f"hydra.run.dir={run}", f"paths.data_dir={tmp_path / 'data'}",
-                          "data.features.workers=2", "logger=[]", "~callbacks.progress_bar"],
+                          "data.feature_tables.workers=2", "logger=[]", "~callbacks.progress_bar"],
                          capture_output=True, text=True, timeout=3000)
     assert out.returncode == 0, out.stderr[-3000:]
     made = json.loads((run / MODEL_FILE).read_text())

@@ -121,7 +121,7 @@ def test_synthetic_learned_score_beats_every_baseline(tmp_path):
     criterion (fit and score on the training set) ours was .763: the margin is small at this scale.
     """
     dm = QualityDataModule(data_dir=str(tmp_path / "q"), synth={"shapes": ["blob", "bumpy", "torus", "rock"], "n_levels": 4},
-                           features={"options": dict(size=48, styles=["ceramic_lightbulb", "metal_lead"], n_samples=2000)},
+                           feature_tables={"options": dict(size=48, styles=["ceramic_lightbulb", "metal_lead"], n_samples=2000)},
                            seed=0)
     dm.setup()
     fm = dm.matrix

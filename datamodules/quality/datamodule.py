@@ -24,7 +24,7 @@ the dataset's published range (:class:`lit3d.features.matrix.TargetScaling`).
 (atomic, resumable; ``manifest.json`` with generator, version, config hash and the sha256 of
 every item file): the distorted meshes (synth only), one feature table per pair
 (``features/<shape>__<name>.json``: ``name -> float``, :mod:`datamodules.quality.features`,
-computed by ``lit3d.features.table`` in ``features.workers`` processes), then ``matrix.npz`` (the
+computed by ``lit3d.features.table`` in ``feature_tables.workers`` processes), then ``matrix.npz`` (the
 :class:`FeatureMatrix`) and ``pairs.json``. ``setup()`` reads it and splits by group:
 ``split.test_shapes`` / ``split.val_shapes`` are held out, the rest trains (``[]``: none held out; ``None``: the
 last group, and for validation the one before it). The groups (``split.groups``) are the reference
@@ -104,16 +104,16 @@ class QualityDataModule(pl.LightningDataModule):
         score_range: Sequence[float | None] | None = None,
         higher_is_better: bool | None = None,
         skip_bad: bool = False,
-        features: Mapping | None = None,
+        feature_tables: Mapping | None = None,
         split: Mapping | None = None,
         name: str | None = None,
     ):
-        """``synth``, ``features``, ``split``: the nodes of :mod:`datamodules.quality.settings` (None: the
+        """``synth``, ``feature_tables``, ``split``: the nodes of :mod:`datamodules.quality.settings` (None: the
         defaults); a data config of the flat layout of old: :func:`datamodules.quality.flat_config.upgrade_data_config`."""
         super().__init__()
         self.save_hyperparameters()
         self.synth_settings = parse(SynthSettings, synth, "synth")
-        self.feature_settings = parse(FeatureSettings, features, "features")
+        self.feature_settings = parse(FeatureSettings, feature_tables, "feature_tables")
         self.split_settings = parse(SplitSettings, split, "split")
         self.data_dir = Path(data_dir)
         self.source = source

@@ -4,7 +4,7 @@ checkpoints' data configs and DataModule hyper-parameters hold them) turned into
 
     upgrade_data_config({"source": "synth", "shapes": [...], "n_levels": 2, "feature_options": {...},
                          "feature_workers": 4, "test_shapes": None, ...})
-    -> {"source": "synth", "synth": {"shapes": [...], "n_levels": 2}, "features": {"options": {...}, "workers": 4},
+    -> {"source": "synth", "synth": {"shapes": [...], "n_levels": 2}, "feature_tables": {"options": {...}, "workers": 4},
         "split": {"test_shapes": None}, ...}
 
 A config already in today's layout comes back unchanged; a key no version knew is kept, so the DataModule
@@ -17,7 +17,8 @@ from collections.abc import Mapping
 # flat key -> (node, key in the node)
 FLAT_DATA_KEYS = {
     **{k: ("synth", k) for k in ("shapes", "user_mesh_dir", "distortions", "levels", "n_levels", "subdivisions")},
-    "feature_fn": ("features", "fn"), "feature_options": ("features", "options"), "feature_workers": ("features", "workers"),
+    "feature_fn": ("feature_tables", "fn"), "feature_options": ("feature_tables", "options"),
+    "feature_workers": ("feature_tables", "workers"),
     **{k: ("split", k) for k in ("test_shapes", "val_shapes", "groups")},
 }
 

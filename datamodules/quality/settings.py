@@ -2,7 +2,7 @@
 (:class:`~datamodules.quality.datamodule.QualityDataModule`):
 
     data.synth     the synthetic set: reference shapes, distortions and their levels (:class:`SynthSettings`)
-    data.features  how the feature tables are computed (:class:`FeatureSettings`)
+    data.feature_tables  how the feature tables are computed (:class:`FeatureSettings`)
     data.split     which groups are held out (:class:`SplitSettings`)
 
 :func:`parse` turns a node (a mapping, None for the defaults, or the dataclass itself) into its dataclass; an

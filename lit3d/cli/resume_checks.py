@@ -35,7 +35,7 @@ COMPARED = ("data.*", "task._target_", "task.arch", "task.net", "task.net.*", "t
             "task.net.lfe.use", "task.net.msfe.use", "task.features", "task.identity.classes")
 # data keys that change how the data is loaded or where it lies, not which items it holds
 LOADING = ("data.num_workers", "data.pin_memory", "data.prepare.progress", "data.prepare_workers", "data.prepare.workers",
-           "data.features.workers", "data.persistent_workers", "data.data_dir")
+           "data.feature_tables.workers", "data.persistent_workers", "data.data_dir")
 TASK_INFO = ("name", "monitor", "monitor_mode")  # task_meta() puts cfg.task_info beside cfg.task
 
 

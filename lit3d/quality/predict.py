@@ -51,7 +51,7 @@ class QualityPredictor:
         path: the checkpoint path as given.
         feature_options: the data's feature options (render size, styles, measures, ...) used to
             compute the training features; None when the checkpoint does not record them.
-        feature_fn: the data's custom feature function (``data.features.fn``), None = the renderer's
+        feature_fn: the data's custom feature function (``data.feature_tables.fn``), None = the renderer's
             feature table (:func:`lit3d.features.table.feature_table`).
     """
 
@@ -150,7 +150,7 @@ def _load(path: str, _resolved: str, _mtime: int) -> QualityPredictor:
         raise QualityCheckpointError(f"{p}: weights do not match the stored network ({first_line(exc)})") from exc
     scaling = TargetScaling.from_dict(meta["scaling"]) if meta.get("scaling") else None
     data_cfg = lit3d.get("data") if isinstance(lit3d, dict) and isinstance(lit3d.get("data"), Mapping) else {}
-    features = data_cfg.get("features") or {}
+    features = data_cfg.get("feature_tables") or {}
     options = meta.get("feature_options")
     if options is None:
         options = features.get("options")
