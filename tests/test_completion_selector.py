@@ -139,7 +139,7 @@ def test_loss_scale_is_adams_eps_and_keeps_the_logged_loss(demo_task_kwargs, fur
     r = demo_task_kwargs["nets"]["out_res"]
     assert demo_task_kwargs["optimizer"]["loss_scale"] == "voxels" and task.loss_scale == r**3
     opt_g = _generator_optimizer(task)
-    assert opt_g.param_groups[0]["eps"] == pytest.approx(demo_task_kwargs["eps"] / r**3)
+    assert opt_g.param_groups[0]["eps"] == pytest.approx(demo_task_kwargs["optimizer"]["eps"] / r**3)
     x, y = furniture_batch
     with torch.no_grad():
         loss, terms = task.reconstruction_loss(task.generator(x), y)
