@@ -17,7 +17,7 @@ Rows:
   rows are listed without figures.
 
 The demo experiment trains the generator alone for 6 warm-up epochs; the benchmark sets
-``task.adversarial_start_epoch=0`` so that every timed step includes the critic update and
+``task.adversarial.start_epoch=0`` so that every timed step includes the critic update and
 its gradient penalty.
 """
 from __future__ import annotations
@@ -40,7 +40,7 @@ from lit3d.utils.shapenet_categories import SEEN_CATEGORIES
 
 THESIS_SAMPLES, THESIS_EPOCHS = 26_000, 20
 GPU_TARGET_SPS = 5.0  # samples/s at paper scale on one GPU (the issue's target)
-WITH_CRITIC = ["task.adversarial_start_epoch=0"]
+WITH_CRITIC = ["task.adversarial.start_epoch=0"]
 CMD = "make bench"
 
 
@@ -81,7 +81,8 @@ def step_worker(experiment: str = "completion_demo", batch: int = 8, threads: in
         meter = SavedTensorMeter()
         times = trainer_step_times(task, batches, warmup=warmup, meter=meter)
         state_mb = sum(p.numel() * p.element_size() for p in task.parameters()) * 4 / 2**20  # + grads + 2 Adam
-    return {"times": times, "idle_rss_mb": idle, "peak_rss_mb": peak_rss_mb(), "critic_steps": int(cfg.task.critic_steps),
+    return {"times": times, "idle_rss_mb": idle, "peak_rss_mb": peak_rss_mb(),
+    "critic_steps": int(cfg.task.adversarial.critic_steps),
             "in_res": in_res, "out_res": out_res, "saved_mb": meter.peak / 2**20, "state_mb": state_mb}
 
 
@@ -156,12 +157,12 @@ def run() -> list[dict]:
     with tempfile.TemporaryDirectory() as tmp_s, num_threads(1):
         tmp = Path(tmp_s)
         demo = _cfg("completion_demo", str(tmp / "demo"),
-                    ["data.sizes={train:64,val:8,test_same:8,test_cross:8,test_unseen:8}", "data.progress=false"])
+                    ["data.sizes={train:64,val:8,test_same:8,test_cross:8,test_unseen:8}", "data.prepare.progress=false"])
         dm, dt, n = _prepare(demo)
         rows.append(_gen_row("demo", int(demo.data.target_res), n, dt))
         rows.append(_loading_row(dm, demo, tmp, "demo", train_sps, "demo training step (1 thread)"))
         paper = _cfg("completion_paper", str(tmp / "paper"),
-                     ["data.sizes={train:12,val:0,test_same:0,test_cross:0,test_unseen:0}", "data.progress=false"])
+                     ["data.sizes={train:12,val:0,test_same:0,test_cross:0,test_unseen:0}", "data.prepare.progress=false"])
         dm, dt, n = _prepare(paper)
         rows.append(_gen_row("paper", int(paper.data.target_res), n, dt))
         rows.append(_loading_row(dm, paper, tmp, "paper", GPU_TARGET_SPS, "the paper-scale GPU step target"))

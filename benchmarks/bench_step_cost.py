@@ -2,8 +2,9 @@
 
 Rows (no timing: the count depends on the config alone, not on the machine):
 - completion (64^3 -> 256^3, ``experiment=completion_paper``) per part of the manual-optimisation step
-  (:mod:`lit3d.completion.step_cost`), then with each option that cuts the step (``task.gp_every=4``,
-  ``task.critic_concat=true``, ``task.gp_precision=bf16``, then all three; ratio = default / option, in FLOPs; the
+  (:mod:`lit3d.completion.step_cost`), then with each option that cuts the step (``task.adversarial.gp_every=4``,
+  ``task.adversarial.critic_concat=true``, ``task.adversarial.gp_precision=bf16``, then all three; ratio = default / option,
+  in FLOPs; the
   note gives the bytes saved for backward, which bf16 cuts), and the demo scale with the critic on.
   ``task.compile_step`` has no row: it changes how the ops run (fusion, launches), not the count;
 - canonical (``experiment=canonical_paper``) at 128^2 and 500^2 (:mod:`lit3d.canonical.step_cost`).
@@ -30,7 +31,7 @@ from lit3d.utils.tables import markdown_table
 
 CMD = "python -m benchmarks.bench_step_cost"
 REFERENCE_TFLOP = 3.4  # the earlier count of the paper-scale step (FlopCounterMode's formulas, one sample)
-WITH_CRITIC = ["task.adversarial=true", "task.adversarial_start_epoch=0"]
+WITH_CRITIC = ["task.adversarial.use=true", "task.adversarial.start_epoch=0"]
 
 # Dense (no sparsity) peaks, TFLOP/s, from NVIDIA's data sheets (their tensor-core figures halved: those are
 # quoted with 2:4 sparsity). fp32 training runs its convolutions in TF32 on the tensor cores by default
@@ -93,12 +94,12 @@ def _parts_note(cost: dict) -> str:
 # the switches that change the count (task.compile_step does not: the count is of the eager step's ops, and
 # compiling changes how they run, not how many FLOPs they take), one row each, then all of them together
 OPTIONS = (
-    ("task.gp_every=4 (lazy gradient penalty)", ["task.gp_every=4"]),
-    ("task.critic_concat=true (one critic pass over real + fake)", ["task.critic_concat=true"]),
-    ("task.gp_precision=bf16 (the penalty's critic pass in bf16: fewer bytes saved for backward, the same FLOPs)",
-     ["task.gp_precision=bf16"]),
+    ("task.adversarial.gp_every=4 (lazy gradient penalty)", ["task.adversarial.gp_every=4"]),
+    ("task.adversarial.critic_concat=true (one critic pass over real + fake)", ["task.adversarial.critic_concat=true"]),
+    ("task.adversarial.gp_precision=bf16 (the penalty's critic pass in bf16: fewer bytes saved for backward, the same FLOPs)",
+     ["task.adversarial.gp_precision=bf16"]),
     ("every option on (gp_every=4, critic_concat, gp_precision=bf16)",
-     ["task.gp_every=4", "task.critic_concat=true", "task.gp_precision=bf16"]),
+     ["task.adversarial.gp_every=4", "task.adversarial.critic_concat=true", "task.adversarial.gp_precision=bf16"]),
 )
 
 
@@ -128,7 +129,7 @@ def completion_rows() -> list[dict]:
     rows.append(row("completion train step FLOPs, demo 16^3->64^3, critic on", CMD, demo["flops"] / 1e12, None,
                     unit="TFLOP/sample",
                     note=_parts_note(demo) + "; experiment=completion_demo as configured trains without the critic "
-                         f"(task.adversarial=false): {plain['flops'] / 1e12:.3g} TFLOP/sample, {plain['ops']:.0f} ops, "
+                         f"(task.adversarial.use=false): {plain['flops'] / 1e12:.3g} TFLOP/sample, {plain['ops']:.0f} ops, "
                          f"{plain['saved_bytes'] / 2**20:.0f} MiB/sample"))
     return rows
 

@@ -8,7 +8,7 @@ default) on random occupancy batches runs ``warmup`` steps, then one step under 
 - a summary: per variant and batch, the step's wall time and samples/s, the device time its kernels keep
   the GPU busy (their union) and the idle time (wall - busy: launch gaps, host work, synchronisations),
   the number of kernels, peak GPU memory, and whether the profiled step ran the gradient penalty (with
-  ``task.gp_every=N`` one critic update in N does: time both kinds or average over N steps);
+  ``task.adversarial.gp_every=N`` one critic update in N does: time both kinds or average over N steps);
 - per variant and batch the top 25 ops by self device time (``key_averages``; by self CPU time without CUDA).
 
     python -m benchmarks.profile_step                        # paper scale, batch 3 and 12 (make bench-gpu)
@@ -39,14 +39,15 @@ TOP = 25
 # the step switches (conf/task/completion.yaml), one profile each; "every" = all of them in one call
 VARIANTS = {
     "default": [],
-    "gp_every4": ["task.gp_every=4"],
-    "critic_concat": ["task.critic_concat=true"],
-    "gp_bf16": ["task.gp_precision=bf16"],
+    "gp_every4": ["task.adversarial.gp_every=4"],
+    "critic_concat": ["task.adversarial.critic_concat=true"],
+    "gp_bf16": ["task.adversarial.gp_precision=bf16"],
     "compile": ["task.compile_step=true"],
-    "all": ["task.gp_every=4", "task.critic_concat=true", "task.gp_precision=bf16", "task.compile_step=true"],
+    "all": ["task.adversarial.gp_every=4", "task.adversarial.critic_concat=true", "task.adversarial.gp_precision=bf16",
+            "task.compile_step=true"],
 }
 # --tiny: demo nets shrunk further (32^3 shapes, small latent), critic on; a few seconds on a CPU
-TINY = ["task.adversarial=true", "data.target_res=32", "task.nets.latent_dim=64", "task.nets.k=16",
+TINY = ["task.adversarial.use=true", "data.target_res=32", "task.nets.latent_dim=64", "task.nets.k=16",
         "task.nets.fixed_latent_dim=64", "task.nets.critic_channels=[8,8,8,8]", "task.nets.enc_channels=[8,16]"]
 
 
@@ -85,8 +86,7 @@ def profile_step(experiment: str = "completion_paper", batch: int = 3, warmup: i
         def on_train_batch_start(self, trainer, pl_module, b, batch_idx):
             if batch_idx == warmup:
                 sync()
-                hp = pl_module.hparams
-                state["penalty"] = pl_module.critic_updates % hp.gp_every == 0
+                state["penalty"] = pl_module.critic_updates % pl_module.adversarial.gp_every == 0
                 if cuda:
                     torch.cuda.reset_peak_memory_stats()
                 state["prof"] = profile(activities=activities)

@@ -19,7 +19,7 @@ fi
 DATA=(data.source="$SOURCE" "data.data_dir=\${paths.data_dir}/${EXP}_$SOURCE")
 rm -rf "$OUT/train" "$OUT/eval" "$OUT/eval_recgan"
 mkdir -p "$OUT"
-"$BIN/lit3d-data" experiment="$EXP" "${DATA[@]}" data.prepare_workers=2 hydra.run.dir="$OUT/data" --show 8 > "$OUT/data_summary.json"
+"$BIN/lit3d-data" experiment="$EXP" "${DATA[@]}" data.prepare.workers=2 hydra.run.dir="$OUT/data" --show 8 > "$OUT/data_summary.json"
 # test_after_fit=false: lit3d-eval below tests the same best checkpoint from its file (once, not twice)
 "$BIN/lit3d-train" experiment="$EXP" "${DATA[@]}" hydra.run.dir="$OUT/train" test_after_fit=false "$@"
 CKPT=$(ls "$OUT"/train/checkpoints/best-*.ckpt | head -n 1)

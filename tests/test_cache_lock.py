@@ -19,7 +19,7 @@ def _tiny(data_dir: Path):
     from datamodules.completion import CompletionDataModule
 
     return CompletionDataModule(data_dir=str(data_dir), target_res=16, input_factor=4, sizes=SIZES,
-                                progress=False)
+                                prepare={"progress": False})
 
 
 def _prepare_counting(data_dir: str, barrier, out) -> None:

@@ -25,7 +25,7 @@ from lit3d.runtime.build import build_datamodule
 from tests.helpers.runs import TINY_NETS
 
 SIZES = "data.sizes={train:4,val:2,test_same:2,test_cross:2,test_unseen:2}"
-DATA = ["experiment=completion_demo", SIZES, "data.progress=false"]
+DATA = ["experiment=completion_demo", SIZES, "data.prepare.progress=false"]
 
 
 def _run(args: list[str], timeout: float = 180) -> subprocess.CompletedProcess:
@@ -66,7 +66,7 @@ def test_another_configs_cache_is_refused_by_every_entry_point(tmp_path):
     ckpt = untrained_checkpoint("completion_demo", tmp_path / "c.ckpt", TINY_NETS)
     # the case: an evaluation naming a prepared folder with other data settings (here the seed)
     line = _one_error(_run(["lit3d-eval", f"ckpt_path={ckpt}", "data=completion_synth", f"data.data_dir={cache}",
-                            "data.target_res=64", "data.sensor=recgan", SIZES, "data.progress=false", "seed=7",
+                            "data.target_res=64", "data.render.sensor=recgan", SIZES, "data.prepare.progress=false", "seed=7",
                             f"hydra.run.dir={tmp_path}/runs/eval"]))
     assert line == (f"error: {cache}: holds data prepared with another config (seed: 7 here, 42 there); nothing was "
                     "deleted: to replace it run lit3d-data with this run's overrides plus --rebuild, or set "
@@ -105,7 +105,7 @@ def test_hand_edited_manifest_and_truncated_item_are_found_and_repaired(tmp_path
 def test_training_stops_when_another_process_re_prepares_its_data(tmp_path):
     run, data = tmp_path / "run", f"paths.data_dir={tmp_path}/data"
     common = ["experiment=completion_demo", "data.sizes={train:8,val:4,test_same:4,test_cross:4,test_unseen:4}",
-              "data.batch_size=4", "data.progress=false", *TINY_NETS, "logger=none", "callbacks.progress_bar=null",
+              "data.batch_size=4", "data.prepare.progress=false", *TINY_NETS, "logger=none", "callbacks.progress_bar=null",
               "test_after_fit=false", data]
     proc = start_script(["lit3d-train", *common, "trainer.max_epochs=500", f"hydra.run.dir={run}"], tmp_path / "train")
     try:

@@ -54,8 +54,8 @@ def test_fast_dev_run(compose_cfg, data_dir):
 def test_critic_and_generator_steps_per_batch(compose_cfg, data_dir):
     # not fast_dev_run: it sets max_steps, and a GAN batch makes critic_steps + 1 optimiser steps
     cfg = compose_cfg([*TINY, "debug=limit", "trainer.max_epochs=1", "trainer.limit_train_batches=3",
-                       "trainer.limit_val_batches=0", "task.critic_steps=2", "task.adversarial_start_epoch=0",
-                       "task.adversarial=true", "logger=none"], data_dir=data_dir)
+                       "trainer.limit_val_batches=0", "task.adversarial.critic_steps=2", "task.adversarial.start_epoch=0",
+                       "task.adversarial.use=true", "logger=none"], data_dir=data_dir)
     from lit3d.runtime.build import build_datamodule, build_task
     from hydra.utils import instantiate
 

@@ -24,7 +24,7 @@ SMALL = {"train": 8, "val": 4, "test_same": 4, "test_cross": 4, "test_unseen": 2
 
 def small_dm(data_dir: Path, seed: int = 0, **kw) -> CompletionDataModule:
     return CompletionDataModule(data_dir=str(data_dir), seed=seed, target_res=32, input_factor=4,
-                                sizes=SMALL, batch_size=4, progress=False, **kw)
+                                sizes=SMALL, batch_size=4, prepare={"progress": False}, **kw)
 
 
 def contents(dm: CompletionDataModule) -> dict[str, tuple[bytes, bytes]]:
@@ -237,7 +237,7 @@ def test_corrupt_cached_item_names_the_file(tmp_path):
 
 
 def test_recgan_without_root_says_how_to_fix(tmp_path):
-    dm = CompletionDataModule(target_res=64, source="recgan", data_dir=str(tmp_path), root=None, progress=False)
+    dm = CompletionDataModule(target_res=64, source="recgan", data_dir=str(tmp_path), root=None, prepare={"progress": False})
     with pytest.raises(DataError, match=r"data\.root=PATH"):
         dm.prepare_data()
     with pytest.raises(DataError, match="source"):
@@ -247,13 +247,13 @@ def test_recgan_without_root_says_how_to_fix(tmp_path):
 def test_categories_are_the_one_list_and_are_checked(tmp_path):
     # every category has a synthetic generator, and only those
     assert set(GENERATORS) == set(SEEN_CATEGORIES) | set(UNSEEN_CATEGORIES)
-    dm = CompletionDataModule(target_res=64, data_dir=str(tmp_path), progress=False)  # null in the configs: all of them
+    dm = CompletionDataModule(target_res=64, data_dir=str(tmp_path), prepare={"progress": False})  # null: all of them
     assert dm.categories == SEEN_CATEGORIES and dm.unseen_categories == UNSEEN_CATEGORIES
-    assert CompletionDataModule(target_res=64, data_dir=str(tmp_path), categories=["chair"]).categories == ("chair",)
-    with pytest.raises(DataError, match=r"data\.categories: unknown categories \['chiar'\]"):
-        CompletionDataModule(target_res=64, data_dir=str(tmp_path), categories=["chiar"])
-    with pytest.raises(DataError, match=r"data\.unseen_categories: unknown categories \['chair'\]"):
-        CompletionDataModule(target_res=64, data_dir=str(tmp_path), unseen_categories=["chair"])
+    assert CompletionDataModule(target_res=64, data_dir=str(tmp_path), categories={"seen": ["chair"]}).categories == ("chair",)
+    with pytest.raises(DataError, match=r"data\.categories\.seen: unknown categories \['chiar'\]"):
+        CompletionDataModule(target_res=64, data_dir=str(tmp_path), categories={"seen": ["chiar"]})
+    with pytest.raises(DataError, match=r"data\.categories\.unseen: unknown categories \['chair'\]"):
+        CompletionDataModule(target_res=64, data_dir=str(tmp_path), categories={"unseen": ["chair"]})
 
 
 @pytest.mark.parametrize("res,factor", [(32, 2), (32, 4), (64, 8), (64, 16), (48, 3), (48, 12)])

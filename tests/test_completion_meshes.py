@@ -236,8 +236,9 @@ def test_datamodule_on_a_mesh_folder(tmp_path):
     (tmp_path / "models" / "chair" / "notes.txt").write_text("ignored")
     sizes = {"train": 16, "val": 4, "test_same": 8, "test_cross": 4, "test_unseen": 2}
     dm = CompletionDataModule(source="meshes", root=str(tmp_path / "models"), data_dir=str(tmp_path / "cache"),
-                              target_res=32, input_factor=4, sizes=sizes, categories=["chair", "table"],
-                              unseen_categories=["car"], batch_size=4, progress=False, min_models=8)
+                              target_res=32, input_factor=4, sizes=sizes,
+                              categories={"seen": ["chair", "table"], "unseen": ["car"]}, batch_size=4,
+                              prepare={"progress": False}, meshes={"min_models": 8})
     dm.prepare_data()
     dm.setup()
     m = json.loads((tmp_path / "cache" / "manifest.json").read_text())
@@ -252,21 +253,21 @@ def test_datamodule_on_a_mesh_folder(tmp_path):
     batch = next(iter(dm.train_dataloader()))
     assert batch["input"].shape[1:] == (1, 8, 8, 8) and batch["target"].shape[1:] == (1, 32, 32, 32)
     assert batch["target"].sum() > 0
-    # the same items rendered in 2 spawned processes (data.prepare_workers): the same files
+    # the same items rendered in 2 spawned processes (data.prepare.workers): the same files
     CompletionDataModule(source="meshes", root=str(tmp_path / "models"), data_dir=str(tmp_path / "cache2"),
-                         target_res=32, input_factor=4, sizes=sizes, categories=["chair", "table"],
-                         unseen_categories=["car"], batch_size=4, progress=False, min_models=8,
-                         prepare_workers=2).prepare_data()
+                         target_res=32, input_factor=4, sizes=sizes,
+                         categories={"seen": ["chair", "table"], "unseen": ["car"]}, batch_size=4,
+                         meshes={"min_models": 8}, prepare={"progress": False, "workers": 2}).prepare_data()
     assert json.loads((tmp_path / "cache2" / "manifest.json").read_text())["manifest_hash"] == m["manifest_hash"]
-    # a corrupt model: one error naming the file, or skipped with data.skip_bad
+    # a corrupt model: one error naming the file, or skipped with data.prepare.skip_bad
     (tmp_path / "models" / "chair" / "chair_03.obj").write_text("v 0 0 0\nf 1 2 3\n")
     kw = dict(source="meshes", root=str(tmp_path / "models"), target_res=32, input_factor=4, sizes=sizes,
-              categories=["chair"], unseen_categories=["car"], progress=False)
+              categories={"seen": ["chair"], "unseen": ["car"]})
     with pytest.raises(DataError, match="chair_03"):
-        CompletionDataModule(data_dir=str(tmp_path / "c2"), **kw).prepare_data()
+        CompletionDataModule(data_dir=str(tmp_path / "c2"), prepare={"progress": False}, **kw).prepare_data()
     with pytest.raises(DataError, match="chair_03"):  # the same from a worker process
-        CompletionDataModule(data_dir=str(tmp_path / "c4"), prepare_workers=2, **kw).prepare_data()
-    dm3 = CompletionDataModule(data_dir=str(tmp_path / "c3"), skip_bad=True, **kw)
+        CompletionDataModule(data_dir=str(tmp_path / "c4"), prepare={"progress": False, "workers": 2}, **kw).prepare_data()
+    dm3 = CompletionDataModule(data_dir=str(tmp_path / "c3"), prepare={"progress": False, "skip_bad": True}, **kw)
     dm3.prepare_data()
     m3 = json.loads((tmp_path / "c3" / "manifest.json").read_text())
     assert m3["skipped"] and not any(it.get("model_id") == "chair/chair_03" for it in m3["items"])

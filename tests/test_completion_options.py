@@ -1,5 +1,6 @@
 """Options that cut the completion training step without changing the method (conf/task/completion.yaml):
-``task.gp_every`` (lazy gradient penalty) and ``task.critic_concat`` (one critic pass over real + fake)."""
+``task.adversarial.gp_every`` (lazy gradient penalty) and ``task.adversarial.critic_concat`` (one critic pass over real +
+fake)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -23,7 +24,7 @@ def _critic_grads(task: CompletionTask) -> list[torch.Tensor]:
 
 def test_options_are_off_by_default_in_the_config():
     cfg = yaml.safe_load((Path(__file__).parents[1] / "conf/task/completion.yaml").read_text())["task"]
-    assert cfg["gp_every"] == 1 and cfg["critic_concat"] is False
+    assert cfg["adversarial"]["gp_every"] == 1 and cfg["adversarial"]["critic_concat"] is False
 
 
 def test_gp_every_1_is_the_critic_loss_of_before(completion_demo_nets):
@@ -81,7 +82,7 @@ def test_gp_every_2_computes_the_penalty_on_alternate_critic_updates(completion_
 
 def test_gp_every_below_1_is_refused(completion_demo_nets):
     with pytest.raises(ValueError, match="gp_every"):
-        CompletionTask(nets=tiny_nets(completion_demo_nets), gp_every=0)
+        CompletionTask(nets=tiny_nets(completion_demo_nets), adversarial={"gp_every": 0})
 
 
 def test_critic_concat_gives_the_two_passes_scores_and_gradients(completion_demo_nets):

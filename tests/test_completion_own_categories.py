@@ -1,6 +1,6 @@
 """Completion data from a mesh folder of your own (``data.source=meshes``): every category folder is
 read, names outside the thesis's ten become user categories with their own class labels, a category
-with fewer than ``data.min_models`` models uses its models with a console line (never procedural
+with fewer than ``data.meshes.min_models`` models uses its models with a console line (never procedural
 shapes in its place), and ``lit3d-data`` / ``lit3d-train`` run on it."""
 from __future__ import annotations
 
@@ -32,12 +32,12 @@ def write_folder(root):
 def test_user_and_small_categories_are_read_not_swapped_for_procedural(tmp_path, caplog):
     root = write_folder(tmp_path / "models")
     dm = CompletionDataModule(source="meshes", root=str(root), data_dir=str(tmp_path / "cache"), target_res=32,
-                              sizes=SIZES, progress=False)
+                              sizes=SIZES, prepare={"progress": False})
     assert dm.categories == ("animal", "chair") and dm.unseen_categories == () and dm.user_categories == ("animal",)
     assert dm.label_categories == ("bench", "chair", "couch", "table", "animal")
     with caplog.at_level(logging.WARNING, logger="lit3d.data"):
         dm.prepare_data()
-    assert "category animal has 3 models (fewer than data.min_models=8): its own models are used" in caplog.text
+    assert "category animal has 3 models (fewer than data.meshes.min_models=8): its own models are used" in caplog.text
     assert "category chair has 2 models" in caplog.text and "procedural" not in caplog.text
     m = json.loads((tmp_path / "cache" / "manifest.json").read_text())
     assert m["models_per_category"] == {"animal": 3, "chair": 2} and m["fallback"] == {} and m["dropped"] == []
@@ -50,10 +50,10 @@ def test_user_and_small_categories_are_read_not_swapped_for_procedural(tmp_path,
     assert labels.get("animal", 4) == 4 and labels.get("chair", 1) == 1
     # a user category made unseen by the key; a name that is no folder and no thesis category: one line
     dm2 = CompletionDataModule(source="meshes", root=str(root), data_dir=str(tmp_path / "c2"), target_res=32,
-                               sizes=SIZES, unseen_categories=["animal"], progress=False)
+                               sizes=SIZES, categories={"unseen": ["animal"]}, prepare={"progress": False})
     assert dm2.categories == ("chair",) and dm2.unseen_categories == ("animal",)
-    with pytest.raises(DataConfigError, match=r"data.categories: \['animl'\] are neither.*animal, chair"):
-        CompletionDataModule(source="meshes", root=str(root), target_res=32, categories=["animl"])
+    with pytest.raises(DataConfigError, match=r"data.categories.seen: \['animl'\] are neither.*animal, chair"):
+        CompletionDataModule(source="meshes", root=str(root), target_res=32, categories={"seen": ["animl"]})
 
 
 def test_lit3d_data_shows_and_lit3d_train_trains_on_own_categories(tmp_path, monkeypatch, capsys, compose_cfg):
@@ -62,7 +62,7 @@ def test_lit3d_data_shows_and_lit3d_train_trains_on_own_categories(tmp_path, mon
     root = write_folder(tmp_path / "models")
     args = ["experiment=completion_demo", "data.source=meshes", f"data.root={root}",
             "data.sizes={train:8,val:4,test_same:2,test_cross:2,test_unseen:0}", "data.batch_size=4",
-            "data.progress=false"]
+            "data.prepare.progress=false"]
     monkeypatch.setattr(sys, "argv", ["lit3d-data", *args, f"paths.data_dir={tmp_path / 'data'}",
                                       f"hydra.run.dir={tmp_path / 'prep'}", "--show", "2"])
     import lit3d.cli.data

@@ -18,6 +18,7 @@ from datamodules.completion.depth_voxels import make_sample
 from datamodules.completion.furniture import make_shape
 from lit3d.callbacks.health import group_stats
 from lit3d.runtime.compose import CONF_DIR
+from lit3d.completion.checkpoint_upgrade import upgrade_hparams
 from lit3d.completion.losses import resolve_loss_scale
 from lit3d.completion.module import CompletionTask
 from lit3d.completion.selector import LatentSelector
@@ -60,7 +61,7 @@ def furniture_batch(demo_task_kwargs) -> tuple[torch.Tensor, torch.Tensor]:
 def _task(kw: dict, **changes) -> CompletionTask:
     torch.manual_seed(0)
     kw = {**kw, **changes, "nets": {**kw["nets"], **changes.pop("nets", {})}} if "nets" in changes else {**kw, **changes}
-    return CompletionTask(**kw)
+    return CompletionTask(**upgrade_hparams(kw))  # changes by their short names (loss_scale=1.0) into their nodes
 
 
 def _update_ratios(task: CompletionTask, batch, steps: int = STEPS) -> dict[str, float]:
@@ -136,9 +137,9 @@ def _generator_optimizer(task: CompletionTask) -> torch.optim.Optimizer:
 def test_loss_scale_is_adams_eps_and_keeps_the_logged_loss(demo_task_kwargs, furniture_batch):
     task = _task(demo_task_kwargs)
     r = demo_task_kwargs["nets"]["out_res"]
-    assert demo_task_kwargs["loss_scale"] == "voxels" and task.loss_scale == r**3
+    assert demo_task_kwargs["optimizer"]["loss_scale"] == "voxels" and task.loss_scale == r**3
     opt_g = _generator_optimizer(task)
-    assert opt_g.param_groups[0]["eps"] == pytest.approx(demo_task_kwargs["eps"] / r**3)
+    assert opt_g.param_groups[0]["eps"] == pytest.approx(demo_task_kwargs["optimizer"]["eps"] / r**3)
     x, y = furniture_batch
     with torch.no_grad():
         loss, terms = task.reconstruction_loss(task.generator(x), y)

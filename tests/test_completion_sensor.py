@@ -118,11 +118,11 @@ def test_sensor_settings_are_checked():
 
 
 def test_datamodule_keeps_the_original_cache_hash_and_names_a_bad_sensor(tmp_path):
-    kw = dict(data_dir=str(tmp_path), target_res=32, sizes={"train": 4}, progress=False)
+    kw = dict(data_dir=str(tmp_path), target_res=32, sizes={"train": 4}, prepare={"progress": False})
     assert "sensor" not in CompletionDataModule(**kw).cache_config()  # the built-in data is unchanged
-    assert CompletionDataModule(sensor="recgan", **kw).cache_config()["sensor"]["camera"] == "perspective"
-    with pytest.raises(DataConfigError, match="data.sensor: unknown sensor 'kinect'"):
-        CompletionDataModule(sensor="kinect", **kw)
+    assert CompletionDataModule(render={"sensor": "recgan"}, **kw).cache_config()["sensor"]["camera"] == "perspective"
+    with pytest.raises(DataConfigError, match="data.render.sensor: unknown sensor 'kinect'"):
+        CompletionDataModule(render={"sensor": "kinect"}, **kw)
 
 
 # ---------------------------------------------------------------- statistics against real data

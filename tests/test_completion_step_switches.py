@@ -1,5 +1,5 @@
 """Switches that make the completion step cheaper without changing the method (conf/task/completion.yaml):
-``task.gp_precision`` (the gradient penalty's critic pass in bf16) and ``task.compile_step`` (torch.compile of
+``task.adversarial.gp_precision`` (the gradient penalty's critic pass in bf16) and ``task.compile_step`` (torch.compile of
 the critic and generator objectives)."""
 from __future__ import annotations
 
@@ -60,7 +60,7 @@ def _penalty_and_grads(task: CompletionTask, precision: str, eps: torch.Tensor):
 
 def test_switches_are_off_by_default_in_the_config():
     cfg = yaml.safe_load((Path(__file__).parents[1] / "conf/task/completion.yaml").read_text())["task"]
-    assert cfg["gp_precision"] == "fp32" and cfg["compile_step"] is False
+    assert cfg["adversarial"]["gp_precision"] == "fp32" and cfg["compile_step"] is False
 
 
 def test_fp32_penalty_is_the_penalty_of_before(completion_demo_nets):
@@ -123,7 +123,7 @@ def test_bf16_penalty_runs_the_critic_in_bf16(completion_demo_nets):
     with pytest.raises(ValueError, match="precision"):
         gradient_penalty(task.critic, x, y, y, precision="fp16")
     with pytest.raises(ValueError, match="gp_precision"):
-        CompletionTask(nets=tiny_nets(completion_demo_nets), gp_precision="half")
+        CompletionTask(nets=tiny_nets(completion_demo_nets), adversarial={"gp_precision": "half"})
 
 
 def test_meta_autocast_saves_for_backward_what_cpu_autocast_saves(completion_demo_nets):

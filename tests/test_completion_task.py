@@ -45,7 +45,7 @@ def test_nonfinite_loss_can_skip_steps(completion_demo_nets):
 
 
 def test_adversarial_warmup_skips_critic_updates(completion_demo_nets):
-    task = CompletionTask(nets=completion_demo_nets, adversarial_start_epoch=1)
+    task = CompletionTask(nets=completion_demo_nets, adversarial={"start_epoch": 1})
     _fit(task, _batches(n=2), steps=2)
     opt_g, opt_d = task.optimizers()
     assert not opt_d.optimizer.state, "critic must not step during warm-up"
@@ -64,7 +64,7 @@ def test_summary_rows_on_meta_device_paper_scale(completion_paper_nets, completi
 def test_stage_bce_is_weighted_bce_of_the_pooled_target(completion_demo_nets):
     from lit3d.completion.losses import weighted_bce_with_logits
 
-    task = CompletionTask(nets=completion_demo_nets, stage_weight=0.5)
+    task = CompletionTask(nets=completion_demo_nets, loss={"stage_weight": 0.5})
     g = torch.Generator().manual_seed(1)
     target = (torch.rand(2, 1, 64, 64, 64, generator=g) < 0.1).float()
     logits = [torch.randn(2, 1, 16, 16, 16, generator=g) for _ in range(2)]
@@ -121,7 +121,7 @@ def _first_targets_mean(data: _Data, n: int) -> torch.Tensor:
 @pytest.fixture(scope="module")
 def fitted_checkpoint(tmp_path_factory, completion_demo_nets):
     """A demo-size task fitted one step (prior_samples=3 of 6 training items), saved as a checkpoint."""
-    task = CompletionTask(nets=completion_demo_nets, prior_samples=3, adversarial_start_epoch=1)
+    task = CompletionTask(nets=completion_demo_nets, prior_samples=3, adversarial={"start_epoch": 1})
     data = _Data()
     trainer = _trainer(max_epochs=1, limit_train_batches=1, limit_val_batches=0)
     trainer.fit(task, datamodule=data)

@@ -33,7 +33,7 @@ def test_short_training_beats_input_baseline(compose_cfg, tmp_path):
         "experiment=completion_demo", "seed=0", "logger=csv", "callbacks.progress_bar=null",
         "data.sizes={train:120,val:24,test_same:24,test_cross:24,test_unseen:24}",
         "task.nets.latent_dim=200", "task.nets.k=20",
-        "data.batch_size=4", "trainer.max_epochs=6", "task.adversarial_start_epoch=6",
+        "data.batch_size=4", "trainer.max_epochs=6", "task.adversarial.start_epoch=6",
         "evaluation.surface=null",  # the surface metrics have their own tests (tests/test_surface_metrics.py)
     ])
     train(cfg)

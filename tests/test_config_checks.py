@@ -18,8 +18,8 @@ EXPERIMENTS = sorted(p.stem for p in (REPO / "conf" / "experiment").glob("*.yaml
 
 # (override, the one line it gives)
 BAD_VALUES = [
-    ("task.lr_g=abc", "error: task.lr_g=abc: expected a number > 0"),
-    ("task.lr_g=-1", "error: task.lr_g=-1: expected a number > 0"),
+    ("task.optimizer.lr_g=abc", "error: task.optimizer.lr_g=abc: expected a number > 0"),
+    ("task.optimizer.lr_g=-1", "error: task.optimizer.lr_g=-1: expected a number > 0"),
     ("trainer.max_epochs=1.5", "error: trainer.max_epochs=1.5: expected an integer >= 0, or -1 (no limit), or null"),
     ("trainer.max_epochs=-5", "error: trainer.max_epochs=-5: expected an integer >= 0, or -1 (no limit), or null"),
     ("data.batch_size=-1", "error: data.batch_size=-1: expected an integer >= 1"),
@@ -27,7 +27,7 @@ BAD_VALUES = [
     ("seed=abc", "error: seed=abc: expected an integer >= 0 (and 1 more)"),  # data.seed is ${seed}
     ("data.num_workers=-1", "error: data.num_workers=-1: expected an integer >= 0"),
     ("task.nets.latent_dim=0", "error: task.nets.latent_dim=0: expected an integer >= 1"),
-    ("task.adversarial=yes", "error: task.adversarial=yes: expected true or false"),
+    ("task.adversarial.use=yes", "error: task.adversarial.use=yes: expected true or false"),
     ("trainer.fast_dev_run=-2", "error: trainer.fast_dev_run=-2: expected true or false, or an integer >= 0"),
 ]
 

@@ -75,7 +75,8 @@ def test_datamodule_cpcd2_builds_matrix(tmp_path):
 
     root = make_layout(tmp_path / "raw")
     dm = QualityDataModule(data_dir=str(tmp_path / "cache"), source="cpcd2", root=str(root),
-                           feature_options=dict(size=48, styles=["ceramic_lightbulb"], measures=["mask_ssim", "psnr"]))
+                           feature_tables={"options": dict(size=48, styles=["ceramic_lightbulb"],
+                                                           measures=["mask_ssim", "psnr"])})
     fm = dm.load_matrix()
     assert fm.items == ["ball/ball_N_34", "ball/ball_N_36"]
     assert {"d1_psnr", "y_psnr", "mask_ssim/albedo_rgb/flat", "mask_ssim/ceramic_lightbulb/smooth"} <= set(fm.names)

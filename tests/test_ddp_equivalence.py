@@ -69,7 +69,8 @@ def test_gan_trains_under_ddp_cpu_with_adversarial_steps(compose_cfg, tmp_path):
     data = tmp_path / "data"
     overrides = [*CASES["completion"], "logger=none", "callbacks.progress_bar=null", "trainer.max_epochs=1",
                  "+trainer.limit_train_batches=3", "+trainer.limit_val_batches=1", "seed=0",
-                 "task.adversarial_start_epoch=0", "task.adversarial=true", "task.critic_steps=2", "data.sizes.train=12"]
+                 "task.adversarial.start_epoch=0", "task.adversarial.use=true", "task.adversarial.critic_steps=2",
+                 "data.sizes.train=12"]
     out = tmp_path / "ddp_run"
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO / "tests"), os.environ.get("PYTHONPATH", "")])}
     res = subprocess.run([str(Path(sys.executable).parent / "lit3d-train"), *overrides, "trainer=ddp_cpu",

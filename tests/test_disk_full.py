@@ -99,7 +99,7 @@ def test_the_atomic_writers_name_the_file_on_a_full_disk(tmp_path, full_disk):
 def test_full_disk_while_writing_a_data_item(tmp_path, full_disk, monkeypatch, capsys):
     data = tmp_path / "data"
     full_disk(lambda p: "items" in p.parts and data in p.parents)
-    code, line = _main(data_cli, ["experiment=completion_demo", "data.progress=false",
+    code, line = _main(data_cli, ["experiment=completion_demo", "data.prepare.progress=false",
                                   "data.sizes={train:2,val:0,test_same:0,test_cross:0,test_unseen:0}",
                                   f"paths.data_dir={data}", f"hydra.run.dir={tmp_path}/run"], monkeypatch, capsys)
     items = data / "completion_demo" / "items"
@@ -110,7 +110,7 @@ def test_full_disk_while_writing_a_data_item(tmp_path, full_disk, monkeypatch, c
 def test_full_disk_while_saving_a_checkpoint(tmp_path, full_disk, monkeypatch, capsys):
     run = tmp_path / "run"
     full_disk(lambda p: p.parent == run / "checkpoints")
-    code, line = _main(train_cli, ["experiment=completion_demo", "data.progress=false", "data.batch_size=2",
+    code, line = _main(train_cli, ["experiment=completion_demo", "data.prepare.progress=false", "data.batch_size=2",
                                    "data.sizes={train:4,val:2,test_same:0,test_cross:0,test_unseen:0}", *TINY_NETS,
                                    "trainer.max_epochs=1", "logger=csv",
                                    "test_after_fit=false", "callbacks.progress_bar=null",
@@ -125,7 +125,7 @@ def test_full_disk_while_writing_metrics_json(tmp_path, full_disk, monkeypatch, 
     evaluation writes into first), and no file of the evaluation is left in the run dir."""
     sizes = "data.sizes={train:2,val:2,test_same:2,test_cross:0,test_unseen:0}"
     ckpt = untrained_checkpoint("completion_demo", tmp_path / "c.ckpt",
-                                [*TINY_NETS, sizes, "data.batch_size=2", "data.progress=false",
+                                [*TINY_NETS, sizes, "data.batch_size=2", "data.prepare.progress=false",
                                  f"paths.data_dir={tmp_path}/data"])
     run = tmp_path / "run"
     full_disk(lambda p: p.name.startswith(".metrics.json."))

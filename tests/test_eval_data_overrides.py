@@ -23,7 +23,8 @@ SIZES = "data.sizes={train:2,val:2,test_same:2,test_cross:2,test_unseen:0}"
 def checkpoint(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("eval_data")
     return untrained_checkpoint("completion_demo", root / "c.ckpt", [*TINY_NETS, SIZES, "data.batch_size=2",
-                                                                     "data.progress=false", f"paths.data_dir={root}/data"])
+                                                                     "data.prepare.progress=false",
+                                                                     f"paths.data_dir={root}/data"])
 
 
 def _eval(args: list[str], timeout: float = 300) -> subprocess.CompletedProcess:

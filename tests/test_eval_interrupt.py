@@ -37,7 +37,8 @@ def checkpoint(tmp_path_factory) -> Path:
     """An untrained tiny completion checkpoint whose data config (prepared here) is the one evaluated."""
     root = tmp_path_factory.mktemp("eval_interrupt")
     ckpt = untrained_checkpoint("completion_demo", root / "c.ckpt", [*TINY_NETS, SIZES, "data.batch_size=2",
-                                                                     "data.progress=false", f"paths.data_dir={root}/data"])
+                                                                     "data.prepare.progress=false",
+                                                                     f"paths.data_dir={root}/data"])
     build_datamodule(read_checkpoint_meta(ckpt)["data"]).prepare_data()
     return ckpt
 
@@ -112,7 +113,7 @@ def test_ctrl_c_while_testing_after_training_keeps_the_training_and_says_how_to_
     and no test output is written."""
     run, log = tmp_path / "run", tmp_path / "train"
     proc = start_script(["lit3d-train", "experiment=completion_demo", *TINY_NETS, SIZES, "data.batch_size=2",
-                   "data.progress=false", f"paths.data_dir={tmp_path}/data", "trainer.max_epochs=1", "logger=none",
+                   "data.prepare.progress=false", f"paths.data_dir={tmp_path}/data", "trainer.max_epochs=1", "logger=none",
                    "callbacks.progress_bar=null", f"hydra.run.dir={run}"], log)
     def testing():
         return "testing " in ((run / "train.log").read_text() if (run / "train.log").is_file() else "")

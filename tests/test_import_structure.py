@@ -37,6 +37,7 @@ ALLOWED_LOCAL_IMPORTS: tuple[tuple[str, str, str], ...] = (
      "start-up time: Lightning and the nets load when a checkpoint is loaded, not for --help or a bad path"),
     ("lit3d/reconstruct/pipeline.py", "lit3d.canonical.module", "start-up time, as above"),
     ("lit3d/reconstruct/pipeline.py", "lit3d.canonical.checkpoint_upgrade", "start-up time, as above"),
+    ("lit3d/reconstruct/pipeline.py", "lit3d.completion.checkpoint_upgrade", "start-up time, as above"),
     ("lit3d/reconstruct/pipeline.py", "datamodules.completion.voxel_cache",
      "start-up time: torch loads when a shape is completed"),
     ("lit3d/reconstruct/figure.py", "lit3d.render.shaded", "start-up time: the renderer loads for --figure only"),

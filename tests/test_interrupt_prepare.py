@@ -34,7 +34,7 @@ from datamodules.completion.voxel_cache import load_pair
 from lit3d.utils import forced_exit
 from lit3d.utils.stops import StopRequested, check_stop, on_signals, pending
 
-DATA = ["experiment=completion_demo", "data.progress=false"]
+DATA = ["experiment=completion_demo", "data.prepare.progress=false"]
 
 
 def _sizes(train: int, rest: int = 0) -> str:
@@ -194,7 +194,7 @@ def test_ctrl_c_while_lit3d_train_starts_is_one_line(tmp_path, delay):
     """A Ctrl-C before any stage with its own stop (while the command claims its run dir, starts Hydra, imports
     Lightning, builds the model): one line and exit 143, no KeyboardInterrupt traceback (before: Python's)."""
     run, log = tmp_path / "run", tmp_path / "train"
-    proc = start_script(["lit3d-train", "experiment=completion_demo", *TINY_NETS, "data.progress=false", "logger=none",
+    proc = start_script(["lit3d-train", "experiment=completion_demo", *TINY_NETS, "data.prepare.progress=false", "logger=none",
                    f"paths.data_dir={tmp_path}/data", f"hydra.run.dir={run}"], log)
     def locked():
         return (run / ".lit3d.lock").exists() and (delay == 0 or __import__("time").sleep(delay) is None)

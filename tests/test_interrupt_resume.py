@@ -46,7 +46,8 @@ def _phases_override(phases: list[dict]) -> str:
 # so every batch makes 2 optimizer steps (critic + generator)
 COMPLETION = [
     "experiment=completion_demo", "data.sizes={train:16,val:4,test_same:0,test_cross:0,test_unseen:0}",
-    "data.batch_size=4", "data.progress=false", "task.adversarial_start_epoch=0", "task.adversarial=true", "test_after_fit=false",
+    "data.batch_size=4", "data.prepare.progress=false", "task.adversarial.start_epoch=0", "task.adversarial.use=true",
+    "test_after_fit=false",
     "callbacks.progress_bar=null", "+trainer.limit_val_batches=0",
 ]
 COMPLETION_BATCHES_PER_EPOCH = 4
@@ -213,7 +214,7 @@ def test_killed_data_generation_keeps_finished_items_and_resumes_identically(tmp
     import datamodules.completion.sources as completion_sources
     from datamodules.completion.voxel_cache import load_pair
 
-    overrides = ["experiment=completion_demo", "data.progress=false",
+    overrides = ["experiment=completion_demo", "data.prepare.progress=false",
                  "data.sizes={train:120,val:0,test_same:0,test_cross:0,test_unseen:0}"]
     data_dir = tmp_path / "data"
     items_dir = data_dir / "completion_demo" / "items"  # the demo's data_dir

@@ -129,7 +129,8 @@ def checkpoint(tmp_path_factory) -> Path:
 
     root = tmp_path_factory.mktemp("leftovers")
     ckpt = untrained_checkpoint("completion_demo", root / "c.ckpt", [*TINY_NETS, SIZES, "data.batch_size=2",
-                                                                     "data.progress=false", f"paths.data_dir={root}/data"])
+                                                                     "data.prepare.progress=false",
+                                                                     f"paths.data_dir={root}/data"])
     build_datamodule(read_checkpoint_meta(ckpt)["data"]).prepare_data()
     return ckpt
 
@@ -159,7 +160,7 @@ def test_killed_evaluations_leave_nothing_after_the_next_evaluation(tmp_path, ch
 @pytest.mark.slow
 def test_a_checkpoint_save_killed_half_way_leaves_nothing_after_the_resume(tmp_path):
     run = tmp_path / "run"
-    train = ["lit3d-train", "experiment=completion_demo", *TINY_NETS, SIZES, "data.batch_size=2", "data.progress=false",
+    train = ["lit3d-train", "experiment=completion_demo", *TINY_NETS, SIZES, "data.batch_size=2", "data.prepare.progress=false",
              f"paths.data_dir={tmp_path}/data", "trainer.max_epochs=2", "logger=none", "callbacks.progress_bar=null",
              "callbacks.resume_state.every_n_train_batches=1", f"hydra.run.dir={run}"]
     _killed(_run(train, "write:last.ckpt@2"))  # the second save: the first one's last.ckpt is there
@@ -180,7 +181,7 @@ def test_a_killed_export_and_a_killed_preparation_leave_nothing_after_the_next(t
     assert out.is_file() and _leftovers(tmp_path) == []
 
     data = tmp_path / "data"
-    prepare = ["lit3d-data", "experiment=completion_demo", SIZES, "data.progress=false", f"paths.data_dir={data}",
+    prepare = ["lit3d-data", "experiment=completion_demo", SIZES, "data.prepare.progress=false", f"paths.data_dir={data}",
                f"hydra.run.dir={tmp_path}/run"]
     _killed(_run(prepare, "write:manifest.json"))
     assert len(list(data.rglob(".manifest.json.*.tmp"))) == 1 and not list(data.rglob("manifest.json"))

@@ -15,8 +15,8 @@ from datamodules.quality.mos_folder import read_mos_folder
 
 LEVELS = (0.002, 0.006, 0.012, 0.02)
 # a cheap feature table: 32 px renders, one style, two image measures (the quality tests' way)
-TINY_FEATURES = ["data.feature_options.size=32", "data.feature_options.styles=[ceramic_lightbulb]",
-                 "data.feature_options.measures=[mask_ssim,mse]", "data.feature_options.n_samples=500"]
+TINY_FEATURES = ["data.feature_tables.options.size=32", "data.feature_tables.options.styles=[ceramic_lightbulb]",
+                 "data.feature_tables.options.measures=[mask_ssim,mse]", "data.feature_tables.options.n_samples=500"]
 
 
 def write_set(root, shape_column: bool = False, rows: list | None = None):

@@ -19,7 +19,7 @@ def test_profile_script_writes_the_table_on_a_tiny_config(tmp_path):
     assert "## default, batch 2" in text and "Step wall time" in text and "Top 25 ops by self CPU time" in text
     assert "aten::convolution" in text
     # the step switches, one profile each, in one call; a summary row each
-    assert "## gp_bf16, batch 2" in text and "| gp_bf16 | task.gp_precision=bf16 | 2 |" in text
+    assert "## gp_bf16, batch 2" in text and "| gp_bf16 | task.adversarial.gp_precision=bf16 | 2 |" in text
     assert "Failed" not in text
 
 

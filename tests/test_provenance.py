@@ -22,8 +22,9 @@ KEYS = {"lit3d_version", "git_commit", "git_dirty", "manifest_hash", "data_confi
 # a quality run of a few seconds: 2 shapes x 2 distortions x 2 levels, 32 px renders of one style
 QUALITY_RUN = [
     "experiment=quality_demo", "logger=none", "callbacks.progress_bar=null", "+trainer.enable_progress_bar=false",
-    "data.shapes=[blob,torus]", "+data.distortions=[noise,taubin]", "data.n_levels=2", "data.subdivisions=2",
-    "data.feature_options={size:32,styles:[toon],measures:[mask_ssim,mse],n_samples:500}",
+    "data.synth.shapes=[blob,torus]", "+data.synth.distortions=[noise,taubin]", "data.synth.n_levels=2",
+    "data.synth.subdivisions=2",
+    "data.feature_tables.options={size:32,styles:[toon],measures:[mask_ssim,mse],n_samples:500}",
     "task.sfs.epochs=2", "task.sfs.max_features=2", "evaluation.cv=false", "trainer.max_epochs=2",
     "trainer.log_every_n_steps=1",
 ]

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from torch.utils.data import DataLoader
 
+from datamodules.quality.settings import FeatureSettings
 from datamodules.quality.batches import QualityPairDataset
 from lit3d.features.matrix import FeatureMatrix, TargetScaling
 from lit3d.quality.fusion_task import MODEL_FILE, QualityFusionTask
@@ -34,7 +35,8 @@ class Rated(pl.LightningDataModule):
         self.matrix = FeatureMatrix(np.stack([pcqm, y_psnr, junk], 1), ["pcqm", "y_psnr", "d1_psnr"], groups,
                                     target, [f"g/{i}" for i in range(n)], "toy")
         self.name, self.scaling = "toy", TargetScaling(1.0, 5.0, True, "MOS")
-        self.hparams.update({"feature_options": {"size": 64, "cache_dir": "/tmp/x"}, "root": None})
+        self.hparams.update({"root": None})
+        self.feature_settings = FeatureSettings(options={"size": 64, "cache_dir": "/tmp/x"})
         train = ~np.isin(groups, ["T"])
         self.splits = {"train": self.matrix.rows(train), "val": self.matrix.rows(~train),
                        "test": self.matrix.rows(~train)}
@@ -106,7 +108,7 @@ def test_lit3d_train_remakes_the_shipped_quality_model(tmp_path):
     run = tmp_path / "run"
     out = subprocess.run([sys.executable, "-m", "lit3d.cli.train", "experiment=quality_cpcd2_fusion",
                           f"data.root={PHIL}", f"hydra.run.dir={run}", f"paths.data_dir={tmp_path / 'data'}",
-                          "data.feature_workers=2", "logger=[]", "~callbacks.progress_bar"],
+                          "data.feature_tables.workers=2", "logger=[]", "~callbacks.progress_bar"],
                          capture_output=True, text=True, timeout=3000)
     assert out.returncode == 0, out.stderr[-3000:]
     made = json.loads((run / MODEL_FILE).read_text())

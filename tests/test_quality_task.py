@@ -120,8 +120,8 @@ def test_synthetic_learned_score_beats_every_baseline(tmp_path):
     ours .814 vs single best .804, MS-SSIM .773, PSNR .759, MSE .755, Chamfer .615; with the thesis's
     criterion (fit and score on the training set) ours was .763: the margin is small at this scale.
     """
-    dm = QualityDataModule(data_dir=str(tmp_path / "q"), shapes=["blob", "bumpy", "torus", "rock"], n_levels=4,
-                           feature_options=dict(size=48, styles=["ceramic_lightbulb", "metal_lead"], n_samples=2000),
+    dm = QualityDataModule(data_dir=str(tmp_path / "q"), synth={"shapes": ["blob", "bumpy", "torus", "rock"], "n_levels": 4},
+                           feature_tables={"options": dict(size=48, styles=["ceramic_lightbulb", "metal_lead"], n_samples=2000)},
                            seed=0)
     dm.setup()
     fm = dm.matrix

@@ -86,9 +86,9 @@ def reference(inp: np.ndarray, tgt: np.ndarray, target_res: int, input_res: int)
 
 
 def dm_for(root: Path, data_dir: Path, **kw) -> CompletionDataModule:
-    return CompletionDataModule(source="recgan", root=str(root), data_dir=str(data_dir), raw_res=RAW,
+    return CompletionDataModule(source="recgan", root=str(root), data_dir=str(data_dir), recgan={"raw_res": RAW},
                                 target_res=kw.pop("target_res", RAW), input_factor=4, batch_size=2,
-                                progress=False, **kw)
+                                prepare={"progress": False, "skip_bad": kw.pop("skip_bad", False)}, **kw)
 
 
 # ---------------------------------------------------------------- helpers
@@ -227,7 +227,7 @@ def test_missing_root_and_empty_root(tmp_path):
 @pytest.mark.skipif(not SHARED_SAMPLE.is_dir(), reason=f"real 3D-RecGAN++ sample not found at {SHARED_SAMPLE}")
 def test_real_sample_converts_with_expected_counts(tmp_path):
     dm = CompletionDataModule(source="recgan", root=str(SHARED_SAMPLE), data_dir=str(tmp_path / "c"),
-                              target_res=64, input_factor=4, progress=False, batch_size=4)
+                              target_res=64, input_factor=4, prepare={"progress": False}, batch_size=4)
     dm.prepare_data()
     dm.setup()
     info = dm.describe()

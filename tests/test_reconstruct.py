@@ -22,10 +22,10 @@ SHARED = REPO.parent / "shared" / "data"
 TINY_TRAIN = [
     "experiment=completion_demo",
     "data.sizes={train:48,val:8,test_same:4,test_cross:4,test_unseen:4}",
-    "data.categories=[chair]", "task.categories=[chair]",
+    "data.categories.seen=[chair]", "task.categories=[chair]",
     "data.batch_size=8", "callbacks.progress_bar=null", "logger=none",
     "trainer.max_epochs=6", "+trainer.limit_val_batches=1", "+trainer.limit_test_batches=1",
-    "task.adversarial=false", "task.nets.classifier=false", "task.lr_g=3e-3",
+    "task.adversarial.use=false", "task.nets.classifier=false", "task.optimizer.lr_g=3e-3",
     "task.nets.enc_channels=[8,16,32]", "task.nets.latent_dim=256", "task.nets.k=32",
     "task.nets.fixed_latent_dim=256", "task.prior_samples=8",
 ]
@@ -72,7 +72,7 @@ def test_mirrored_training_grids_are_flipped_at_the_network_only():
     mirror images along i: the network sees the flipped grid, the caller gets its own frame back."""
     nets = {"in_res": 16, "out_res": 64}
     sensed = GridGeometry.from_checkpoint({"source": "synth", "target_res": 64, "input_factor": 4,
-                                           "sensor": "recgan"}, nets)
+                                           "render": {"sensor": "recgan"}}, nets)
     real = GridGeometry.from_checkpoint({"source": "recgan", "target_res": 64, "input_factor": 4}, nets)
     assert sensed.mirror_x and real.mirror_x
     assert (sensed.margin, sensed.push) == (0.25, 0.0625)  # 1 and 0.25 voxels of the 256 grid

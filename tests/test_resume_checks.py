@@ -47,7 +47,7 @@ def _no_training(monkeypatch):
 
 @pytest.fixture(scope="module")
 def completion_ckpt(tmp_path_factory):
-    """A checkpoint of TINY (data.sensor=recgan, latent_dim=64)."""
+    """A checkpoint of TINY (data.render.sensor=recgan, latent_dim=64)."""
     return untrained_checkpoint("completion_demo", tmp_path_factory.mktemp("ckpt") / "completion.ckpt", TINY[1:])
 
 
@@ -70,26 +70,26 @@ def run(fn, cfg, capsys) -> tuple[int | str, list[str]]:
 
 # ------------------------------------------------------------------ fault 11: resume compares configs
 def test_changed_data_is_refused_naming_the_keys(completion_ckpt, compose_cfg, capsys, tmp_path):
-    cfg = compose_cfg([*TINY, "data.sensor=ortho", "data.views_per_shape=2", f"ckpt_path={completion_ckpt}"])
+    cfg = compose_cfg([*TINY, "data.render.sensor=ortho", "data.render.views_per_shape=2", f"ckpt_path={completion_ckpt}"])
     code, lines = run(train_cli.train, cfg, capsys)
     assert code == 2 and len(lines) == 1, lines
     assert lines[0].startswith(f"error: {completion_ckpt}: this run's data or architecture differs"), lines
-    assert "data.sensor: recgan in the checkpoint, ortho here" in lines[0]
-    assert "data.views_per_shape: 4 in the checkpoint, 2 here" in lines[0]
+    assert "data.render.sensor: recgan in the checkpoint, ortho here" in lines[0]
+    assert "data.render.views_per_shape: 4 in the checkpoint, 2 here" in lines[0]
     assert "+resume.allow_changes=true" in lines[0]
     assert not (tmp_path / "run" / "config.yaml").exists() and not (tmp_path / "data").exists()
 
 
 def test_allow_changes_takes_them(completion_ckpt, compose_cfg, capsys, tmp_path):
-    cfg = compose_cfg([*TINY, "data.sensor=ortho", "+resume.allow_changes=true", f"ckpt_path={completion_ckpt}"])
+    cfg = compose_cfg([*TINY, "data.render.sensor=ortho", "+resume.allow_changes=true", f"ckpt_path={completion_ckpt}"])
     code, lines = run(train_cli.train, cfg, capsys)
     assert code == "reached", lines
-    assert OmegaConf.load(tmp_path / "run" / "config.yaml").data.sensor == "ortho"
+    assert OmegaConf.load(tmp_path / "run" / "config.yaml").data.render.sensor == "ortho"
 
 
 def test_run_length_and_learning_rate_may_change(completion_ckpt, compose_cfg, capsys):
     """Not refused: extending a run (trainer.max_epochs) and other task settings (logged) are free."""
-    cfg = compose_cfg([*TINY, "trainer.max_epochs=3", "task.lr_g=0.01", "data.num_workers=1",
+    cfg = compose_cfg([*TINY, "trainer.max_epochs=3", "task.optimizer.lr_g=0.01", "data.num_workers=1",
                        f"ckpt_path={completion_ckpt}"])
     code, lines = run(train_cli.train, cfg, capsys)
     assert code == "reached", lines
@@ -100,7 +100,7 @@ def test_edited_run_dir_config_is_refused_not_overwritten(completion_ckpt, compo
     neither taken nor kept. Refused, naming the file and the key; the file is left as edited."""
     cfg = compose_cfg([*TINY, f"ckpt_path={completion_ckpt}"])
     edited = OmegaConf.to_container(cfg, resolve=True)
-    edited["data"]["sensor"] = "ortho"
+    edited["data"]["render"]["sensor"] = "ortho"
     run_dir = tmp_path / "run"
     run_dir.mkdir()
     (run_dir / "config.yaml").write_text(OmegaConf.to_yaml(OmegaConf.create(edited)))
@@ -108,7 +108,7 @@ def test_edited_run_dir_config_is_refused_not_overwritten(completion_ckpt, compo
     code, lines = run(train_cli.train, cfg, capsys)
     assert code == 2 and len(lines) == 1, lines
     assert lines[0].startswith(f"error: {run_dir / 'config.yaml'}: edited since the checkpoint was saved"), lines
-    assert "data.sensor: ortho in config.yaml, recgan in this run" in lines[0]
+    assert "data.render.sensor: ortho in config.yaml, recgan in this run" in lines[0]
     assert (run_dir / "config.yaml").read_bytes() == before
 
 

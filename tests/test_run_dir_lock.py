@@ -19,7 +19,7 @@ from tests.helpers.runs import BIN, CANONICAL, REPO, child_env, start_script
 
 # a few tiny completion items: lit3d-data runs in seconds
 TINY_DATA = ["experiment=completion_demo", "data.sizes={train:2,val:1,test_same:1,test_cross:1,test_unseen:1}",
-             "data.progress=false"]
+             "data.prepare.progress=false"]
 
 
 def _run(args: list[str], timeout: float = 120) -> subprocess.CompletedProcess:

@@ -140,8 +140,9 @@ def quality_ckpt(tmp_path_factory):
     with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         cfg = compose(config_name="train", overrides=[
             "experiment=quality_demo", "logger=none", "callbacks.progress_bar=null", "test_after_fit=false",
-            "+trainer.enable_progress_bar=false", "data.shapes=[blob,bumpy,torus]", "+data.distortions=[noise,taubin]",
-            "data.n_levels=2", "data.subdivisions=2", f"data.feature_options={{{opts}}}", "task.sfs.epochs=2",
+            "+trainer.enable_progress_bar=false", "data.synth.shapes=[blob,bumpy,torus]",
+            "+data.synth.distortions=[noise,taubin]",
+            "data.synth.n_levels=2", "data.synth.subdivisions=2", f"data.feature_tables.options={{{opts}}}", "task.sfs.epochs=2",
             "task.sfs.max_features=2", "evaluation.cv=false", "trainer.max_epochs=2"])
     GlobalHydra.instance().clear()
     with open_dict(cfg):
@@ -230,7 +231,7 @@ def test_ckpt_refuses_other_tasks_and_non_checkpoints(pair, quality_ckpt, capsys
     cases = {
         _edited(quality_ckpt, tmp_path / "canonical.ckpt", canonical):
             "checkpoint is a canonical model, expected a quality model",
-        _edited(quality_ckpt, tmp_path / "custom.ckpt", custom_features): "features of data.feature_fn=",
+        _edited(quality_ckpt, tmp_path / "custom.ckpt", custom_features): "features of data.feature_tables.fn=",
         tmp_path / "notes.ckpt": "not a readable checkpoint",
         tmp_path / "plain.ckpt": "not a lit3d quality checkpoint",
         tmp_path / "missing.ckpt": "checkpoint not found",

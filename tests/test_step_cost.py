@@ -7,6 +7,7 @@ import json
 import pytest
 import torch
 
+from lit3d.completion.checkpoint_upgrade import upgrade_hparams
 from lit3d.completion.module import CompletionTask
 from lit3d.completion.step_cost import completion_step_cost
 from lit3d.utils.step_cost import CostCounter, SavedBytes
@@ -17,7 +18,7 @@ META = torch.device("meta")
 
 def _meta_task(nets: dict, **kw) -> CompletionTask:
     with torch.device(META):
-        return CompletionTask(nets=nets, **kw)
+        return CompletionTask(**upgrade_hparams({"nets": nets, **kw}))  # kw by their short names (gp_every=2)
 
 
 def test_conv3d_flops_are_two_multiply_adds_per_weight_and_output_voxel():

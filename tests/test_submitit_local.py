@@ -26,7 +26,7 @@ REPO = Path(__file__).resolve().parents[1]
 # completion at demo net sizes with tiny latents, one short epoch; data.seed fixed so that the jobs
 # (seeds 1 and 2) share the dataset made once beforehand
 TINY = ["experiment=completion_demo", "data.sizes={train:4,val:2,test_same:2,test_cross:2,test_unseen:2}",
-        "data.batch_size=2", "data.seed=0", "data.progress=false", "task.nets.latent_dim=64", "task.nets.k=16",
+        "data.batch_size=2", "data.seed=0", "data.prepare.progress=false", "task.nets.latent_dim=64", "task.nets.k=16",
         "task.nets.fixed_latent_dim=64", "task.prior_samples=2", "trainer.max_epochs=1",
         "trainer.log_every_n_steps=1", "callbacks.progress_bar=null"]
 METRICS = ["test/same/iou", "test/cross/iou"]

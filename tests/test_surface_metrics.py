@@ -185,9 +185,9 @@ def prepared(tmp_path_factory):
     from datamodules.completion.voxel_cache import load_pair
 
     root = tmp_path_factory.mktemp("folder_eval")
-    dm = CompletionDataModule(data_dir=str(root / "data"), target_res=32, input_factor=4, progress=False,
+    dm = CompletionDataModule(data_dir=str(root / "data"), target_res=32, input_factor=4, prepare={"progress": False},
                               sizes={"train": 0, "val": 0, "test_same": 4, "test_cross": 0, "test_unseen": 0},
-                              categories=["chair", "table"])
+                              categories={"seen": ["chair", "table"]})
     dm.prepare_data()
     items = json.loads((root / "data" / "manifest.json").read_text())["items"]
     targets = {Path(it["file"]).stem: load_pair(root / "data" / it["file"])[1] for it in items}

@@ -26,7 +26,7 @@ def _job(root, name, overrides, metrics):
     (d / ".hydra").mkdir(parents=True)
     (d / ".hydra" / "overrides.yaml").write_text(yaml.safe_dump(overrides))
     (d / ".hydra" / "hydra.yaml").write_text(yaml.safe_dump(
-        {"hydra": {"sweeper": {"params": {"task.adversarial": "true,false", "seed": "0,1,2"}}}}))
+        {"hydra": {"sweeper": {"params": {"task.adversarial.use": "true,false", "seed": "0,1,2"}}}}))
     if metrics is not None:
         (d / "metrics.json").write_text(json.dumps(metrics))
 
@@ -34,14 +34,14 @@ def _job(root, name, overrides, metrics):
 def test_collect_groups_seeds_into_mean_and_sd(tmp_path):
     values = {("true", 0): 0.30, ("true", 1): 0.34, ("true", 2): 0.35, ("false", 0): 0.40, ("false", 1): 0.38}
     for n, ((adv, seed), v) in enumerate(values.items()):
-        _job(tmp_path, str(n), ["experiment=completion_demo", f"task.adversarial={adv}", f"seed={seed}"],
+        _job(tmp_path, str(n), ["experiment=completion_demo", f"task.adversarial.use={adv}", f"seed={seed}"],
              {"test/same/iou": v})
-    _job(tmp_path, "5", ["experiment=completion_demo", "task.adversarial=false", "seed=2"], None)  # failed job
-    text = collect(tmp_path, ["test/same/iou"], {"task.adversarial=true": 0.7})
+    _job(tmp_path, "5", ["experiment=completion_demo", "task.adversarial.use=false", "seed=2"], None)  # failed job
+    text = collect(tmp_path, ["test/same/iou"], {"task.adversarial.use=true": 0.7})
     assert "no metrics.json" in text
     gan = np.array([0.30, 0.34, 0.35])
-    assert f"| task.adversarial=true | 3 | {gan.mean():.3f} ± {gan.std(ddof=1):.3f} | 0.700 |" in text
-    assert f"| task.adversarial=false | 2 | 0.390 ± {np.std([0.40, 0.38], ddof=1):.3f} | – |" in text
+    assert f"| task.adversarial.use=true | 3 | {gan.mean():.3f} ± {gan.std(ddof=1):.3f} | 0.700 |" in text
+    assert f"| task.adversarial.use=false | 2 | 0.390 ± {np.std([0.40, 0.38], ddof=1):.3f} | – |" in text
     assert (tmp_path / "sweep_results.md").read_text() == text
 
 
@@ -51,14 +51,14 @@ def test_every_metric_table_is_one_row_per_metric_not_one_row_of_hundreds(tmp_pa
     keys = [f"test/{split}/{m}/{c}" for split in ("same", "cross") for m in ("iou", "chamfer_l1", "fscore_1pct")
             for c in ("bench", "chair", "couch", "table")]
     for n, seed in enumerate((0, 1, 2)):
-        _job(tmp_path, str(n), ["experiment=completion_demo", "task.adversarial=true", f"seed={seed}"],
+        _job(tmp_path, str(n), ["experiment=completion_demo", "task.adversarial.use=true", f"seed={seed}"],
              {"monitor": "val/iou", "monitored_value": 0.5 + 0.01 * n, **{k: 0.1 * n for k in keys}})
-    _job(tmp_path, "3", ["experiment=completion_demo", "task.adversarial=true", "seed=3"], None)
+    _job(tmp_path, "3", ["experiment=completion_demo", "task.adversarial.use=true", "seed=3"], None)
     text = collect(tmp_path)
     widest = max(line.count("|") for line in text.splitlines())
     assert widest <= 6, widest  # metric + 3 jobs (or job, setting, monitored), not 24 metric columns
-    assert "| job | setting | val/iou (monitored) |" in text and "| 1 | task.adversarial=true, seed=1 | 0.510 |" in text
-    assert "| 3 | task.adversarial=true, seed=3 | no metrics.json |" in text
+    assert "| job | setting | val/iou (monitored) |" in text and "| 1 | task.adversarial.use=true, seed=1 | 0.510 |" in text
+    assert "| 3 | task.adversarial.use=true, seed=3 | no metrics.json |" in text
     assert "| test/same/iou/chair | 0.000 | 0.100 | 0.200 |" in text
     assert "| test/same/iou/chair | 0.100 ± 0.100 |" in text  # over seeds, one row per metric too
 

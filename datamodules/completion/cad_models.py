@@ -193,7 +193,7 @@ def load_model_mesh(model: CadModel, up_axis: str = "y"):
     if up_axis == "z":
         v = v[:, [0, 2, 1]] * [1.0, 1.0, -1.0]
     elif up_axis != "y":
-        raise DataError(f"data.up_axis={up_axis!r}: expected 'y' or 'z'")
+        raise DataError(f"data.meshes.up_axis={up_axis!r}: expected 'y' or 'z'")
     if model.rotation is not None:
         v = v @ np.asarray(model.rotation, np.float64).reshape(3, 3).T
     if model.size is not None:

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import logging
 from collections import Counter, defaultdict
-from collections.abc import Sequence
+from collections.abc import Mapping
 from pathlib import Path
 
 import lightning.pytorch as pl
@@ -33,6 +33,8 @@ from datamodules.completion.catalogues import present_packages
 from datamodules.completion.meshes import MESH_SOURCES, MeshSpec, folder_plan_categories, prepare_mesh_items
 from datamodules.completion.plan import DEFAULT_SIZES, DataConfigError, ItemSpec, check_sizes
 from datamodules.completion.recgan import RECGAN_RAW_RES
+from datamodules.completion.settings import (CategorySettings, MeshSettings, PrepareSettings, RecganSettings,
+                                             RenderSettings, parse)
 from datamodules.completion.sources import prepare_recgan_items, prepare_synth_items
 from datamodules.completion.voxel_cache import DATA_SPLITS, TEST_SPLITS, VoxelPairDataset, load_pair
 from datamodules.loaders import evaluation_loader
@@ -52,7 +54,6 @@ SYNTH_VERSION = "1"
 RECGAN_VERSION = "1"
 MESHES_VERSION = "1"
 DATA_SOURCES = ("synth", "recgan") + MESH_SOURCES
-DEFAULT_MODEL_SPLIT = {"train": 0.7, "val": 0.1, "test": 0.2}
 
 __all__ = ["DATA_SOURCES", "DEFAULT_SIZES", "CompletionDataModule", "DataConfigError"]
 
@@ -61,87 +62,76 @@ class CompletionDataModule(pl.LightningDataModule):
     """Shape-completion DataModule (see module docstring for the batch layout).
 
     Args:
-        source: "synth" (procedural) or "recgan" (the 3D-RecGAN++ release at ``root``).
+        source: "synth" (procedural), "recgan" (the 3D-RecGAN++ release at ``root``) or a mesh source.
         data_dir: cache folder (manifest.json + items/<split>/*.npz).
-        root: raw 3D-RecGAN++ folder (source=recgan only).
+        root: raw 3D-RecGAN++ folder (source=recgan) or the models' folder (mesh sources).
         target_res: R, the target grid (64 demo, 256 paper).
         input_factor: r = R / input_factor (4: 64 -> 16, 256 -> 64).
         sizes: synthetic items per split (train, val, test_same, test_cross, test_unseen,
             test_unseen_cross = unseen categories from the cross-view set, 0 when absent); splits
             left out keep the demo defaults (240/40/40/40/40); 0 drops a split.
-        categories: seen categories used for train/val/test_same/test_cross (None: all of
-            :data:`~lit3d.utils.shapenet_categories.SEEN_CATEGORIES`; with ``source="meshes"`` every
-            category folder of ``root`` but the unseen ones, thesis names or not). Labels index
-            ``label_categories``: that list, then the seen user categories.
-        unseen_categories: categories of test_unseen / test_unseen_cross (None: all unseen categories).
-        views_per_shape: synthetic views per shape instance.
-        unseen_view_set: view set of synthetic test_unseen ("same" or "cross").
-        val_fraction: recgan: share of train shape ids held out as val.
-        raw_res: recgan: grids are centre-padded/cropped to raw_res^3 (null: the release's 256,
-            ``RECGAN_RAW_RES``).
-        skip_bad: recgan: skip bad files with a warning (count in describe()) instead of raising.
-        procedural_share: mesh sources: that share of the training items (drawn per item, fixed by the seed)
-            made from procedural shapes instead of real models (a mix); validation and test stay real.
-        compress: zlib-compress the packed bits (smaller; measured about as fast to load).
-        render_factor: synth depth image size = render_factor * target_res.
-        sensor: synth: camera, handedness and noise of the 2.5D input (:mod:`lit3d.sensing.sensor`):
-            "ortho" (orthographic, noise-free), "recgan" (3D-RecGAN++'s perspective camera and
-            handedness, noise calibrated on its released sample), or a dict of Sensor fields.
-        progress: tqdm progress bar during preparation.
+        categories: ``{seen, unseen}`` (:class:`~datamodules.completion.settings.CategorySettings`). Labels
+            index ``label_categories``: the seen thesis categories, then the seen user categories.
+        render: ``{views_per_shape, unseen_view_set, render_factor, sensor}``
+            (:class:`~datamodules.completion.settings.RenderSettings`).
+        recgan: ``{val_fraction, raw_res}`` (:class:`~datamodules.completion.settings.RecganSettings`).
+        meshes: ``{model_split, min_models, up_axis, procedural_share}``
+            (:class:`~datamodules.completion.settings.MeshSettings`).
+        prepare: ``{workers, progress, skip_bad, compress}``
+            (:class:`~datamodules.completion.settings.PrepareSettings`).
+    A data config of the flat layout of old: :func:`datamodules.completion.flat_config.upgrade_data_config`.
     """
 
     test_split_names: list[str]
 
     def __init__(self, *, target_res: int, source: str = "synth", data_dir: str = "data/completion_synth",
                  root: str | None = None, input_factor: int = 4, sizes: dict | None = None,
-                 categories: Sequence[str] | None = None, unseen_categories: Sequence[str] | None = None,
-                 batch_size: int = 4, num_workers: int = 0, seed: int = 0, skip_bad: bool = False,
-                 pin_memory: bool = False, views_per_shape: int = 4, unseen_view_set: str = "same",
-                 val_fraction: float = 0.1, raw_res: int | None = None, compress: bool = True, render_factor: int = 2,
-                 progress: bool = True, sensor: str | dict = "ortho", model_split: dict | None = None,
-                 min_models: int = 8, up_axis: str = "y", prepare_workers: int = 0,
-                 procedural_share: float = 0.0):
+                 categories: Mapping | None = None, batch_size: int = 4, num_workers: int = 0, seed: int = 0,
+                 pin_memory: bool = False, render: Mapping | None = None, recgan: Mapping | None = None,
+                 meshes: Mapping | None = None, prepare: Mapping | None = None):
         super().__init__()
         if source not in DATA_SOURCES:
             raise DataConfigError(f"data.source={source!r}: expected one of {', '.join(DATA_SOURCES)}")
         if target_res % input_factor:
             raise DataConfigError(f"data.target_res={target_res} is not divisible by data.input_factor={input_factor}")
+        cats = parse(CategorySettings, categories, "categories")
+        render, recgan = parse(RenderSettings, render, "render"), parse(RecganSettings, recgan, "recgan")
+        meshes, prepare = parse(MeshSettings, meshes, "meshes"), parse(PrepareSettings, prepare, "prepare")
         self.source, self.data_dir = source, Path(data_dir)
         self.root = None if root in (None, "") else Path(root)
+        seen, unseen = cats.seen, cats.unseen
         if source == "meshes":  # a folder of your own: its category folders, thesis names or not
-            categories, unseen_categories = folder_plan_categories(self.root, categories, unseen_categories)
+            seen, unseen = folder_plan_categories(self.root, seen, unseen)
         try:
-            categories, unseen_categories = (tuple(categories), tuple(unseen_categories)) if source == "meshes" else (
-                select_seen_categories(categories), select_unseen_categories(unseen_categories))
-        except ValueError as exc:
-            raise DataConfigError(f"data.{exc}") from None
+            seen, unseen = (tuple(seen), tuple(unseen)) if source == "meshes" else (
+                select_seen_categories(seen), select_unseen_categories(unseen))
+        except ValueError as exc:  # "categories: ..." or "unseen_categories: ..."
+            what, _, why = str(exc).partition(": ")
+            raise DataConfigError(f"data.categories.{'unseen' if what.startswith('unseen') else 'seen'}: {why}") from None
         self.target_res, self.input_factor = int(target_res), int(input_factor)
         self.input_res = self.target_res // self.input_factor
         self.sizes = {**DEFAULT_SIZES, **check_sizes(sizes)}
-        self.categories, self.unseen_categories = tuple(categories), tuple(unseen_categories)
+        self.categories, self.unseen_categories = tuple(seen), tuple(unseen)
         # class labels: the thesis's seen categories, then the other seen ones (user categories), in plan order
         self.label_categories = SEEN_CATEGORIES + tuple(c for c in self.categories if c not in SEEN_CATEGORIES)
         self.user_categories = tuple(c for c in self.categories + self.unseen_categories
                                      if c not in SEEN_CATEGORIES + UNSEEN_CATEGORIES)
         self.batch_size, self.num_workers = int(batch_size), int(num_workers)
-        self.seed, self.skip_bad, self.pin_memory = int(seed), bool(skip_bad), bool(pin_memory)
-        self.views_per_shape, self.unseen_view_set = int(views_per_shape), unseen_view_set
-        self.val_fraction, self.raw_res = float(val_fraction), int(raw_res or RECGAN_RAW_RES)
-        self.compress, self.render_factor, self.progress = bool(compress), int(render_factor), bool(progress)
+        self.seed, self.skip_bad, self.pin_memory = int(seed), bool(prepare.skip_bad), bool(pin_memory)
+        self.views_per_shape, self.unseen_view_set = int(render.views_per_shape), render.unseen_view_set
+        self.val_fraction, self.raw_res = float(recgan.val_fraction), int(recgan.raw_res or RECGAN_RAW_RES)
+        self.compress, self.render_factor = bool(prepare.compress), int(render.render_factor)
+        self.progress = bool(prepare.progress)
         if source == "recgan" and self.raw_res % self.target_res:
-            raise DataConfigError(f"data.target_res={target_res} must divide data.raw_res={raw_res}")
+            raise DataConfigError(f"data.target_res={target_res} must divide data.recgan.raw_res={recgan.raw_res}")
         try:
-            self.sensor = make_sensor(dict(sensor) if hasattr(sensor, "keys") else sensor)
+            self.sensor = make_sensor(render.sensor)
         except (TypeError, ValueError) as exc:
-            raise DataConfigError(f"data.sensor: {exc}") from None
-        self.model_split = {str(k): float(v) for k, v in dict(model_split or DEFAULT_MODEL_SPLIT).items()}
-        if set(self.model_split) != set(DEFAULT_MODEL_SPLIT) or min(self.model_split.values()) < 0:
-            raise DataConfigError(f"data.model_split={dict(model_split)}: expected fractions >= 0 for train, val and test")
-        self.min_models, self.up_axis = int(min_models), str(up_axis)
-        self.procedural_share = float(procedural_share)
-        if not 0.0 <= self.procedural_share <= 1.0:
-            raise DataConfigError(f"data.procedural_share={procedural_share}: expected a share in [0, 1]")
-        self.prepare_workers = int(prepare_workers)
+            raise DataConfigError(f"data.render.sensor: {exc}") from None
+        self.model_split = meshes.model_split
+        self.min_models, self.up_axis = int(meshes.min_models), str(meshes.up_axis)
+        self.procedural_share = float(meshes.procedural_share)
+        self.prepare_workers = int(prepare.workers)
         self.manifest: dict | None = None
         self.datasets: dict[str, VoxelPairDataset] = {}
         self.test_split_names = []

@@ -75,7 +75,7 @@ def folder_plan_categories(root: Path | None, categories=None, unseen_categories
 
     ``categories`` None: every category folder under ``root`` (:func:`~datamodules.completion.cad_models.category_folders`)
     but the unseen ones; ``unseen_categories`` None: the folders of the thesis's unseen categories. Given
-    names must be thesis categories or folders (a user category made unseen: ``data.unseen_categories=[animal]``).
+    names must be thesis categories or folders (a user category made unseen: ``data.categories.unseen=[animal]``).
 
     Raises:
         DataConfigError: no root, or a given name that is neither (naming it and the folders).
@@ -84,7 +84,7 @@ def folder_plan_categories(root: Path | None, categories=None, unseen_categories
         raise DataConfigError("data.source=meshes needs a folder: set data.root=PATH")
     found = list(category_folders(root))
     known = set(found) | set(SEEN_CATEGORIES) | set(UNSEEN_CATEGORIES)
-    for key, chosen in (("categories", categories), ("unseen_categories", unseen_categories)):
+    for key, chosen in (("categories.seen", categories), ("categories.unseen", unseen_categories)):
         bad = [str(c) for c in chosen or () if str(c) not in known]
         if bad:
             raise DataConfigError(f"data.{key}: {bad} are neither thesis categories nor category folders of {root} "
@@ -121,7 +121,7 @@ def attach_models(items: list[dict], models: list[CadModel], seen: tuple[str, ..
     for cat in sorted({it["category"] for it in items}):
         n = len(by_cat.get(cat, []))
         if n < min_models and not (keep_small and n > 0):
-            fallback[cat] = f"procedural ({n} real models < data.min_models={min_models})"
+            fallback[cat] = f"procedural ({n} real models < data.meshes.min_models={min_models})"
     pools: dict[tuple[str, str], list[str]] = {}
     for cat, ms in by_cat.items():
         for m in sorted(ms, key=lambda m: m.model_id):
@@ -140,7 +140,7 @@ def attach_models(items: list[dict], models: list[CadModel], seen: tuple[str, ..
             continue  # a small category of your own: no model in this split group
         if not pool:
             raise DataError(f"category {cat}: no {group} models after the model split; "
-                            f"raise data.min_models or change data.model_split")
+                            f"raise data.meshes.min_models or change data.meshes.model_split")
         model_id = pool[it["shape_index"] % len(pool)]
         out.append({**it, "shape_source": "model", "model_id": model_id})
     return out, fallback
@@ -155,7 +155,7 @@ def small_category_notes(planned: list[dict], kept: list[dict], models: list[Cad
     for cat in sorted(c for c in real if counts[c] < min_models):
         lost = Counter(it["split"] for it in planned if it["category"] == cat) - Counter(
             it["split"] for it in kept if it["category"] == cat)
-        what = f"{counts[cat]} models (fewer than data.min_models={min_models}): its own models are used"
+        what = f"{counts[cat]} models (fewer than data.meshes.min_models={min_models}): its own models are used"
         if lost:
             what += (", no model left for " + ", ".join(f"{s} ({n} items left out)" for s, n in sorted(lost.items())))
         notes[cat] = what
@@ -232,7 +232,7 @@ def prepare_mesh_items(builder: CacheBuilder, spec: ItemSpec, mesh: MeshSpec, sk
         log.warning("data.source=%s: category %s has %s", mesh.source, cat, what)
     if spec.sizes.get("train") and not any(it["split"] == "train" for it in items):
         raise DataError(f"{mesh.root}: no training item left (categories {', '.join(spec.categories)}); "
-                        "add models or lower data.min_models")
+                        "add models or lower data.meshes.min_models")
     by_id = {m.model_id: m for m in models}
     todo = sorted((it for it in items if not builder.has(it["file"])), key=lambda it: (it.get("model_id", ""), it["file"]))
     jobs, chunk = [], []
@@ -261,7 +261,7 @@ def prepare_mesh_items(builder: CacheBuilder, spec: ItemSpec, mesh: MeshSpec, sk
         check_stop()  # Ctrl-C or SIGTERM: stop after this job (lit3d.utils.stops)
     bar.close()
     if bad:
-        log.warning("skipped %d item(s) of unreadable models (data.skip_bad=true)", len(bad))
+        log.warning("skipped %d item(s) of unreadable models (data.prepare.skip_bad=true)", len(bad))
     items = [it for it in items if it["file"] not in bad]
     used = sorted({it["model_id"] for it in items if it.get("model_id")})
     kept = [by_id[i] for i in used]

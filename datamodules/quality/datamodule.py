@@ -3,7 +3,7 @@
 Two sources:
 
 - ``source="synth"`` (default, no download): procedural reference shapes (plus every
-  mesh in ``user_mesh_dir``) x distortion types x levels (``datamodules.quality.distortions``).
+  mesh in ``synth.user_mesh_dir``) x distortion types x levels (``datamodules.quality.distortions``).
   The target is the **ordinal severity score** of the distortion level within its
   type, ``(level + 1) / n_levels`` in (0, 1]: a rank that the generator knows, *not*
   a human opinion score. It only says "level 3 of smoothing is worse than level 2 of
@@ -24,11 +24,11 @@ the dataset's published range (:class:`lit3d.features.matrix.TargetScaling`).
 (atomic, resumable; ``manifest.json`` with generator, version, config hash and the sha256 of
 every item file): the distorted meshes (synth only), one feature table per pair
 (``features/<shape>__<name>.json``: ``name -> float``, :mod:`datamodules.quality.features`,
-computed by ``lit3d.features.table`` in ``feature_workers`` processes), then ``matrix.npz`` (the
+computed by ``lit3d.features.table`` in ``feature_tables.workers`` processes), then ``matrix.npz`` (the
 :class:`FeatureMatrix`) and ``pairs.json``. ``setup()`` reads it and splits by group:
-``test_shapes`` / ``val_shapes`` are held out, the rest trains (``[]``: none held out; ``None``: the
-last group, and for validation the one before it). The groups (``groups``) are the reference
-shapes, or with ``groups="family"`` the distortion families of CPCD2-style stimulus names
+``split.test_shapes`` / ``split.val_shapes`` are held out, the rest trains (``[]``: none held out; ``None``: the
+last group, and for validation the one before it). The groups (``split.groups``) are the reference
+shapes, or with ``split.groups="family"`` the distortion families of CPCD2-style stimulus names
 (``<cloud>_<family>_<n>``: :func:`datamodules.quality.cpcd2.stimulus_family`).
 
 Batches (:mod:`datamodules.quality.batches`): ``{"x": (B, F) float32 all features, "y": (B,)
@@ -69,7 +69,8 @@ from datamodules.quality.features import (  # noqa: F401  (re-exported)
 from datamodules.quality.mos import read_mos_dataset
 from datamodules.quality.mos_folder import read_mos_folder
 from datamodules.quality.preview import mesh_pairs_png
-from datamodules.quality.distortions import DISTORTIONS, LEVELS, distort, severity
+from datamodules.quality.settings import FeatureSettings, SplitSettings, SynthSettings, parse
+from datamodules.quality.distortions import LEVELS, distort, severity
 from datamodules.quality.quality_shapes import (  # noqa: F401  (re-exported)
     MESH_SUFFIXES,
     PROCEDURAL_SHAPES,
@@ -95,13 +96,7 @@ class QualityDataModule(pl.LightningDataModule):
         seed: int = 0,
         batch_size: int = 3,
         num_workers: int = 0,
-        # synthetic set
-        shapes: Sequence[str] = PROCEDURAL_SHAPES,
-        user_mesh_dir: str | None = None,
-        distortions: Sequence[str] = DISTORTIONS,
-        levels: Mapping[str, Sequence[float]] | None = None,
-        n_levels: int | None = None,
-        subdivisions: int = 4,
+        synth: Mapping | None = None,
         # real sets
         root: str | None = None,
         spreadsheet: str | None = None,
@@ -109,18 +104,17 @@ class QualityDataModule(pl.LightningDataModule):
         score_range: Sequence[float | None] | None = None,
         higher_is_better: bool | None = None,
         skip_bad: bool = False,
-        # features
-        feature_fn: str | None = None,
-        feature_options: Mapping[str, Any] | None = None,
-        feature_workers: int = 0,
-        # splits
-        test_shapes: Sequence[str] | None = None,
-        val_shapes: Sequence[str] | None = None,
-        groups: str = "shape",
+        feature_tables: Mapping | None = None,
+        split: Mapping | None = None,
         name: str | None = None,
     ):
+        """``synth``, ``feature_tables``, ``split``: the nodes of :mod:`datamodules.quality.settings` (None: the
+        defaults); a data config of the flat layout of old: :func:`datamodules.quality.flat_config.upgrade_data_config`."""
         super().__init__()
         self.save_hyperparameters()
+        self.synth_settings = parse(SynthSettings, synth, "synth")
+        self.feature_settings = parse(FeatureSettings, feature_tables, "feature_tables")
+        self.split_settings = parse(SplitSettings, split, "split")
         self.data_dir = Path(data_dir)
         self.source = source
         self.name = name or source
@@ -135,7 +129,7 @@ class QualityDataModule(pl.LightningDataModule):
 
     # ------------------------------------------------------------ config
     def _levels(self) -> dict[str, list[float]]:
-        hp = self.hparams
+        hp = self.synth_settings
         table = {k: list(v) for k, v in (hp.levels or LEVELS).items()}
         unknown = [d for d in hp.distortions if d not in table]
         if unknown:
@@ -149,12 +143,12 @@ class QualityDataModule(pl.LightningDataModule):
 
     def manifest_config(self) -> dict:
         """Everything that changes the cached files (hashed into the cache folder's name)."""
-        hp = self.hparams
-        cfg = {"source": self.source, "feature_fn": hp.feature_fn, "feature_options": dict(hp.feature_options or {})}
+        hp, feats, synth = self.hparams, self.feature_settings, self.synth_settings
+        cfg = {"source": self.source, "feature_fn": feats.fn, "feature_options": dict(feats.options)}
         if self.source == "synth":
-            cfg.update({"shapes": list(hp.shapes), "user_mesh_dir": hp.user_mesh_dir, "levels": self._levels(),
-                        "subdivisions": hp.subdivisions, "seed": int(hp.seed)})
-            if hp.user_mesh_dir:  # user meshes merged by position (caches of split ones are stale)
+            cfg.update({"shapes": list(synth.shapes), "user_mesh_dir": synth.user_mesh_dir, "levels": self._levels(),
+                        "subdivisions": synth.subdivisions, "seed": int(hp.seed)})
+            if synth.user_mesh_dir:  # user meshes merged by position (caches of split ones are stale)
                 cfg["user_meshes"] = "merged_by_position"
         else:
             cfg.update({"root": str(hp.root), "spreadsheet": hp.spreadsheet, "sheet": hp.sheet,
@@ -180,10 +174,10 @@ class QualityDataModule(pl.LightningDataModule):
     # ------------------------------------------------------------ pairs
     def _synth_pairs(self) -> list[dict]:
         """Write reference + distorted meshes (atomic, skip existing); one record per pair."""
-        hp = self.hparams
-        refs = {s: procedural_shape(s, hp.subdivisions, hp.seed) for s in hp.shapes}
-        if hp.user_mesh_dir:
-            for k, m in load_user_meshes(hp.user_mesh_dir).items():
+        hp, synth = self.hparams, self.synth_settings
+        refs = {s: procedural_shape(s, synth.subdivisions, hp.seed) for s in synth.shapes}
+        if synth.user_mesh_dir:
+            for k, m in load_user_meshes(synth.user_mesh_dir).items():
                 if k in refs:
                     raise ValueError(f"user mesh '{k}' has the name of a procedural shape; rename the file")
                 refs[k] = m
@@ -238,10 +232,10 @@ class QualityDataModule(pl.LightningDataModule):
             scaling = TargetScaling(0.0, 1.0, False, SEVERITY_NAME)
         else:
             pairs, scaling = self._real_pairs()
-        hp = self.hparams
+        feats = self.feature_settings
         builder.total_items = len(pairs)  # feature tables: what a Ctrl-C's stop line counts
-        tables, pairs, skipped = write_feature_tables(builder.root, pairs, hp.feature_fn, hp.feature_options,
-                                                      int(hp.feature_workers), bool(hp.skip_bad))
+        tables, pairs, skipped = write_feature_tables(builder.root, pairs, feats.fn, feats.options,
+                                                      int(feats.workers), bool(self.hparams.skip_bad))
         self.skipped += skipped
         raw = np.array([p["score"] for p in pairs], dtype=np.float64)
         fm = FeatureMatrix.from_tables(tables, [p["shape"] for p in pairs], scaling.forward(raw),
@@ -276,15 +270,14 @@ class QualityDataModule(pl.LightningDataModule):
         if self.matrix is not None:
             return
         fm = self.load_matrix()
-        if self.hparams.groups == "family":
+        split = self.split_settings
+        if split.groups == "family":
             fm = FeatureMatrix(fm.X, fm.names, np.array([stimulus_family(i.split("/")[-1]) for i in fm.items]),
                                fm.target, fm.items, fm.dataset, fm.target_name)
-        elif self.hparams.groups != "shape":
-            raise DataError(f"data.groups must be 'shape' or 'family', got {self.hparams.groups!r}")
         self.matrix = fm
         names = fm.shape_names
-        test = list(self.hparams.test_shapes) if self.hparams.test_shapes is not None else names[-1:]
-        val = list(self.hparams.val_shapes) if self.hparams.val_shapes is not None else (
+        test = list(split.test_shapes) if split.test_shapes is not None else names[-1:]
+        val = list(split.val_shapes) if split.val_shapes is not None else (
             [s for s in names if s not in test][-1:] if len(names) > 2 else [])
         for s in test + val:
             if s not in names:

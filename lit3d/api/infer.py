@@ -223,7 +223,7 @@ def _feature_config(model: QualityPredictor | None, size: int | None, styles) ->
     if model is None or model.feature_options is None:
         return FeatureConfig.rendered(size or SCORE_SIZE, styles)
     if model.feature_fn:
-        raise InputError(f"{model.path}: the model was trained on features of data.feature_fn={model.feature_fn}, "
+        raise InputError(f"{model.path}: the model was trained on features of data.feature_tables.fn={model.feature_fn}, "
                          "not the renderer's feature table")
     if size is not None or styles is not None:
         raise InputError(f"{model.path}: size/styles are the model's own (it was trained on "

@@ -34,8 +34,8 @@ ALLOW_KEY = "resume.allow_changes"
 COMPARED = ("data.*", "task._target_", "task.arch", "task.net", "task.net.*", "task.nets", "task.nets.*",
             "task.net.lfe.use", "task.net.msfe.use", "task.features", "task.identity.classes")
 # data keys that change how the data is loaded or where it lies, not which items it holds
-LOADING = ("data.num_workers", "data.pin_memory", "data.progress", "data.prepare_workers", "data.feature_workers",
-           "data.persistent_workers", "data.data_dir")
+LOADING = ("data.num_workers", "data.pin_memory", "data.prepare.progress", "data.prepare_workers", "data.prepare.workers",
+           "data.feature_tables.workers", "data.persistent_workers", "data.data_dir")
 TASK_INFO = ("name", "monitor", "monitor_mode")  # task_meta() puts cfg.task_info beside cfg.task
 
 

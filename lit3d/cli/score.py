@@ -336,7 +336,7 @@ def _model_features(args, cli_cfg):
 
     predictor = load_predictor(args.ckpt)
     if predictor.feature_fn:
-        raise ValueError(f"{args.ckpt}: the model was trained on features of data.feature_fn="
+        raise ValueError(f"{args.ckpt}: the model was trained on features of data.feature_tables.fn="
                          f"{predictor.feature_fn}, not the renderer's feature table lit3d-score computes")
     if predictor.feature_options is None:
         return predictor, cli_cfg, ["the checkpoint does not record its feature options; features computed "

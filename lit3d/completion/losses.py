@@ -14,7 +14,7 @@ import torch.nn.functional as F
 
 from lit3d.utils.meta_autocast import MetaAutocast
 
-# task.gp_precision: the dtype of the gradient penalty's critic pass (gradient_penalty)
+# task.adversarial.gp_precision: the dtype of the gradient penalty's critic pass (gradient_penalty)
 PENALTY_PRECISIONS = ("fp32", "bf16")
 
 
@@ -52,7 +52,7 @@ def weighted_bce_with_logits(logits: torch.Tensor, target: torch.Tensor, alpha: 
 
 
 def resolve_loss_scale(loss_scale: float | str, out_res: int) -> float:
-    """``task.loss_scale`` as a number: ``"voxels"`` -> ``out_res**3`` (the weighted BCE summed over
+    """``task.optimizer.loss_scale`` as a number: ``"voxels"`` -> ``out_res**3`` (the weighted BCE summed over
     a shape's voxels, averaged over the batch), a number -> itself (1 = the per-voxel mean).
 
     Raises:
@@ -60,10 +60,10 @@ def resolve_loss_scale(loss_scale: float | str, out_res: int) -> float:
     """
     if isinstance(loss_scale, str):
         if loss_scale != "voxels":
-            raise ValueError(f"task.loss_scale={loss_scale!r}: use 'voxels' or a positive number")
+            raise ValueError(f"task.optimizer.loss_scale={loss_scale!r}: use 'voxels' or a positive number")
         return float(out_res) ** 3
     if not float(loss_scale) > 0:
-        raise ValueError(f"task.loss_scale={loss_scale!r} must be positive")
+        raise ValueError(f"task.optimizer.loss_scale={loss_scale!r} must be positive")
     return float(loss_scale)
 
 

@@ -6,10 +6,10 @@ Batches are dicts from ``datamodules.completion``:
     label  (B,) int64                      index into ``categories`` or -1 (unseen)
     category list[str]                     category name (seen or unseen)
 
-One training step = ``critic_steps`` critic updates, then one generator update
+One training step = ``adversarial.critic_steps`` critic updates, then one generator update
 (generator + auxiliary classifier share the generator optimiser). The critic's gradient penalty
-runs on every ``gp_every``-th critic update, weighted ``gp_every`` times (1 = every update);
-``critic_concat`` scores real and fake shapes in one critic pass; ``gp_precision`` runs the penalty's
+runs on every ``adversarial.gp_every``-th critic update, weighted ``gp_every`` times (1 = every update);
+``adversarial.critic_concat`` scores real and fake shapes in one critic pass; ``adversarial.gp_precision`` runs the penalty's
 critic pass in bf16 (:func:`lit3d.completion.losses.gradient_penalty`); ``compile_step`` runs the critic and
 generator objectives through ``torch.compile`` (:mod:`lit3d.completion.compiled_step`). The parts of the step
 (:meth:`CompletionTask.critic_objective`, :meth:`CompletionTask.generator_objective`) are what
@@ -34,20 +34,21 @@ import lightning.pytorch as pl
 import torch
 import torch.nn.functional as F
 
+from lit3d.completion.checkpoint_upgrade import EVALUATION_LEGACY
 from lit3d.completion.compiled_step import CompiledStep
-from lit3d.completion.losses import PENALTY_PRECISIONS, resolve_loss_scale
+from lit3d.completion.losses import resolve_loss_scale
 from lit3d.completion.objectives import CompletionObjectives
 from lit3d.metrics.voxel import VoxelSweepMetrics, best_threshold, default_thresholds
 from lit3d.completion.nets import build_completion_nets, validate_net_config
 from lit3d.completion.paired import PairedSamples, extrude_silhouette
 from lit3d.completion.previews import log_validation_previews
 from lit3d.completion.prior import OccupancyPrior
+from lit3d.completion.settings import AdversarialSettings, LossWeights, OptimizerSettings, PanelSettings, parse
 from lit3d.completion.split_metrics import split_values, threshold_index
 from lit3d.completion.summary import summarize_completion
 from lit3d.completion.surface_eval import SurfaceTestMetrics
 from lit3d.metrics.gathered import compute_if_updated
 from lit3d.callbacks.nonfinite import NonFiniteLossError, guard_step, validate_mode  # noqa: F401 (re-exported)
-from lit3d.utils.evaluation import legacy_settings
 from lit3d.utils.data_hooks import HasLabelCategories
 from lit3d.utils.shapenet_categories import SEEN_CATEGORIES, select_seen_categories, select_unseen_categories
 
@@ -57,11 +58,6 @@ log = logging.getLogger("lit3d.completion")
 TEST_SPLIT_KEYS = ("same", "cross", "unseen", "unseen_cross")
 # predictions: the model, the partial input upsampled, the per-voxel training prior
 PREDICTION_SOURCES = ("model", "input", "prior", "extrusion")
-
-
-# the evaluation settings (the config's ``evaluation`` node, :mod:`lit3d.completion.evaluator`) that checkpoints
-# written before that node hold among the task's hyper-parameters, with the constructor's defaults then
-EVALUATION_LEGACY = {"surface": None}
 
 
 def split_key(name: str) -> str:
@@ -80,43 +76,28 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
     def __init__(
         self,
         nets: dict,
-        critic_steps: int = 1,
-        lr_g: float = 1e-4,
-        lr_d: float = 1e-4,
-        betas: Sequence[float] = (0.9, 0.999),
-        eps: float = 1e-8,
-        loss_scale: float | str = 1.0,
-        alpha: float = 0.35,
-        gamma: float = 0.8,
-        zeta: float = 0.01,
-        gp_lambda: float = 10.0,
-        gp_every: int = 1,
-        critic_concat: bool = False,
-        gp_precision: str = "fp32",
+        optimizer: dict | None = None,
+        loss: dict | None = None,
+        adversarial: dict | None = None,
+        panels: dict | None = None,
         compile_step: bool = False,
-        stage_weight: float = 0.0,
-        adversarial: bool = True,
-        adversarial_start_epoch: int = 0,
         categories: Sequence[str] | None = None,
         unseen_categories: Sequence[str] | None = None,
         prior_samples: int = 256,
-        image_every_n_epochs: int = 1,
-        mesh_every_n_epochs: int = 0,
         channels_last: bool = False,
         on_nonfinite: str = "raise",
-        **legacy_evaluation,
     ):
-        """``legacy_evaluation``: the evaluation settings (:data:`EVALUATION_LEGACY`, ``surface``) that
-        checkpoints written before they got their own config node hold among these hyper-parameters;
-        accepted and ignored (``lit3d-eval`` reads them from the checkpoint), any other keyword is a ValueError."""
+        """``nets``: the nets' sizes (:func:`lit3d.completion.nets.validate_net_config`); ``optimizer``, ``loss``,
+        ``adversarial``, ``panels``: the nodes of :mod:`lit3d.completion.settings` (None: the defaults).
+        A checkpoint's hyper-parameters of the flat layout of old (and its evaluation settings, ``surface``):
+        :func:`lit3d.completion.checkpoint_upgrade.upgrade_hparams`."""
         super().__init__()
-        legacy_settings(type(self).__name__, legacy_evaluation, EVALUATION_LEGACY)
-        self.save_hyperparameters(ignore=list(legacy_evaluation))
+        self.save_hyperparameters()
         validate_mode(on_nonfinite)
-        if int(gp_every) < 1:
-            raise ValueError(f"task.gp_every={gp_every}: the gradient penalty runs every N >= 1 critic updates")
-        if gp_precision not in PENALTY_PRECISIONS:
-            raise ValueError(f"task.gp_precision={gp_precision!r}: one of {', '.join(PENALTY_PRECISIONS)}")
+        self.optimizer_settings = parse(OptimizerSettings, optimizer, "optimizer")
+        self.loss_weights = parse(LossWeights, loss, "loss")
+        self.adversarial = parse(AdversarialSettings, adversarial, "adversarial")
+        self.panels = parse(PanelSettings, panels, "panels")
         self.automatic_optimization = False
         nets = dict(nets)
         if nets.pop("preset", None) is not None:  # checkpoints written before that change name one beside every size
@@ -128,7 +109,7 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
                              f"{len(SEEN_CATEGORIES)} seen categories {list(SEEN_CATEGORIES)} (then any of your own)")
         built = build_completion_nets(self.net_cfg)
         self.generator = built["generator"]
-        self.critic = built["critic"] if adversarial else None
+        self.critic = built["critic"] if self.adversarial.use else None
         self.classifier = built.get("classifier")
         seen, unseen = select_seen_categories(categories), select_unseen_categories(unseen_categories)
         self.eval_categories = list(seen) + [c for c in unseen if c not in seen]
@@ -148,7 +129,7 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
         self.critic_updates = 0  # counts the critic updates (the lazy gradient penalty's schedule)
         self.skipped_steps = 0
         self._compiled: CompiledStep | None = None  # task.compile_step: built on the first training step (its device)
-        self.loss_scale = resolve_loss_scale(loss_scale, res)
+        self.loss_scale = resolve_loss_scale(self.optimizer_settings.loss_scale, res)
 
     def _metric_modules(self) -> None:
         """Validation and test metrics per category of ``eval_categories`` (states not saved in checkpoints)."""
@@ -209,7 +190,7 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
 
     # ------------------------------------------------------------------ training
     def configure_optimizers(self):
-        hp = self.hparams
+        hp = self.optimizer_settings
         g_params = list(self.generator.parameters())
         if self.classifier is not None:
             g_params += list(self.classifier.parameters())
@@ -255,17 +236,17 @@ class CompletionTask(CompletionObjectives, pl.LightningModule):
         return lambda *args: self._compiled(name, *args)
 
     def training_step(self, batch: dict, batch_idx: int) -> None:
-        hp = self.hparams
+        adv = self.adversarial
         critic_objective, generator_objective = self._objective("critic_objective"), self._objective("generator_objective")
         x, y = self._fmt(batch["input"]), self._fmt(batch["target"])
         opt_g, opt_d = self._optimizers()
-        if self.current_epoch < hp.adversarial_start_epoch:
+        if self.current_epoch < adv.start_epoch:
             opt_d = None  # warm-up: reconstruction (+ classifier) only
         logs: dict[str, torch.Tensor] = {}
         if opt_d is not None:
-            for _ in range(hp.critic_steps):
+            for _ in range(adv.critic_steps):
                 with self.toggled_optimizer(opt_d):
-                    loss_d, critic_logs = critic_objective(x, y, self.critic_updates % hp.gp_every == 0)
+                    loss_d, critic_logs = critic_objective(x, y, self.critic_updates % adv.gp_every == 0)
                     if self._check_finite(critic=loss_d):
                         opt_d.zero_grad(set_to_none=True)
                         self.manual_backward(loss_d)

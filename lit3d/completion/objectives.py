@@ -7,8 +7,9 @@ model (:mod:`lit3d.completion.step_cost` counts them on the meta device, so its 
                       (WGAN-GP, on every ``gp_every``-th update), combined by critic_objective
     generator update: generator_objective (generator, BCE, critic's adversarial term, classifier)
 
-The mixin reads ``self.generator``, ``self.critic``, ``self.classifier`` and ``self.hparams``
-(``gamma``, ``alpha``, ``zeta``, ``gp_lambda``, ``gp_every``, ``critic_concat``, ``gp_precision``, ``stage_weight``).
+The mixin reads ``self.generator``, ``self.critic``, ``self.classifier``, ``self.loss_weights`` (``gamma``, ``alpha``,
+``zeta``, ``stage_weight``) and ``self.adversarial`` (``gp_lambda``, ``gp_every``, ``critic_concat``, ``gp_precision``):
+:mod:`lit3d.completion.settings`.
 Shapes: partial inputs ``x`` ``(B, 1, r, r, r)``, shapes ``(B, 1, R, R, R)``.
 """
 from __future__ import annotations
@@ -31,11 +32,11 @@ class CompletionObjectives:
     def critic_scores(self, x: torch.Tensor, real: torch.Tensor, fake: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``(D(real | x), D(fake | x))``, each ``(B,)``, for ``x`` ``(B, 1, r, r, r)`` and shapes ``(B, 1, R, R, R)``.
 
-        ``task.critic_concat``: one critic pass over the batch of ``2B`` (real then fake) instead of two
+        ``task.adversarial.critic_concat``: one critic pass over the batch of ``2B`` (real then fake) instead of two
         passes; the same values up to float rounding, as the critic couples no samples (no batch norm;
         its attention is within a sample).
         """
-        if not self.hparams.critic_concat:
+        if not self.adversarial.critic_concat:
             return self.critic(x, real), self.critic(x, fake)
         d = self.critic(torch.cat([x, x]), torch.cat([real, fake]))
         return d[: x.shape[0]], d[x.shape[0]:]
@@ -43,14 +44,14 @@ class CompletionObjectives:
     @torch.compiler.disable  # a double backward: eager under task.compile_step (lit3d.completion.compiled_step)
     def critic_penalty(self, x: torch.Tensor, real: torch.Tensor, fake: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """WGAN-GP penalty of the critic and the mean gradient norm (:func:`lit3d.completion.losses.gradient_penalty`),
-        its critic pass in ``task.gp_precision`` (fp32 or bf16 autocast; the norm and the penalty in fp32)."""
-        return gradient_penalty(self.critic, x, real, fake, precision=self.hparams.gp_precision)
+        its critic pass in ``task.adversarial.gp_precision`` (fp32 or bf16 autocast; the norm and the penalty in fp32)."""
+        return gradient_penalty(self.critic, x, real, fake, precision=self.adversarial.gp_precision)
 
     def critic_objective(self, x: torch.Tensor, y: torch.Tensor, with_penalty: bool = True) -> tuple[torch.Tensor, dict]:
         """The loss of one critic update and its logged terms.
 
         ``E[D(fake)] - E[D(real)] + gp_lambda * gp_every * gp`` when ``with_penalty`` (the lazy
-        regularisation of StyleGAN2: with ``task.gp_every = N`` the penalty is computed on one critic
+        regularisation of StyleGAN2: with ``task.adversarial.gp_every = N`` the penalty is computed on one critic
         update in N and weighted N times, the same penalty on average), else without the penalty.
 
         Args:
@@ -58,7 +59,7 @@ class CompletionObjectives:
         Returns:
             (scalar fp32 loss, ``{"wasserstein": ..., ["gp": ..., "grad_norm": ...]}``).
         """
-        hp = self.hparams
+        hp = self.adversarial
         fake = self.critic_fakes(x)
         d_real, d_fake = self.critic_scores(x, y, fake)
         logs = {"wasserstein": (d_real - d_fake).mean()}
@@ -85,7 +86,7 @@ class CompletionObjectives:
         Returns:
             (scalar fp32 loss, terms, :class:`lit3d.completion.generator.GeneratorOutput`).
         """
-        hp = self.hparams
+        hp = self.loss_weights
         out = self.generator(x)
         probs = torch.sigmoid(out.logits)
         loss_g, terms = self.reconstruction_loss(out, y, hp.gamma if adversarial else 1.0)
@@ -111,7 +112,7 @@ class CompletionObjectives:
         Returns:
             (scalar fp32 loss, ``{"bce": ..., ["bce_stages": ...]}``).
         """
-        hp = self.hparams
+        hp = self.loss_weights
         bce = weighted_bce_with_logits(out.logits, target, hp.alpha)
         loss, terms = weight * bce, {"bce": bce}
         if hp.stage_weight > 0 and len(out.stage_logits) > 1:
@@ -123,4 +124,4 @@ class CompletionObjectives:
         """Mean weighted BCE of the intermediate stages' (B, 1, r, r, r) logits against the
         target max-pooled to r^3 (a voxel of the coarse grid is occupied if any of its cell is)."""
         small = F.adaptive_max_pool3d(target.float(), stage_logits[0].shape[-3:])
-        return torch.stack([weighted_bce_with_logits(lg, small, self.hparams.alpha) for lg in stage_logits]).mean()
+        return torch.stack([weighted_bce_with_logits(lg, small, self.loss_weights.alpha) for lg in stage_logits]).mean()

@@ -35,10 +35,10 @@ def log_validation_previews(task, batch: dict) -> None:
     if not loggers:
         return
     epoch, step = task.current_epoch, task.global_step
-    if epoch % max(int(task.hparams.image_every_n_epochs), 1) == 0:
+    if epoch % max(int(task.panels.image_every_n_epochs), 1) == 0:
         sample = {"input": batch["input"][0].cpu(), "target": batch["target"][0].cpu(), "category": batch["category"][0]}
         log_image(loggers, "val/panels", split_figure(task, [sample], f"validation, epoch {epoch}"), step)
-    every = int(task.hparams.get("mesh_every_n_epochs", 0) or 0)
+    every = int(task.panels.mesh_every_n_epochs or 0)
     if every > 0 and epoch % every == 0 and not task.trainer.sanity_checking:
         for name, (verts, faces) in sample_meshes(task, batch["input"][0], batch["target"][0]).items():
             log_mesh(loggers, f"val/mesh/{name}", verts, faces, step)

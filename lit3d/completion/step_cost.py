@@ -55,7 +55,7 @@ def _measure(task, batch: int) -> dict[str, dict]:
                 loss = critic_loss(d_fake, d_real, torch.zeros((), device=META), 0.0)
             with penalty:
                 gp, _ = task.critic_penalty(x, y, fake)
-                gp_loss = task.hparams.gp_lambda * task.hparams.gp_every * gp
+                gp_loss = task.adversarial.gp_lambda * task.adversarial.gp_every * gp
             critic_peak = saved.peak
             with scores:
                 loss.backward()
@@ -89,7 +89,7 @@ def completion_step_cost(task) -> dict:
         (``saved_bytes``: the step's peak, the larger of a critic update with the penalty and the generator's).
     """
     _on_meta(task)
-    hp = task.hparams
+    hp = task.adversarial
     one, two = _measure(task, 1), _measure(task, 2)
     runs = {"critic fakes": hp.critic_steps, "critic scores": hp.critic_steps,
             "critic penalty": hp.critic_steps / hp.gp_every, "generator": 1}

@@ -88,7 +88,7 @@ class FeatureConfig:
 
 def feature_config(options: Mapping[str, Any] | None = None) -> FeatureConfig:
     """:class:`FeatureConfig` from plain options, as stored in data configs and checkpoints
-    (``data.feature_options``): ``size``, ``extent``, ``distance``, ``shadings``, ``styles``,
+    (``data.feature_tables.options``): ``size``, ``extent``, ``distance``, ``shadings``, ``styles``,
     ``measures``, ``mesh_measures``, ``n_samples``, ``fsim_downsample``, ``chunk``, ``workers``
     (missing -> the defaults; ``cache_dir`` is ignored). The one definition: the data's feature
     function and :meth:`lit3d.quality.predict.QualityPredictor.feature_config` both call it."""

@@ -37,7 +37,7 @@ class FeatureSelection(pl.Callback):
             pl_module.use_features(features, sfs_info)
         pl_module.dataset_name = dm.name
         if pl_module.feature_options is None:
-            pl_module.feature_options = dict(getattr(dm.hparams, "feature_options", None) or {})
+            pl_module.feature_options = dict(dm.feature_settings.options)
         if pl_module.scaling is None:
             pl_module.scaling = dm.scaling
         pl_module.bind_data(dm.feature_names, dm.shape_names)

@@ -5,7 +5,7 @@ and writes it, in the shipped format (:func:`lit3d.quality.shipped.model_documen
 
 Before fitting, :class:`FusionFit` (returned by :meth:`QualityFusionTask.configure_callbacks`) takes
 the training split (``datamodule.split("train")``: a :class:`~lit3d.features.matrix.FeatureMatrix`
-whose ``shapes`` are the groups, e.g. ``data.groups=family``) and
+whose ``shapes`` are the groups, e.g. ``data.split.groups=family``) and
 
 - chooses a candidate of :func:`lit3d.quality.fusion_candidates.fusion_candidates` (its model kind,
   feature set and strength) by leave-one-group-out inside the training rows, and fits it on all of them;
@@ -75,7 +75,7 @@ class QualityFusionTask(pl.LightningModule):
         """Choose and fit on ``train``, score the choice by nested leave-one-group-out; returns the document."""
         if len(train.shape_names) < 3:
             raise ValueError(f"the fusion's nested protocol needs at least 3 training groups, got "
-                             f"{train.shape_names} (data.groups=family on CPCD2 gives 3)")
+                             f"{train.shape_names} (data.split.groups=family on CPCD2 gives 3)")
         candidates = self.candidates(train.names)
         chosen = ChosenFusion(candidates).fit(train)
         pred, _ = nested_group_out(train, candidates)
@@ -175,7 +175,7 @@ class FusionFit(pl.Callback):
             command = (f"lit3d-train experiment=quality_cpcd2_fusion data.root={hp.get('root')}"
                        if dm.name == "cpcd2" else f"lit3d-train task=quality_fusion data={dm.name}")
             pl_module.fit_fusion(dm.split("train"), dataset=dm.name, scaling=dm.scaling,
-                                 feature_options={k: v for k, v in dict(hp.get("feature_options") or {}).items()
+                                 feature_options={k: v for k, v in dm.feature_settings.options.items()
                                                   if k != "cache_dir"},  # where tables are kept, not how made
                                  command=command)
         pl_module.bind_columns(dm.feature_names)

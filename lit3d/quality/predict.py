@@ -25,6 +25,7 @@ from pathlib import Path
 import torch
 
 from lit3d.features.config import FeatureConfig, feature_config
+from lit3d.quality.checkpoint_upgrade import upgrade_checkpoint
 from lit3d.quality.nets import QualityMLP
 from lit3d.quality.protocol import TargetScaling
 from lit3d.utils.checkpoints import META_KEY, first_line, load_checkpoint
@@ -50,7 +51,7 @@ class QualityPredictor:
         path: the checkpoint path as given.
         feature_options: the data's feature options (render size, styles, measures, ...) used to
             compute the training features; None when the checkpoint does not record them.
-        feature_fn: the data's custom feature function (``data.feature_fn``), None = the renderer's
+        feature_fn: the data's custom feature function (``data.feature_tables.fn``), None = the renderer's
             feature table (:func:`lit3d.features.table.feature_table`).
     """
 
@@ -129,7 +130,7 @@ def _task_name(task_cfg: Mapping) -> str:
 @lru_cache(maxsize=4)
 def _load(path: str, _resolved: str, _mtime: int) -> QualityPredictor:
     p = Path(path)
-    ckpt = load_checkpoint(p, QualityCheckpointError)
+    ckpt = upgrade_checkpoint(load_checkpoint(p, QualityCheckpointError))  # its data config in today's layout
     lit3d = ckpt.get(META_KEY) if isinstance(ckpt, dict) else None
     task_cfg = lit3d.get("task") if isinstance(lit3d, dict) else None
     if isinstance(task_cfg, Mapping) and not _is_quality(task_cfg):
@@ -149,11 +150,12 @@ def _load(path: str, _resolved: str, _mtime: int) -> QualityPredictor:
         raise QualityCheckpointError(f"{p}: weights do not match the stored network ({first_line(exc)})") from exc
     scaling = TargetScaling.from_dict(meta["scaling"]) if meta.get("scaling") else None
     data_cfg = lit3d.get("data") if isinstance(lit3d, dict) and isinstance(lit3d.get("data"), Mapping) else {}
+    features = data_cfg.get("feature_tables") or {}
     options = meta.get("feature_options")
     if options is None:
-        options = data_cfg.get("feature_options")
+        options = features.get("options")
     return QualityPredictor(list(meta["features"]), net.eval(), scaling, meta.get("dataset"), str(p),
-                            None if options is None else dict(options), data_cfg.get("feature_fn"))
+                            None if options is None else dict(options), features.get("fn"))
 
 
 def predict_from_features(ckpt_path: str | Path, features: Mapping[str, float]) -> float:

@@ -64,7 +64,8 @@ class GridGeometry:
     @classmethod
     def from_checkpoint(cls, data_cfg: dict | None, net_cfg: dict) -> "GridGeometry":
         """The geometry of a completion checkpoint: its stored data config, checked against the
-        net's ``in_res``/``out_res``; a checkpoint without a data config gets the synthetic
+        net's ``in_res``/``out_res`` (today's layout: :func:`lit3d.completion.checkpoint_upgrade.upgrade_checkpoint`
+        reads an old one so); a checkpoint without a data config gets the synthetic
         geometry at the net's sizes, with a note."""
         out_res, in_res = int(net_cfg["out_res"]), int(net_cfg["in_res"])
         if not data_cfg:
@@ -78,10 +79,10 @@ class GridGeometry:
                     f"the net ({in_res}^3 -> {out_res}^3): the net's sizes are used")
             factor = out_res // in_res
         if source == "recgan":
-            raw = int(data_cfg.get("raw_res", 256))
+            raw = int((data_cfg.get("recgan") or {}).get("raw_res") or 256)
             # voxel step = extent / (raw - 1) in a raw^3 grid, pooled to R: margin of half a raw voxel
             return cls("recgan", out_res, factor, 0.5 * out_res / raw, 0.0, note, mirror_x=True)
-        sensor = make_sensor(data_cfg.get("sensor"))
+        sensor = make_sensor((data_cfg.get("render") or {}).get("sensor"))
         shrink = out_res / sensor.raw_res if sensor.raw_res else 1.0  # made finer, then pooled
         return cls("synth", out_res, factor, GRID_MARGIN * shrink, SURFACE_PUSH * shrink, note, mirror_x=sensor.mirror_x)
 

@@ -66,7 +66,10 @@ def load_task(path: str | Path, device: str, want: str):
     if want not in name.lower():
         raise InputError(f"{path}: checkpoint is for task '{name}', not '{want}'")
     if want == "completion":
+        from lit3d.completion.checkpoint_upgrade import upgrade_checkpoint
         from lit3d.completion.module import CompletionTask as cls
+
+        ckpt = upgrade_checkpoint(ckpt)  # one written before the completion settings were nodes, as today's
     else:
         from lit3d.canonical.checkpoint_upgrade import upgrade_checkpoint
         from lit3d.canonical.module import CanonicalTask as cls

@@ -15,7 +15,7 @@ Why the YAML configs hold no list: ``categories`` and ``unseen_categories`` in
 ``conf/task/completion.yaml`` and ``conf/data/{completion_synth,recgan}.yaml`` default to
 ``null``, read as "all of them" by :func:`select_seen_categories` /
 :func:`select_unseen_categories`.
-A user may still pick a subset (``data.categories=[chair]``); it is validated against the
+A user may still pick a subset (``data.categories.seen=[chair]``); it is validated against the
 lists here, so a typo fails at start-up instead of yielding an empty split.
 """
 from __future__ import annotations

@@ -7,8 +7,8 @@ Builds ``CompletionTask`` from ``experiment=completion_<scale>`` (plus Hydra ove
 for each named parameter group of ``CompletionTask.health_groups()`` prints:
 
     grad_rms      RMS over the group's elements of d(reconstruction loss)/d(param) at init
-                  (the loss as logged: the per-voxel mean, before task.loss_scale)
-    grad/eps      grad_rms / the generator optimiser's eps (= task.eps / loss_scale, which is the
+                  (the loss as logged: the per-voxel mean, before task.optimizer.loss_scale)
+    grad/eps      grad_rms / the generator optimiser's eps (= task.optimizer.eps / loss_scale, which is the
                   same as scaling the loss): below 1, Adam's update shrinks by about that factor
     upd/w step1   |dw| / |w| of the first Adam step (generator optimiser of the task, its lr/eps)
     upd/w stepN   |w_N - w_0| / |w_0| after N steps on the same batch

@@ -20,7 +20,7 @@ from lit3d.cli.train import train
 
 SHORT = ["experiment=completion_demo", "seed=0", "logger=csv", "callbacks.progress_bar=null",
          "data.sizes={train:160,val:24,test_same:24,test_cross:24,test_unseen:24}",
-         "data.batch_size=4", "trainer.max_epochs=6", "task.adversarial_start_epoch=6"]
+         "data.batch_size=4", "trainer.max_epochs=6", "task.adversarial.start_epoch=6"]
 
 
 def main(tag: str, overrides: list[str]) -> None:

@@ -149,8 +149,8 @@ def cross_from_synth(train: FeatureMatrix, items, tables, factory=None) -> dict[
 
 def synth_matrix(feature_options: dict, data_dir: str | Path, n_levels: int | None = 3) -> FeatureMatrix:
     """The built-in synthetic ordinal set (``data=quality_synth``) with these feature options."""
-    dm = QualityDataModule(data_dir=str(data_dir), source="synth", n_levels=n_levels,
-                           feature_options=dict(feature_options))
+    dm = QualityDataModule(data_dir=str(data_dir), source="synth", synth={"n_levels": n_levels},
+                           feature_tables={"options": dict(feature_options)})
     return dm.load_matrix()
 
 

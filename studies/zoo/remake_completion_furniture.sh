@@ -7,7 +7,7 @@ BIN=${VENV:-.venv}/bin
 OUT=${OUT:-logs/zoo_completion}
 SEED=${SEED:-42}
 mkdir -p "$OUT"
-"$BIN/lit3d-data" experiment=completion_furniture data.prepare_workers=2 hydra.run.dir="$OUT/data" --show 8 > "$OUT/data_summary.json"
+"$BIN/lit3d-data" experiment=completion_furniture data.prepare.workers=2 hydra.run.dir="$OUT/data" --show 8 > "$OUT/data_summary.json"
 "$BIN/lit3d-train" experiment=completion_furniture seed="$SEED" logger=csv hydra.run.dir="$OUT/train" test_after_fit=false "$@"
 CKPT=$(ls "$OUT"/train/checkpoints/best-*.ckpt | head -n 1)
 echo "completion-furniture checkpoint: $CKPT"

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import torch
 
+from lit3d.completion.checkpoint_upgrade import upgrade_hparams
 from lit3d.completion.module import CompletionTask
 
 
@@ -21,6 +22,7 @@ def grid_pair(batch: int = 2, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor
 
 
 def tiny_task(nets: dict, **kw) -> CompletionTask:
-    """A :class:`CompletionTask` of :func:`tiny_nets` (``nets``: the demo's node), seeded."""
+    """A :class:`CompletionTask` of :func:`tiny_nets` (``nets``: the demo's node), seeded; ``kw``: its settings,
+    also by their short flat names (``gp_every=2``: :func:`lit3d.completion.checkpoint_upgrade.upgrade_hparams`)."""
     torch.manual_seed(0)
-    return CompletionTask(nets=tiny_nets(nets), **kw)
+    return CompletionTask(**upgrade_hparams({"nets": tiny_nets(nets), **kw}))
