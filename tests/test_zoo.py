@@ -70,8 +70,8 @@ def test_the_shipped_body_regressor_reads_held_out_people():
 
 
 def _net_args(regressor) -> dict:
-    ck = torch.load(regressor.path, weights_only=True)
-    return dict(ck["net"])
+    ck = torch.load(regressor.path, weights_only=True)  # a slim lit3d-train experiment=body_regressor checkpoint
+    return dict(ck["hyper_parameters"]["net"])
 
 
 # the card's fixed evaluation (docs/models/completion_furniture.md): four built-in procedural pieces of

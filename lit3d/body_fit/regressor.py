@@ -17,8 +17,10 @@ rotation as 6 numbers (the first two columns of the matrix, Gram-Schmidt orthono
 Zhou et al. 2019) and the translation, metres, relative to :func:`lit3d.body_fit.fit.start_centre`
 of the points with ``depth_offset``. The scale is not predicted (``log_scale = 0``: metric depth).
 
-**Checkpoint** (``torch.save``, read with ``weights_only``): ``{"format": FORMAT, "state_dict",
-"preprocess": Preprocess fields, "net": {"width", "hidden"}, "train": the training's settings}``.
+**Checkpoint** (read with ``weights_only``): a ``lit3d-train experiment=body_regressor`` checkpoint (the
+task's ``hyper_parameters`` ``preprocess`` and ``net``, its ``net.``-prefixed state dict; the shipped
+``body-regressor`` is one, slimmed to fp16 by :func:`lit3d.zoo.slim.slim_checkpoint`), or this module's own
+form ``{"format": FORMAT, "state_dict", "preprocess": Preprocess fields, "net": {"width", "hidden"}, "train"}``.
 """
 from __future__ import annotations
 
