@@ -66,7 +66,8 @@ ZOO: dict[str, ZooModel] = {m.name: m for m in (
              "Anny people drawn and rendered on the fly (adult shape distribution, the 'upright' pose mix: standing "
              "people in the fit's joint limits, turned up to 15 degrees), seed 7, 12,500 steps in 63 min on one "
              "CPU thread",
-             "lit3d-train experiment=body_regressor, then lit3d.zoo.slim.slim_checkpoint of its best checkpoint",
+             "lit3d-train experiment=body_regressor, then lit3d.zoo.slim.slim_checkpoint of its best checkpoint "
+             "(half=False, data_overrides={'faust_root': None})",
              "docs/models/body_regressor.md"),
     ZooModel("cpcd2-phil-fusion", "quality", "quality/models/cpcd2-phil-fusion.json",
              "CPCD2.0 phil (30 coloured point clouds, MOS 1..5)",

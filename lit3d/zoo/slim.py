@@ -13,8 +13,9 @@ uses (the completion critic) can be left out. What was done is written into the 
 from __future__ import annotations
 
 import io
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 from lit3d.utils.checkpoints import META_KEY, load_checkpoint
 from lit3d.utils.io import atomic_write_bytes
@@ -24,8 +25,10 @@ KEEP_KEYS = ("hyper_parameters", "state_dict", META_KEY, "pytorch-lightning_vers
 
 
 def slim_checkpoint(src: str | Path, dst: str | Path, *, half: bool = True,
-                    drop_prefixes: Sequence[str] = ()) -> dict:
+                    drop_prefixes: Sequence[str] = (), data_overrides: Mapping[str, Any] | None = None) -> dict:
     """Write the slim copy of checkpoint ``src`` to ``dst`` (atomically; ``dst`` must not be ``src``).
+    ``data_overrides``: top-level keys of the stored data config to replace (a path on the training
+    machine, such as the body task's ``faust_root``, set to None: the user gives their own).
     Returns the ``slim`` record: ``{"from": name of src, "half": bool, "dropped": [prefixes],
     "dropped_tensors": n, "bytes": size of dst}``."""
     import torch
@@ -49,6 +52,8 @@ def slim_checkpoint(src: str | Path, dst: str | Path, *, half: bool = True,
     out = {k: ckpt[k] for k in KEEP_KEYS if k in ckpt}
     out["state_dict"] = state
     out[META_KEY] = {**dict(ckpt[META_KEY]), "slim": record}
+    if data_overrides:
+        out[META_KEY]["data"] = {**dict(out[META_KEY].get("data") or {}), **dict(data_overrides)}
     buf = io.BytesIO()
     torch.save(out, buf)
     atomic_write_bytes(dst, buf.getvalue())
