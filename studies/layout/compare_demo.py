@@ -176,8 +176,10 @@ def main(argv: list[str] | None = None) -> int:
     rows = compare(a, b)
     print(table(rows, args.all))
     differ = sum(not r[4] for r in rows)
+    only_a = sum(not r[4] and r[3] == "-" for r in rows)
+    only_b = sum(not r[4] and r[2] == "-" for r in rows)
     print(f"{'SAME' if not differ else 'DIFFERENT'}: {len(rows)} values compared, {differ} differ "
-          f"({args.dir_a} vs {args.dir_b})")
+          f"({differ - only_a - only_b} changed, {only_a} only in A, {only_b} only in B; {args.dir_a} vs {args.dir_b})")
     return 1 if differ else 0
 
 
