@@ -77,3 +77,16 @@ def test_bad_folder_and_bad_json_exit_2(tmp_path, capsys):
     assert main([str(a), str(b)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "eval/metrics.json: unreadable JSON" in err
+
+
+def test_console_lines_after_a_data_summary_are_skipped_elsewhere_refused(tmp_path, capsys):
+    a = _demo(tmp_path, "a")
+    b = _demo(tmp_path, "b")
+    (a / "data_summary.json").write_text('{"counts": {"train": 720}}')
+    (b / "data_summary.json").write_text('{"counts": {"train": 720}}\n[12:00:01][lit3d][INFO] - wrote samples.png\n')
+    assert main([str(a), str(b)]) == 0
+    assert "data_summary.json: text after the JSON summary skipped" in capsys.readouterr().err
+    (b / "data_summary.json").write_text('{"counts": {"train": 721}}\nwrote samples.png\n')
+    assert main([str(a), str(b)]) == 1
+    (b / "eval/metrics.json").write_text('{"test/same/iou": 0.4123456789}\nextra')
+    assert main([str(a), str(b)]) == 2

@@ -50,8 +50,21 @@ class Printed(str):
 
 
 def _read_json(path: Path):
+    """The JSON value of ``path``, numbers as :class:`Printed`. A ``data_summary.json`` may carry text after its
+    summary (lit3d-data before it kept its stdout for the JSON alone printed console lines there too): the
+    summary is read and the rest skipped with a note on stderr; any other extra text is a bad file."""
+    decoder = json.JSONDecoder(parse_float=Printed, parse_int=Printed, parse_constant=Printed)
     try:
-        return json.loads(path.read_text("utf-8"), parse_float=Printed, parse_int=Printed, parse_constant=Printed)
+        text = path.read_text("utf-8")
+        try:
+            return decoder.decode(text)
+        except json.JSONDecodeError as exc:
+            if path.name != "data_summary.json" or not exc.msg.startswith("Extra data"):
+                raise
+            value, end = decoder.raw_decode(text.lstrip())
+            print(f"compare_demo: note: {path}: text after the JSON summary skipped ({len(text) - end} characters)",
+                  file=sys.stderr)
+            return value
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise BadInput(f"{path}: unreadable JSON ({exc})") from exc
 
@@ -105,7 +118,7 @@ def text_values(path: Path) -> dict[str, str]:
                 if TIME_UNIT.match(rest) and not word[m.end():].strip(")").isalnum():
                     continue
                 n += 1
-                label = re.sub(r"[^\w/]+", "", words[w - 1])[:24] if w else ""
+                label = re.sub(r"\W+", "", words[w - 1])[:24] if w and "/" not in words[w - 1] else ""
                 out[f"L{i}#{n} {label}".rstrip()] = m.group()
     return out
 
