@@ -9,7 +9,7 @@ STAMP := $(VENV)/.installed
 EXTRAS := $(VENV)/.extras
 export VENV TORCH_SPEC
 
-.PHONY: demo test test-all bench bench-gpu install clean lint
+.PHONY: demo demo-compare test test-all bench bench-gpu install clean lint
 
 $(STAMP): pyproject.toml scripts/bootstrap.sh
 	bash scripts/bootstrap.sh
@@ -22,6 +22,11 @@ install: $(STAMP) $(EXTRAS)
 
 demo: $(STAMP)
 	bash scripts/demo.sh $(TASK)
+
+# two demo folders value by value as printed (metrics, summary lines, cache manifest hashes; times left out):
+#   make demo-compare DEMO_A=/tmp/demo_a DEMO_B=/tmp/demo_b   (exit 1 when a value differs; studies/layout/README.md)
+demo-compare: $(STAMP)
+	$(BIN)/python -m studies.layout.compare_demo $(DEMO_A) $(DEMO_B)
 
 # the suite in TEST_WORKERS processes (pytest-xdist; a test file stays in one process); TEST_WORKERS=0: one process
 TEST_WORKERS ?= 2

@@ -1,0 +1,1 @@
+"""Does the layout move change results? The demo-folder comparer (compare_demo)."""
