@@ -242,9 +242,9 @@ def test_thesis_experiment_is_the_paper_sizes_in_the_thesis_form(compose_cfg):
     """completion_thesis = the thesis's exact form (no input skip, last-stage BCE only, critic from
     step 0) at the sizes of completion_paper, which keeps the measured additions on."""
     thesis, paper = (compose_cfg([f"experiment=completion_{n}"]).task for n in ("thesis", "paper"))
-    assert (thesis.nets.input_skip, thesis.stage_weight, thesis.adversarial, thesis.adversarial_start_epoch) == (
+    assert (thesis.nets.input_skip, thesis.loss.stage_weight, thesis.adversarial.use, thesis.adversarial.start_epoch) == (
         False, 0.0, True, 0)
-    assert (paper.nets.input_skip, paper.stage_weight) == (True, 0.5)
+    assert (paper.nets.input_skip, paper.loss.stage_weight) == (True, 0.5)
     assert {k: v for k, v in thesis.nets.items() if k != "input_skip"} == \
         {k: v for k, v in paper.nets.items() if k != "input_skip"}
-    assert thesis.loss_scale == paper.loss_scale == "voxels"
+    assert thesis.optimizer.loss_scale == paper.optimizer.loss_scale == "voxels"

@@ -109,7 +109,7 @@ class _FakeCompletion:
 
     def __init__(self, loggers, epoch, image_every=1, mesh_every=2, sanity_checking=False):
         self.loggers, self.current_epoch, self.global_step = loggers, epoch, 10 * epoch + 1
-        self.hparams = _HParams(image_every_n_epochs=image_every, mesh_every_n_epochs=mesh_every)
+        self.panels = _HParams(image_every_n_epochs=image_every, mesh_every_n_epochs=mesh_every)
         self.trainer, self.device, self.threshold = _Trainer(sanity_checking), torch.device("cpu"), torch.tensor(0.5)
 
     def __call__(self, partial):  # (B, 1, r, r, r) -> (B, 1, R, R, R)

@@ -17,6 +17,7 @@ from collections.abc import Mapping
 
 from datamodules.canonical.flat_config import upgrade_data_config
 from lit3d.utils.checkpoints import META_KEY
+from lit3d.utils.errors import Lit3dError
 
 TASK_TARGET = "lit3d.canonical.module.CanonicalTask"
 
@@ -63,7 +64,7 @@ PARKED_DATA = {"render.forward_flow": False, "phenotype_targets": False, "traini
 OFFSET_HEAD = ("net.head.out.weight", 6)
 
 
-class ParkedOptionError(ValueError):
+class ParkedOptionError(Lit3dError, ValueError):
     """A checkpoint that used an option removed from the product (measured and not adopted)."""
 
 
