@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from lit3d.utils.settings_nodes import nest_flat_keys
+
 # flat key -> (node, key in the node)
 FLAT_DATA_KEYS = {
     **{k: ("render", k) for k in ("views_per_shape", "unseen_view_set", "render_factor", "sensor")},
@@ -32,14 +34,4 @@ def is_flat(key: str, value) -> bool:
 
 def upgrade_data_config(cfg: Mapping) -> dict:
     """A completion data config with flat keys (see the module docstring) as nodes; today's layout unchanged."""
-    out: dict = {}
-    moved: dict[str, dict] = {}
-    for key, value in cfg.items():
-        if is_flat(key, value):
-            node, name = FLAT_DATA_KEYS[key]
-            moved.setdefault(node, {})[name] = value
-        else:
-            out[key] = value
-    for node, values in moved.items():
-        out[node] = {**dict(out.get(node) or {}), **values}
-    return out
+    return nest_flat_keys(cfg, FLAT_DATA_KEYS, is_flat)

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from lit3d.utils.settings_nodes import nest_flat_keys
+
 # flat key -> (node, key in the node)
 FLAT_DATA_KEYS = {
     **{k: ("synth", k) for k in ("shapes", "user_mesh_dir", "distortions", "levels", "n_levels", "subdivisions")},
@@ -25,14 +27,4 @@ FLAT_DATA_KEYS = {
 
 def upgrade_data_config(cfg: Mapping) -> dict:
     """A quality data config with flat keys (see the module docstring) as nodes; today's layout unchanged."""
-    out: dict = {}
-    moved: dict[str, dict] = {}
-    for key, value in cfg.items():
-        if key in FLAT_DATA_KEYS:
-            node, name = FLAT_DATA_KEYS[key]
-            moved.setdefault(node, {})[name] = value
-        else:
-            out[key] = value
-    for node, values in moved.items():
-        out[node] = {**dict(out.get(node) or {}), **values}
-    return out
+    return nest_flat_keys(cfg, FLAT_DATA_KEYS)

@@ -17,6 +17,7 @@ from collections.abc import Mapping
 
 from datamodules.completion.flat_config import upgrade_data_config
 from lit3d.utils.checkpoints import META_KEY
+from lit3d.utils.settings_nodes import nest_flat_keys
 
 TASK_TARGET = "lit3d.completion.module.CompletionTask"
 
@@ -44,20 +45,8 @@ def upgrade_hparams(hparams: Mapping, keep_evaluation: bool = False) -> dict:
     """The task's hyper-parameters (or task config) of a checkpoint in today's layout: the flat keys of
     :data:`FLAT_TASK_KEYS` moved into their nodes; the evaluation settings of :data:`EVALUATION_LEGACY`
     dropped (``keep_evaluation``: kept, for the task config). Today's layout comes back unchanged."""
-    out: dict = {}
-    moved: dict[str, dict] = {}
-    for key, value in hparams.items():
-        if key in EVALUATION_LEGACY:
-            if keep_evaluation:
-                out[key] = value
-        elif key in FLAT_TASK_KEYS and not isinstance(value, Mapping):
-            node, name = FLAT_TASK_KEYS[key]
-            moved.setdefault(node, {})[name] = value
-        else:
-            out[key] = value
-    for node, values in moved.items():
-        out[node] = {**dict(out.get(node) or {}), **values}
-    return out
+    kept = {k: v for k, v in hparams.items() if keep_evaluation or k not in EVALUATION_LEGACY}
+    return nest_flat_keys(kept, FLAT_TASK_KEYS, lambda k, v: k in FLAT_TASK_KEYS and not isinstance(v, Mapping))
 
 
 def upgrade_checkpoint(ckpt: dict) -> dict:
