@@ -4,7 +4,7 @@
 :meth:`InspectableDataModule.show`'s PNG; the three DataModules
 (:class:`~datamodules.completion.CompletionDataModule`,
 :class:`~datamodules.quality.QualityDataModule`, :class:`~datamodules.canonical.CanonicalDataModule`)
-conform (``tests/test_datamodule_protocol.py`` checks it), and a new task's DataModule must too
+conform (``tests/datamodules/test_datamodule_protocol.py`` checks it), and a new task's DataModule must too
 (docs/CONTRIBUTING_TASKS.md).
 """
 from __future__ import annotations

@@ -9,7 +9,7 @@ looked up on first use (module ``__getattr__``).
 """
 from __future__ import annotations
 
-# the names of lit3d.api (tests/test_api.py checks that they match its __all__)
+# the names of lit3d.api (tests/api/test_api.py checks that they match its __all__)
 API = (
     "RECGAN_FOV_DEG", "CanonicalForm", "InputError", "Intrinsics", "Options", "canonical_form",
     "canonical_points", "checkpoint_task", "complete", "complete_grid", "export", "load", "models", "score",

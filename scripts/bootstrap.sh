@@ -51,7 +51,7 @@ echo "bootstrap: installing $TORCH_SPEC and lit3d[all,dev]"
 "$VENV/bin/pip" install -q "$TORCH_SPEC"
 "$VENV/bin/pip" install -q -e ".[all,dev]"  # all: make demo and make test use every extra
 # piq: the colour image measures of the quality features (FSIMc, VIF, GMSD, HaarPSI, MDSI, VSI of coloured point
-# clouds, lit3d.metrics.image.colour_measures) and the reference of tests/test_fsim_piq.py. --no-deps: piq requires
+# clouds, lit3d.metrics.image.colour_measures) and the reference of tests/metrics/test_fsim_piq.py. --no-deps: piq requires
 # torchvision, whose PyPI wheels are CUDA builds that replace the CPU torch (or fail to load beside it); the six
 # measures need only torch. Not a package dependency for that reason.
 "$VENV/bin/pip" install -q --no-deps "piq==0.8.0" || echo "bootstrap: piq not installed: coloured point-cloud pairs need it"

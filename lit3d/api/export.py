@@ -97,7 +97,7 @@ def export(model: Model, path: str | Path) -> Path:
     check_export_path(path, getattr(model, "path", None))
     with torch.no_grad(), warnings.catch_warnings():
         # the canonical net compares image sizes (lit3d.canonical.nets.resize_to): fixed by the trace
-        # by design; outputs on other inputs and batch sizes are checked in tests/test_api.py
+        # by design; outputs on other inputs and batch sizes are checked in tests/api/test_api.py
         warnings.filterwarnings("ignore", category=torch.jit.TracerWarning, module=r"lit3d\.canonical\.")
         traced = torch.jit.trace(module, inputs, check_trace=False)
     buf = io.BytesIO()

@@ -7,7 +7,7 @@ same pieces: :func:`init_mlp` (initial weights from ``cfg.seed``), the batches o
 :func:`lit3d.features.matrix.minibatches` drawn from ``np.random.default_rng(seed)`` (the
 datamodule's ``ShuffledBatches``), :func:`make_optimizer`, mean squared error, and dropout masks
 from ``torch.manual_seed(cfg.seed)`` at the start of training. For one seed and one training
-split both give the same predictions up to float rounding (``tests/test_quality_trainer.py``).
+split both give the same predictions up to float rounding (``tests/quality/test_quality_trainer.py``).
 """
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """The optional interfaces a DataModule may offer beyond :class:`datamodules.protocol.InspectableDataModule`,
 declared once as :class:`typing.Protocol`\\ s, so that task rooms, callbacks and provenance ask
-``isinstance(datamodule, Protocol)`` instead of probing for names (``tests/test_task_hooks.py`` checks
+``isinstance(datamodule, Protocol)`` instead of probing for names (``tests/utils/test_task_hooks.py`` checks
 which DataModule offers which, and that no reader probes by name):
 
 - :class:`HasManifest`: ``manifest``, the prepared cache's manifest (``manifest_hash``, ``config_hash``),

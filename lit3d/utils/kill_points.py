@@ -1,5 +1,5 @@
 """A test hook that kills this process at a named point, as SIGKILL, the OOM killer or a power cut
-would: the tests of what killed runs leave behind (``tests/test_leftovers.py``) use it instead of
+would: the tests of what killed runs leave behind (``tests/e2e/test_leftovers.py``) use it instead of
 racing a signal against a write that takes milliseconds.
 
 ``LIT3D_KILL_AT=<point>`` kills at the first time the process reaches ``<point>``;

@@ -1,7 +1,7 @@
 """The optional hooks a task's LightningModule may define, declared once as :class:`typing.Protocol`\\ s.
 
 The runtime and the callbacks ask ``isinstance(task, Protocol)`` instead of probing for names, so each hook
-a task can offer is written down here with its meaning (``tests/test_task_hooks.py`` checks which task
+a task can offer is written down here with its meaning (``tests/utils/test_task_hooks.py`` checks which task
 offers which):
 
 - :class:`AdaptsDataConfig`: ``adapt_data_config(data_cfg) -> data_cfg``, the data config that

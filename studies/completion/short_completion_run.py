@@ -1,4 +1,4 @@
-"""The reduced completion demo of tests/test_completion_training.py, with extra overrides.
+"""The reduced completion demo of tests/completion/test_completion_training.py, with extra overrides.
 
     .venv/bin/python -m studies.completion.short_completion_run TAG [hydra overrides ...]
 

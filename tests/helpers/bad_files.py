@@ -1,4 +1,4 @@
-"""The bad files of tests/test_bad_inputs.py's table: each ``writer(tmp_path) -> (argument, named)``
+"""The bad files of tests/cli/test_bad_inputs.py's table: each ``writer(tmp_path) -> (argument, named)``
 writes real bad file(s) and says what the entry point gets and which file its message must name."""
 from __future__ import annotations
 

@@ -11,7 +11,7 @@ CASES = {
     "canonical": ["experiment=canonical_tiny", "data.source.n_subjects=6", "data.source.n_poses=6", "data.image_size=32",
                   "task.net.image_size=32", "data.batch_size=3", "evaluation.mesh_baselines=[posed]",
                   "evaluation.retrieval.view_size=32"],
-    "quality": ["experiment=quality_demo", "+data.feature_tables.fn=test_quality_task.fake_features",
+    "quality": ["experiment=quality_demo", "+data.feature_tables.fn=tests.helpers.quality.fake_features",
                 "~data.feature_tables.options",
                 "data.synth.subdivisions=2", "data.synth.shapes=[blob,bumpy,torus,rock,twist]", "evaluation.cv=false",
                 "task.sfs.epochs=5",

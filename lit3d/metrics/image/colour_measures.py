@@ -7,7 +7,7 @@ batch) bool foreground. Every per-image measure is ``(N,) float32``.
 - :func:`ciede2000`: mean CIEDE2000 colour difference ΔE00 over the union of the two masks, in
   torch (:func:`delta_e_ciede2000` is the per-pixel formula, Sharma, Wu & Dalal 2005). The sRGB to
   CIELAB (D65, 2° observer) conversion is ``kornia.color.rgb_to_lab``, which equals
-  ``skimage.color.rgb2lab`` (to 1e-13 in float64, checked in ``tests/test_colour_measures.py``).
+  ``skimage.color.rgb2lab`` (to 1e-13 in float64, checked in ``tests/metrics/test_colour_measures.py``).
   scikit-image's ``deltaE_ciede2000`` is NumPy only (no batches on the GPU), so the formula is
   written out here and checked against it and against Sharma's 34 published test pairs.
 - :func:`piq_measures`: six non-learned full-reference measures of piq 0.8.0, called from piq:

@@ -4,7 +4,7 @@ Images ``(B, C, H, W)`` float in ``[0, data_range]``; values ``(B,) float32``. T
 images (no phase congruency anywhere) give 1.
 
 No library in the dependencies provides FSIM (piq does, but is not a dependency;
-kornia, torchmetrics, scikit-image do not). ``tests/test_fsim_piq.py`` checks it against piq's
+kornia, torchmetrics, scikit-image do not). ``tests/metrics/test_fsim_piq.py`` checks it against piq's
 ``fsim(..., chromatic=False)`` on real grey photographs (within 2e-5). The Scharr gradient is written out as
 shifted slices: ``kornia.filters.spatial_gradient`` offers only ``sobel`` and
 ``diff`` kernels, and MATLAB's ``conv2(..., 'same')`` zero border is kept exactly.
