@@ -52,10 +52,19 @@ class Printed(str):
 def _read_json(path: Path):
     """The JSON value of ``path``, numbers as :class:`Printed`. A ``data_summary.json`` may carry text after its
     summary (lit3d-data before it kept its stdout for the JSON alone printed console lines there too): the
-    summary is read and the rest skipped with a note on stderr; any other extra text is a bad file."""
+    summary is read and the rest skipped with a note on stderr, and so are log lines before it (``[YYYY-MM-DD
+    ...`` lines, which older checkouts printed there); any other extra text is a bad file."""
     decoder = json.JSONDecoder(parse_float=Printed, parse_int=Printed, parse_constant=Printed)
     try:
         text = path.read_text("utf-8")
+        if path.name == "data_summary.json":
+            lines = text.splitlines(keepends=True)
+            logged = 0
+            while logged < len(lines) and LOG_LINE.match(lines[logged]):
+                logged += 1
+            if logged:
+                print(f"compare_demo: note: {path}: {logged} log lines before the JSON summary skipped", file=sys.stderr)
+                text = "".join(lines[logged:])
         try:
             return decoder.decode(text)
         except json.JSONDecodeError as exc:
@@ -67,6 +76,9 @@ def _read_json(path: Path):
             return value
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise BadInput(f"{path}: unreadable JSON ({exc})") from exc
+
+
+LOG_LINE = re.compile(r"^\[\d{4}-\d\d-\d\d [\d:,]+\]")  # a logging line: [2026-11-29 05:06:01,350][name]...
 
 
 def _leaves(value, prefix: str):

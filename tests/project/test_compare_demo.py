@@ -1,7 +1,9 @@
 """The demo-folder comparer (studies.layout.compare_demo) on tiny fake demo folders."""
 import json
 
-from studies.layout.compare_demo import main, text_values
+import pytest
+
+from studies.layout.compare_demo import BadInput, json_values, main, text_values
 
 SUMMARY = """completion (shape completion from one depth view; test IoU: same 0.412 (input 0.205); cross 0.398 (input 0.201))
   evaluation       {d}/eval/results.md  {d}/eval/metrics.json
@@ -90,3 +92,15 @@ def test_console_lines_after_a_data_summary_are_skipped_elsewhere_refused(tmp_pa
     assert main([str(a), str(b)]) == 1
     (b / "eval/metrics.json").write_text('{"test/same/iou": 0.4123456789}\nextra')
     assert main([str(a), str(b)]) == 2
+
+
+def test_log_lines_before_a_data_summary_are_skipped(tmp_path, capsys):
+    """Older checkouts printed lit3d-data's warnings on stdout, before the JSON summary."""
+    path = tmp_path / "data_summary.json"
+    path.write_text("[2026-11-29 05:06:01,350][lit3d.data][WARNING] - bench keeps procedural\n"
+                    '{"bytes_on_disk": 12, "config_hash": "ab"}\n')
+    assert json_values(path) == {"bytes_on_disk": "12", "config_hash": "ab"}
+    assert "1 log lines before the JSON summary skipped" in capsys.readouterr().err
+    (tmp_path / "x.json").write_text("[2026-11-29 05:06:01,350] not skipped here\n{}")
+    with pytest.raises(BadInput, match="unreadable JSON"):
+        json_values(tmp_path / "x.json")
