@@ -19,28 +19,19 @@ import signal
 from pathlib import Path
 
 import pytest
-from tests.helpers.runs import TINY_NETS
+from tests.helpers.completion import TINY_SIZES as SIZES, prepared_tiny_checkpoint
+from tests.helpers.runs import TINY_NETS, start_script
 from tests.helpers.signals import signal_when, stop_line
-from tests.helpers.runs import start_script
 
-from lit3d.api.checkpoints import untrained_checkpoint
 from lit3d.cli import evaluation
-from lit3d.runtime.build import build_datamodule
-from lit3d.runtime.checkpoints import read_checkpoint_meta
 
-SIZES = "data.sizes={train:2,val:4,test_same:4,test_cross:4,test_unseen:0}"
 OUTPUTS = ("metrics.json", "results.md", "config.yaml")
 
 
 @pytest.fixture(scope="module")
 def checkpoint(tmp_path_factory) -> Path:
     """An untrained tiny completion checkpoint whose data config (prepared here) is the one evaluated."""
-    root = tmp_path_factory.mktemp("eval_interrupt")
-    ckpt = untrained_checkpoint("completion_demo", root / "c.ckpt", [*TINY_NETS, SIZES, "data.batch_size=2",
-                                                                     "data.prepare.progress=false",
-                                                                     f"paths.data_dir={root}/data"])
-    build_datamodule(read_checkpoint_meta(ckpt)["data"]).prepare_data()
-    return ckpt
+    return prepared_tiny_checkpoint(tmp_path_factory.mktemp("eval_interrupt"))
 
 
 def _expected(run: Path, what: str) -> str:

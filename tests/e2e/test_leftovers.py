@@ -23,14 +23,13 @@ import sys
 from pathlib import Path
 
 import pytest
-from tests.helpers.runs import TINY_NETS
-from tests.helpers.runs import BIN, REPO, child_env
+from tests.helpers.completion import TINY_SIZES as SIZES, prepared_tiny_checkpoint
+from tests.helpers.runs import BIN, REPO, TINY_NETS, child_env
 
 from lit3d.cli.run_leftovers import clear_run_dirs
 from lit3d.utils.io import atomic_write_text, write_json
 from lit3d.utils.temp_names import HOST, tag, writer
 
-SIZES = "data.sizes={train:2,val:4,test_same:4,test_cross:4,test_unseen:0}"
 
 
 def _dead_pid() -> int:
@@ -123,16 +122,7 @@ def _killed(res: subprocess.CompletedProcess) -> subprocess.CompletedProcess:
 @pytest.fixture(scope="module")
 def checkpoint(tmp_path_factory) -> Path:
     """An untrained tiny completion checkpoint whose data (prepared here) lit3d-eval evaluates."""
-    from lit3d.api.checkpoints import untrained_checkpoint
-    from lit3d.runtime.build import build_datamodule
-    from lit3d.runtime.checkpoints import read_checkpoint_meta
-
-    root = tmp_path_factory.mktemp("leftovers")
-    ckpt = untrained_checkpoint("completion_demo", root / "c.ckpt", [*TINY_NETS, SIZES, "data.batch_size=2",
-                                                                     "data.prepare.progress=false",
-                                                                     f"paths.data_dir={root}/data"])
-    build_datamodule(read_checkpoint_meta(ckpt)["data"]).prepare_data()
-    return ckpt
+    return prepared_tiny_checkpoint(tmp_path_factory.mktemp("leftovers"))
 
 
 @pytest.mark.slow

@@ -1,10 +1,19 @@
 """Tiny completion nets and grids shared by the step-cost, options and step-switch tests."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import torch
 
+from lit3d.api.checkpoints import untrained_checkpoint
 from lit3d.completion.checkpoint_upgrade import upgrade_hparams
 from lit3d.completion.module import CompletionTask
+from lit3d.runtime.build import build_datamodule
+from lit3d.runtime.checkpoints import read_checkpoint_meta
+from tests.helpers.runs import TINY_NETS
+
+# two training items, four validation and four of each seen test split: an evaluation in seconds
+TINY_SIZES = "data.sizes={train:2,val:4,test_same:4,test_cross:4,test_unseen:0}"
 
 
 def tiny_nets(demo: dict) -> dict:
@@ -26,3 +35,13 @@ def tiny_task(nets: dict, **kw) -> CompletionTask:
     also by their short flat names (``gp_every=2``: :func:`lit3d.completion.checkpoint_upgrade.upgrade_hparams`)."""
     torch.manual_seed(0)
     return CompletionTask(**upgrade_hparams({"nets": tiny_nets(nets), **kw}))
+
+
+def prepared_tiny_checkpoint(root: Path) -> Path:
+    """An untrained tiny completion checkpoint in ``root`` whose data config (prepared here, under
+    ``root/data``) is the one ``lit3d-eval`` evaluates."""
+    ckpt = untrained_checkpoint("completion_demo", root / "c.ckpt", [*TINY_NETS, TINY_SIZES, "data.batch_size=2",
+                                                                     "data.prepare.progress=false",
+                                                                     f"paths.data_dir={root}/data"])
+    build_datamodule(read_checkpoint_meta(ckpt)["data"]).prepare_data()
+    return ckpt
