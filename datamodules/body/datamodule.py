@@ -98,14 +98,16 @@ class BodyDataModule(pl.LightningDataModule):
         self._stream: ReplayStream | None = None
 
     # ------------------------------------------------------------------ drawing
-    def _load_body(self) -> None:
+    def anny_body(self) -> Body:
+        """The differentiable Anny body the people are drawn with, loaded once (the evaluator fits with it too)."""
         if self.body is None:
             self.body, self.cam = Body(), Camera.default(*self.placement.image)
             self.dist = shape_distribution(self.body)
+        return self.body
 
     def draw(self, seed: int, first: int, n: int) -> dict[str, torch.Tensor]:
         """People ``first .. first + n - 1`` of draw ``seed``, rendered and cropped (module doc)."""
-        self._load_body()
+        self.anny_body()
         return draw_people(self.body, self.dist, seed, first, n, self.cam, self.prep, self.placement)
 
     def _train_draw(self, first: int, n: int) -> dict[str, torch.Tensor]:

@@ -23,7 +23,6 @@ import numpy as np
 from lit3d.body.figures import write_fit_sheet
 from lit3d.body.fit_scores import anny_items, faust_items
 from lit3d.body.report import markdown, summarise
-from lit3d.body_fit.model import Body
 from lit3d.body_fit.regressor import refine_config
 from lit3d.body_fit.synthetic import Camera
 from lit3d.utils.evaluation import Evaluation
@@ -76,7 +75,7 @@ def flat_metrics(summary: dict) -> dict[str, float]:
 def protocol(task, datamodule, settings: Mapping) -> Evaluation:
     """The body fit from ``task``'s regressor on held-out Anny people and, with ``data.faust_root``, FAUST."""
     s = _settings(settings)
-    body, cam = Body(), Camera.default()
+    body, cam = datamodule.anny_body(), Camera.default()
     init = (task.regressor(), refine_config(s["refine_global"], s["refine_full"]))
     meta = {"command": "lit3d-eval (the body task's evaluation)", "body_seed": s["body_seed"], "pose_seed": s["pose_seed"],
             "sensor": s["sensor"], "poses": s["poses"], "settings": s,
@@ -149,5 +148,5 @@ def write_figures(task, datamodule, out_dir: Path, n: int = 4, evaluation: Evalu
     if n <= 0:
         return []
     s = _settings(evaluation.artefacts.get("settings", {}) if evaluation and evaluation.artefacts else {})
-    return [write_fit_sheet(task.regressor(), refine_config(s["refine_global"], s["refine_full"]), n, s,
-                            Path(out_dir) / "body_fits.png")]
+    return [write_fit_sheet(datamodule.anny_body(), task.regressor(), refine_config(s["refine_global"], s["refine_full"]),
+                            n, s, Path(out_dir) / "body_fits.png")]

@@ -48,10 +48,10 @@ def mesh_tile(verts_cam: np.ndarray, faces: np.ndarray, centre: np.ndarray, scal
     return shaded_views(mesh, VIEW, CELL, "basic_1", 0.6, background=1.0)[0]
 
 
-def write_fit_sheet(regressor, refine, n: int, s: dict, path: Path) -> Path:
+def write_fit_sheet(body: Body, regressor, refine, n: int, s: dict, path: Path) -> Path:
     """PNG of the first ``n`` held-out Anny people of the evaluation settings ``s``: input depth | true
     posed body | regressor alone | regressor + refinement (per-vertex median errors in the labels)."""
-    body, cam = Body(), Camera.default()
+    cam = Camera.default()
     rows = []
     for i in range(n):
         pheno = sample_phenotype(s["body_seed"], i, "adult", body.model.model)
