@@ -102,6 +102,11 @@ def write_artefacts(evaluation: Evaluation, out_dir: Path) -> list[Path]:
     return [js, md]
 
 
+def validation_protocol(trainer, task, datamodule, settings: Mapping) -> Evaluation:
+    """``lit3d-eval split=val``: nothing beyond the module's own ``val/`` metrics."""
+    return Evaluation()
+
+
 def _plain(value):
     if isinstance(value, np.generic):
         return value.item()

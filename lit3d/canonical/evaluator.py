@@ -17,7 +17,8 @@ test (``task.test_outputs``, DDP-correct) and returns ``test/retrieval/<source>/
 
 :func:`write_artefacts` saves the fold's held-out items (the ``heldout`` artefact of
 :func:`protocol`) to ``<run dir>/heldout.npz`` (:mod:`lit3d.canonical.heldout`) for the pooled
-cross-validated protocol (:mod:`lit3d.canonical.pooled`).
+cross-validated protocol (:mod:`lit3d.canonical.pooled`); with ``lit3d-eval split=val``,
+:func:`validation_protocol` gives the validation items' in the same layout.
 
 ``settings`` are the run's evaluation settings (the config's ``evaluation`` node, saved in the checkpoint:
 ``retrieval``: descriptor config or null = off, ``retrieval_min_subjects``, ``chance_trials``,
@@ -37,7 +38,7 @@ import numpy as np
 import torch
 
 from lit3d.canonical.baselines import baseline_retrieval
-from lit3d.canonical.heldout import HELDOUT_FILE, heldout_arrays, save_heldout, settings_of
+from lit3d.canonical.heldout import HELDOUT_FILE, heldout_arrays, item_ids, save_heldout, settings_of
 from lit3d.canonical.report import write_figures, write_results  # noqa: F401
 from lit3d.canonical.smoothing import smooth_prediction, smoothing_of
 from lit3d.metrics.depth import composite_depth
@@ -108,6 +109,26 @@ def heldout_items(task, outputs: dict[str, torch.Tensor], datamodule, settings: 
         outputs, {i: s for s, i in datamodule.subject_index.items()}, datamodule.held_out_ids(),
         prediction_source(task), dict(datamodule.hparams), datamodule.split.fold, datamodule.split.n_folds,
         settings_of({"mask_threshold": task.hparams.mask_threshold, **settings}))
+
+
+def validation_protocol(trainer, task, datamodule, settings: Mapping) -> Evaluation:
+    """``lit3d-eval split=val``: the validation items' predictions as the ``heldout`` artefact (saved as
+    ``heldout.npz`` by :func:`write_artefacts`), so that ``lit3d-summary --pooled`` scores settings on
+    validation people with the thesis descriptor instead of on the test set. The validation loader goes
+    through the task's test step (the gathered outputs, ``settings``' smoothing applied); every
+    validation item is its own expected set (fold 0 of 1). None for a datamodule that does not list
+    its held-out items. Call on every process."""
+    if not isinstance(datamodule, ListsHeldOut):
+        return Evaluation()
+    trainer.test(task, dataloaders=datamodule.val_dataloader(), weights_only=True, verbose=False)
+    outputs = scored_outputs(task, settings)
+    if not outputs or not trainer.is_global_zero:
+        return Evaluation()
+    names = {i: s for s, i in datamodule.subject_index.items()}
+    expected = item_ids([names[int(i)] for i in outputs["subject_idx"]], outputs["pose"], outputs["view"])
+    held = heldout_arrays(outputs, names, expected.tolist(), prediction_source(task), dict(datamodule.hparams), 0, 1,
+                          settings_of({"mask_threshold": task.hparams.mask_threshold, **settings}))
+    return Evaluation({}, {"heldout": held})
 
 
 def write_artefacts(evaluation: Evaluation, out_dir: Path) -> list[Path]:

@@ -13,8 +13,9 @@ Evaluates with the evaluation settings the checkpoint was trained with (saved by
 those the command line sets (``evaluation.*``; with ``task=NAME``, whose config brings the node):
 :mod:`lit3d.runtime.eval_settings`.
 
-``split=val``: the validation split only, its ``val/`` metrics into metrics.json (with config.yaml; no
-results.md or figures): settings chosen on validation items, not on the test set
+``split=val``: the validation split only, its ``val/`` metrics into metrics.json (with config.yaml, and for
+the canonical task the validation items' predictions as heldout.npz, which ``lit3d-summary --pooled`` scores;
+no results.md or figures): settings chosen on validation items, not on the test set
 (:func:`lit3d.cli.evaluation.run_validation`).
 
 Writes into the run dir: metrics.json, results.md (the thesis's table layout,
@@ -104,7 +105,8 @@ def _evaluate(cfg: DictConfig, out_dir: Path) -> dict[str, float]:
 
     config = OmegaConf.to_yaml(OmegaConf.create({"task": task_cfg, "data": data_cfg, "evaluation": settings}))
     if cfg.split == "val":
-        return run_validation(trainer, task, datamodule, out_dir, extra=record, files={"config.yaml": config})
+        return run_validation(trainer, task, datamodule, task_cfg["name"], out_dir, extra=record,
+                              files={"config.yaml": config}, settings=settings)
     return run_evaluation(trainer, task, datamodule, task_cfg["name"], out_dir,
                           validate=validates_before_test(task), n_figures=cfg.n_figures,
                           extra=record, files={"config.yaml": config}, settings=settings)

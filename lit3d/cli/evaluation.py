@@ -113,14 +113,20 @@ def run_evaluation(trainer, task, datamodule, task_name: str, out_dir: Path, *, 
     return metrics
 
 
-def run_validation(trainer, task, datamodule, out_dir: Path, *, extra: dict | Callable[[], dict] | None = None,
-                   files: dict[str, str] | None = None) -> dict[str, float]:
+def run_validation(trainer, task, datamodule, task_name: str, out_dir: Path, *,
+                   extra: dict | Callable[[], dict] | None = None, files: dict[str, str] | None = None,
+                   settings: Mapping | None = None) -> dict[str, float]:
     """``lit3d-eval split=val``: validate ``task`` only (the task's ``val/`` metrics, e.g. the canonical
-    task's ``val/retrieval_nn``: choose settings on validation people, not on the test set) and on rank 0
-    write ``metrics.json`` (``extra`` first, ``"split": "val"``, the metrics) and ``files`` into ``out_dir``
-    as one set (:func:`staged_outputs`); no results.md, artefacts or figures (those are the test's)."""
+    task's ``val/retrieval_nn``: choose settings on validation people, not on the test set), then the task
+    room's ``validation_protocol`` (the canonical task's validation predictions, ``heldout.npz``), and on
+    rank 0 write ``metrics.json`` (``extra`` first, ``"split": "val"``, the metrics), the artefacts and
+    ``files`` into ``out_dir`` as one set (:func:`staged_outputs`); no results.md or figures (those are the
+    test's)."""
+    evaluator = evaluator_module(task_name)
     trainer.validate(task, datamodule=datamodule, weights_only=True)
     metrics = {k: v for k, v in scalar_metrics(trainer.callback_metrics).items() if k.startswith("val/")}
+    check_stop()
+    evaluation = evaluator.validation_protocol(trainer, task, datamodule, dict(settings or {}))  # every rank
     check_stop()
     if trainer.is_global_zero:
         head = extra() if callable(extra) else dict(extra or {})
@@ -128,5 +134,6 @@ def run_validation(trainer, task, datamodule, out_dir: Path, *, extra: dict | Ca
             for name, text in (files or {}).items():
                 atomic_write_text(stage / name, text)
             write_json(stage / METRICS, {**head, "split": "val", **metrics})
+            evaluator.write_artefacts(evaluation, stage)
         log.info("wrote %s (the validation split)", out_dir / METRICS)
     return metrics

@@ -27,3 +27,8 @@ def protocol(task, datamodule, settings: Mapping) -> Evaluation:
 def write_artefacts(evaluation: Evaluation, out_dir: Path) -> list[Path]:
     """No files beyond results.md and the figures."""
     return []
+
+
+def validation_protocol(trainer, task, datamodule, settings: Mapping) -> Evaluation:
+    """``lit3d-eval split=val``: nothing beyond the module's own ``val/`` metrics."""
+    return Evaluation()

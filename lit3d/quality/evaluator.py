@@ -63,6 +63,11 @@ def write_artefacts(evaluation: Evaluation, out_dir: Path) -> list[Path]:
     return []
 
 
+def validation_protocol(trainer, task, datamodule, settings: Mapping) -> Evaluation:
+    """``lit3d-eval split=val``: nothing beyond the module's own ``val/`` metrics."""
+    return Evaluation()
+
+
 def learned_methods(task, fm: FeatureMatrix, settings: Mapping) -> dict:
     """The learned methods of ``settings["cv_methods"]`` (the task's net, optimiser and selection),
     trained for ``settings["cv_epochs"]`` epochs (None: the trainer's)."""

@@ -10,6 +10,8 @@ LightningModule does not hold them):
 - ``protocol(task, datamodule, settings) -> Evaluation`` (:class:`lit3d.utils.evaluation.Evaluation`):
   metrics computed after ``trainer.test`` from what the module's test metrics gathered (retrieval,
   baselines, cross-validation), on every rank, plus in-memory artefacts for the writers below;
+- ``validation_protocol(trainer, task, datamodule, settings) -> Evaluation``: ``lit3d-eval split=val``'s
+  artefacts after the validation (the canonical task's validation predictions; empty for the others);
 - ``write_artefacts(evaluation, out_dir) -> list[Path]``: files beyond the tables (rank 0);
 - ``write_results(metrics, out_dir) -> Path``: results.md in the thesis's table layout;
 - ``write_figures(task, datamodule, out_dir, n, evaluation) -> list[Path]``: labelled PNGs.

@@ -12,10 +12,9 @@ existed. One checkpoint's ``val/`` metrics without ``--heldout`` are also ``lit3
 data.split.max_val_items=null`` (its metrics.json; that reads the data config from the checkpoint).
 
 ``--heldout DIR`` (canonical task): also writes the validation items' predictions as
-``DIR/<i>/heldout.npz`` (``i``: the checkpoint's place on the command line; the layout
-:mod:`lit3d.canonical.heldout` gives test items, with the checkpoint's evaluation settings), so that
-``lit3d-summary --pooled DIR/<i> --out ...`` ranks settings on validation people with the
-thesis descriptor, the measure the test reports, instead of on the test set.
+``DIR/<i>/heldout.npz`` (``i``: the checkpoint's place on the command line), as ``lit3d-eval ckpt_path=CKPT
+split=val`` writes them into its run dir, so that ``lit3d-summary --pooled DIR/<i> --out ...`` ranks settings on
+validation people with the thesis descriptor, the measure the test reports, instead of on the test set.
 """
 from __future__ import annotations
 
@@ -27,8 +26,7 @@ import lightning.pytorch as pl
 from omegaconf import OmegaConf
 
 from datamodules.canonical.flat_config import upgrade_data_config
-from lit3d.canonical.evaluator import prediction_source, scored_outputs
-from lit3d.canonical.heldout import heldout_arrays, item_ids, save_heldout, settings_of
+from lit3d.canonical.evaluator import validation_protocol, write_artefacts
 from lit3d.runtime.build import build_datamodule, import_object
 from lit3d.runtime.checkpoints import read_checkpoint
 from lit3d.runtime.eval_settings import checkpoint_settings
@@ -55,19 +53,13 @@ def validate(ckpt: Path, all_val: bool, heldout: Path | None = None) -> dict[str
     return metrics
 
 
-def write_validation_heldout(task, dm, ckpt: Path, task_cls, folder: Path) -> Path:
-    """The validation items through the task's test step, saved as ``folder/heldout.npz`` as the
-    evaluator saves test items (the checkpoint's evaluation settings, its smoothing applied; every
-    validation item is its own expected set: one fold)."""
+def write_validation_heldout(task, dm, ckpt: Path, task_cls, folder: Path) -> list[Path]:
+    """The validation items' predictions saved as ``folder/heldout.npz``, as ``lit3d-eval split=val`` saves
+    them (:func:`lit3d.canonical.evaluator.validation_protocol`, the checkpoint's evaluation settings)."""
     ck, meta = read_checkpoint(ckpt)
     settings, _ = checkpoint_settings(ck, meta, task_cls)
-    _trainer().test(task, dataloaders=dm.val_dataloader(), verbose=False)
-    outputs = scored_outputs(task, settings)
-    names = {i: s for s, i in dm.subject_index.items()}
-    expected = item_ids([names[int(i)] for i in outputs["subject_idx"]], outputs["pose"], outputs["view"])
-    arrays = heldout_arrays(outputs, names, expected.tolist(), prediction_source(task), dict(dm.hparams), 0, 1,
-                            settings_of({"mask_threshold": task.hparams.mask_threshold, **settings}))
-    return save_heldout(folder / "heldout.npz", arrays)
+    folder.mkdir(parents=True, exist_ok=True)
+    return write_artefacts(validation_protocol(_trainer(), task, dm, settings), folder)
 
 
 def main(argv: list[str] | None = None) -> None:
