@@ -4,7 +4,7 @@ Settings (:mod:`datamodules.canonical.settings`, one frozen dataclass per config
 ``data.source`` (``kind``: ``synth`` procedural figures, ``anny``, or meshes under ``data.root``: ``tosca``,
 ``shrec14``, ``faust``, ``sumner``; only that source's fields), ``data.render``, ``data.split``,
 ``data.training``; flat: ``data_dir``, ``image_size``, ``root``, ``seed``, ``batch_size``, ``num_workers``,
-``prepare_workers``, ``skip_bad``, ``phenotype_targets``.
+``prepare_workers``, ``skip_bad``.
 
 Every shape is centred on its bounding-box centre and scaled so that its longest side is 1
 (``render.scale_mode="shape"``, as the thesis) or by the subject's canonical scale
@@ -24,9 +24,8 @@ vertex blends of two of the fold's training poses (:mod:`datamodules.canonical.b
 the validation subjects' own poses (new poses, as the test), not the training ones.
 ``split.train_pose_fraction``: train on that share of each subject's training poses (a learning curve).
 ``render.flow_targets``: also cache, for every pose whose mesh corresponds to the canonical one, the warp
-head's backward flow and visibility (:mod:`datamodules.canonical.flow`; ``render.forward_flow``: the splat
-head's forward ones too); items carry them. ``training.batch_poses`` K >= 2: batches of ``batch_size / K``
-subjects x K poses (``task.contrastive.weight``).
+head's backward flow and visibility (:mod:`datamodules.canonical.flow`); items carry them. Options measured
+and not adopted were removed (:mod:`datamodules.canonical.parked`).
 
 Batches (``B`` samples, ``S = image_size``):
     depth, mask              (B, 1, S, S) float32   posed input; mask in {0, 1}
@@ -34,7 +33,6 @@ Batches (``B`` samples, ``S = image_size``):
     subject (list[str]), subject_idx (B,) int64, pose (B,) int64, view (B,) int64
     flow (B, 2, S, S), vis (B, 1, S, S) float32, has_flow (B,) bool   (``flow_targets``; zeros and False
                              for items without targets; backward: at canonical pixels)
-    fflow (B, 2, S, S), fvis (B, 1, S, S) float32   (``forward_flow``: at posed pixels)
 
 Cache (:class:`datamodules.cache.CacheBuilder`, the one cache scheme of every DataModule):
 ``data_dir/subjects/<subject>.npz`` per subject (depth as float16, masks packed bits; layout in
@@ -63,7 +61,6 @@ import numpy as np
 from torch.utils.data import DataLoader
 
 from datamodules.cache import CacheBuilder, DataError
-from datamodules.canonical.batches import SubjectGroupedBatches
 from datamodules.canonical.blends import add_blends
 from datamodules.canonical.dataset import CanonicalPairDataset, mirror_views, subject_balanced_sampler
 from datamodules.canonical.images import (depth_image_problem, depth_pairs_png, read_subject, remove_legacy_subject_files,
@@ -99,7 +96,7 @@ class CanonicalDataModule(pl.LightningDataModule):
                  root: str | None = None, render: dict | RenderSettings | None = None,
                  split: dict | SplitSettings | None = None, training: dict | TrainingSettings | None = None,
                  seed: int = 42, batch_size: int = 8, num_workers: int = 0, prepare_workers: int = 0,
-                 skip_bad: bool = False, phenotype_targets: bool = False):
+                 skip_bad: bool = False):
         """``source``, ``render``, ``split``, ``training``: the config nodes of
         :mod:`datamodules.canonical.settings` (None: every default; ``source``: synthetic figures)."""
         super().__init__()
@@ -119,7 +116,7 @@ class CanonicalDataModule(pl.LightningDataModule):
         self.data_dir = Path(data_dir)
         self.root, self.image_size, self.seed = root, int(image_size), int(seed)
         self.batch_size, self.num_workers, self.prepare_workers = int(batch_size), int(num_workers), int(prepare_workers)
-        self.skip_bad, self.phenotype_targets = bool(skip_bad), bool(phenotype_targets)
+        self.skip_bad = bool(skip_bad)
         self._source = None
         self.manifest: dict = {}
         self.cache: dict[str, dict] = {}
@@ -159,8 +156,8 @@ class CanonicalDataModule(pl.LightningDataModule):
             cfg["skip_bad"] = True
         if render.view_mode != "fixed":  # absent for the old convention: its caches keep their hash
             cfg["view_mode"] = render.view_mode
-        if render.flow_targets:  # absent without flows, and "+forward" only with them: those caches keep their hash
-            cfg["flow_targets"] = FLOW_VERSION + ("+forward" if render.forward_flow else "")
+        if render.flow_targets:  # absent without flows: those caches keep their hash
+            cfg["flow_targets"] = FLOW_VERSION
         return cfg
 
     def cache_builder(self) -> CacheBuilder:
@@ -227,14 +224,6 @@ class CanonicalDataModule(pl.LightningDataModule):
             raise DataError(f"{self.data_dir}: no usable subject left ({len(self.skipped)} bad images skipped)")
         self.subject_index = {s: i for i, s in enumerate(man["subjects"])}
 
-    def subject_phenotypes(self) -> dict[str, np.ndarray]:
-        """Every cached subject's phenotypes ``(len(bodies.PHENOTYPE_RANGES),)`` float32 in [0, 1] (Anny's labels in
-        that order), drawn again from the source's seeds (nothing new in the cache); DataError for a source
-        without phenotypes."""
-        if not hasattr(self.source, "phenotype"):
-            raise DataError(f"phenotype_targets: data source '{self.source_kind}' has no phenotypes (anny has)")
-        return {s: np.array([self.source.phenotype(s)[k] for k in bodies.PHENOTYPE_RANGES], np.float32) for s in self.cache}
-
     def setup(self, stage: str | None = None) -> None:
         if self.datasets:
             return
@@ -242,7 +231,6 @@ class CanonicalDataModule(pl.LightningDataModule):
         sp, tr = self.split, self.training
         subject_poses = {s: c["poses"] for s, c in self.cache.items()}
         pairs = self._pairs(sp.fold)
-        phenotypes = self.subject_phenotypes() if self.phenotype_targets else None
         pairs["train"] = thin_training(pairs["train"], sp.train_pose_fraction, self.seed + sp.fold)
         if sp.max_val_items and len(pairs["val"]) > sp.max_val_items:
             idx = np.random.default_rng(self.split_seed).choice(len(pairs["val"]), sp.max_val_items, replace=False)
@@ -259,7 +247,7 @@ class CanonicalDataModule(pl.LightningDataModule):
             if not self.splits[k]:
                 raise DataError(f"split '{k}' is empty (subjects {len(subject_poses)}, folds {sp.n_folds}): "
                                 "use more subjects/poses or fewer folds")
-            self.datasets[k] = CanonicalPairDataset(self.splits[k], self.cache, self.subject_index, phenotypes=phenotypes,
+            self.datasets[k] = CanonicalPairDataset(self.splits[k], self.cache, self.subject_index,
                                            flip_lr=tr.flip_lr and k == "train", flip_target=self.render.view_mode == "fixed",
                                            mirror_view=mirror_views(self.render.azimuths),
                                            roll_deg=tr.roll_deg if k == "train" else 0.0)
@@ -320,11 +308,8 @@ class CanonicalDataModule(pl.LightningDataModule):
         return DataLoader(self.datasets[split], batch_size=self.batch_size, shuffle=shuffle, **self._workers)
 
     def train_dataloader(self):
-        train, tr = self.datasets["train"], self.training
-        if tr.batch_poses:  # several poses of each subject per batch (a contrastive identity term)
-            return DataLoader(train, batch_sampler=SubjectGroupedBatches(train.records, self.batch_size, tr.batch_poses,
-                                                                         self.seed), **self._workers)
-        if tr.balance_subjects:
+        train = self.datasets["train"]
+        if self.training.balance_subjects:
             return DataLoader(train, batch_size=self.batch_size, sampler=subject_balanced_sampler(train.records, self.seed),
                               **self._workers)
         return self._loader("train", True)

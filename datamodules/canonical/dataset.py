@@ -3,13 +3,10 @@ subject-balanced training sampler.
 
 Items (``S = image_size``): ``depth``, ``mask``, ``canon_depth``, ``canon_mask`` ``(1, S, S)``
 float32; ``subject`` str, ``subject_idx``, ``pose``, ``view`` int; ``flow`` ``(2, S, S)`` (backward
-flow in pixels, :mod:`datamodules.canonical.flow`), ``vis`` ``(1, S, S)`` float32, ``fflow`` and
-``fvis`` (the forward flow and visibility, at posed pixels, same shapes; only from a cache that holds
-them, ``data.render.forward_flow``) and ``has_flow``
+flow in pixels, :mod:`datamodules.canonical.flow`), ``vis`` ``(1, S, S)`` float32 and ``has_flow``
 bool (zeros and False for an item without targets, or whose input is rolled or mirrored without its
-target); ``phenotype`` ``(P,)`` float32 when the dataset is given phenotypes. With ``flip_lr`` (training
-only) the posed images of an item are mirrored left-right with probability 1/2, and the canonical
-images with them only when ``flip_target`` (the camera convention decides, see
+target). With ``flip_lr`` (training only) the posed images of an item are mirrored left-right with probability
+1/2, and the canonical images with them only when ``flip_target`` (the camera convention decides, see
 :class:`CanonicalPairDataset`).
 """
 from __future__ import annotations
@@ -44,15 +41,12 @@ class CanonicalPairDataset(Dataset):
 
     def __init__(self, records: list[dict], cache: dict[str, dict], subject_index: dict[str, int],
                  flip_lr: bool = False, flip_target: bool = True, mirror_view: dict[int, int] | None = None,
-                 roll_deg: float = 0.0, phenotypes: dict[str, np.ndarray] | None = None):
+                 roll_deg: float = 0.0):
         self.records, self.cache, self.subject_index = records, cache, subject_index
-        self.phenotypes = phenotypes  # {subject: (P,) float32}: items carry "phenotype" (the task's regression)
         self.flip_lr = flip_lr  # mirror the input left-right with probability 1/2
         self.flip_target = flip_target  # ... and the canonical target with it (same camera only)
         self.mirror_view = dict(mirror_view or {})
         self.roll_deg = float(roll_deg)
-        # items carry the forward flow when the cache holds it (data.render.forward_flow): all items or none, for collation
-        self.forward_flow = any(c.get("fflow") for c in cache.values())
 
     def __len__(self):
         return len(self.records)
@@ -74,26 +68,21 @@ class CanonicalPairDataset(Dataset):
             depth, mask = roll(depth, mask, angle)
         # flow targets hold only when input and target moved together (not rolled; mirrored both or neither)
         has_flow = pk in c.get("flow", {}) and not angle and flip == flip_canon and target_view == r["view"]
-        flows = {}
-        for f_name, v_name in (("flow", "vis"), ("fflow", "fvis"))[:2 if self.forward_flow else 1]:
-            if has_flow:
-                flow = c[f_name][pk].astype(np.float32)
-                if flip:  # mirrored pair: the flow of the mirrored image, its x component negated
-                    flow = flow[:, :, ::-1] * np.array([-1.0, 1.0], np.float32)[:, None, None]
-                flows[f_name], flows[v_name] = torch.from_numpy(np.ascontiguousarray(flow)), t(c[v_name][pk], flip)
-            else:
-                size = depth.shape[-1]
-                flows[f_name], flows[v_name] = torch.zeros(2, size, size), torch.zeros(1, size, size)
-        item = {
+        if has_flow:
+            flow = c["flow"][pk].astype(np.float32)
+            if flip:  # mirrored pair: the flow of the mirrored image, its x component negated
+                flow = flow[:, :, ::-1] * np.array([-1.0, 1.0], np.float32)[:, None, None]
+            flow, vis = torch.from_numpy(np.ascontiguousarray(flow)), t(c["vis"][pk], flip)
+        else:
+            size = depth.shape[-1]
+            flow, vis = torch.zeros(2, size, size), torch.zeros(1, size, size)
+        return {
             "depth": depth, "mask": mask,
             "canon_depth": t(c["depth"][ck], flip_canon), "canon_mask": t(c["mask"][ck], flip_canon),
             "subject": r["subject"], "subject_idx": self.subject_index[r["subject"]],
             "pose": int(r["pose"]), "view": int(r["view"]), "index": i,
-            **flows, "has_flow": has_flow,
+            "flow": flow, "vis": vis, "has_flow": has_flow,
         }
-        if self.phenotypes is not None:
-            item["phenotype"] = torch.from_numpy(self.phenotypes[r["subject"]])
-        return item
 
     def canonical_templates(self, view: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
         """Every subject's canonical depth and mask seen from view ``view``, ``(K, 1, S, S)`` float32 each,

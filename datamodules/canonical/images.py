@@ -43,10 +43,9 @@ def unpack_mask(packed: np.ndarray | None, size: int) -> np.ndarray | None:
 
 
 def read_subject(path: Path, size: int, n_views: int) -> tuple[dict | None, list[str]]:
-    """One subject's cache file -> (``{"depth", "mask", "flow", "vis", "fflow", "fvis", "poses"}`` of its
-    valid images, problems). ``flow`` / ``fflow`` ``{"<p>_<v>": (2, S, S) float16}`` and ``vis`` / ``fvis``
-    (``(S, S)`` float32) hold the backward and forward flow targets present (none without them; the forward
-    ones only in a ``forward_flow`` cache); a flow of the wrong shape or not finite, or one without its
+    """One subject's cache file -> (``{"depth", "mask", "flow", "vis", "poses"}`` of its valid images,
+    problems). ``flow`` ``{"<p>_<v>": (2, S, S) float16}`` and ``vis`` (``(S, S)`` float32) hold the flow
+    targets present (none without them); a flow of the wrong shape or not finite, or one without its
     visibility, is a problem.
 
     A pose with a bad or missing view is left out of ``poses``; a bad canonical view gives
@@ -77,24 +76,17 @@ def read_subject(path: Path, size: int, n_views: int) -> tuple[dict | None, list
     complete = [p for p in listed if all(f"{p}_{v}" in depth for v in range(n_views))]
     if "canonical" not in complete:
         return None, problems
-    flows = {name: {} for name in ("flow", "vis", "fflow", "fvis")}
+    flow, vis = {}, {}
     for key in (f"{p}_{v}" for p in complete[1:] for v in range(n_views)):
         if f"flow_{key}" not in arrays:
             continue
-        got = {}
-        for f_name, v_name in (("flow", "vis"), ("fflow", "fvis")):
-            if f_name == "fflow" and f"fflow_{key}" not in arrays and f"fvis_{key}" not in arrays:
-                continue  # a cache without the forward flow (data.render.forward_flow=false)
-            f, m = arrays.get(f"{f_name}_{key}"), unpack_mask(arrays.get(f"{v_name}_{key}"), size)
-            if f is None or f.shape != (2, size, size) or m is None or not np.isfinite(f).all():
-                problems.append(f"{path}: {f_name}_{key}: flow target not (2, {size}, {size}) and finite, or its "
-                                "visibility missing")
-                break
-            got[f_name], got[v_name] = f, m.astype(np.float32)
-        else:
-            for name, a in got.items():
-                flows[name][key] = a
-    return {"depth": depth, "mask": mask, **flows, "poses": [int(p) for p in complete[1:]]}, problems
+        f, m = arrays[f"flow_{key}"], unpack_mask(arrays.get(f"vis_{key}"), size)
+        if f.shape != (2, size, size) or m is None or not np.isfinite(f).all():
+            problems.append(f"{path}: flow_{key}: flow target not (2, {size}, {size}) and finite, or its "
+                            "visibility missing")
+            continue
+        flow[key], vis[key] = f, m.astype(np.float32)
+    return {"depth": depth, "mask": mask, "flow": flow, "vis": vis, "poses": [int(p) for p in complete[1:]]}, problems
 
 
 def depth_pairs_png(dataset, n: int, path: str | Path, cell: int = 256) -> Path:

@@ -10,8 +10,6 @@ Arrays of a subject file (``S = image_size``; layout read by :mod:`datamodules.c
     depth_<p>_<v>  (S, S) float16       mask_<p>_<v>  packed bits of (S, S) bool
     flow_<p>_<v>   (2, S, S) float16    vis_<p>_<v>   packed bits of (S, S) bool   (``flow_targets``;
                    only for poses whose mesh corresponds to the canonical one)
-    fflow_<p>_<v>  (2, S, S) float16    fvis_<p>_<v>  packed bits of (S, S) bool   (``forward_flow``, the
-                   same pairs: the forward flow, per posed pixel, and whether its point is seen canonically)
     poses (str), skipped (str)
 """
 from __future__ import annotations
@@ -108,10 +106,6 @@ class PairRenderer:
             flow, vis = flow_targets(canon_v, posed_v, cd, cm, d, m)
             out[f"flow_{pose}_{vi}"] = flow.astype(np.float16)
             out[f"vis_{pose}_{vi}"] = np.packbits(vis)
-            if self.render.forward_flow:  # per posed pixel, where its point lies in the canonical image
-                fflow, fvis = flow_targets(posed_v, canon_v, d, m, cd, cm)
-                out[f"fflow_{pose}_{vi}"] = fflow.astype(np.float16)
-                out[f"fvis_{pose}_{vi}"] = np.packbits(fvis)
         return out
 
     def render_subject(self, subject: str) -> dict[str, np.ndarray]:

@@ -171,13 +171,12 @@ SourceSettings = SynthSettings | AnnySettings | ToscaSettings | Shrec14Settings 
 class RenderSettings:
     """What the cached images are rendered with: every shape turned by ``view_mode``'s azimuth plus each of
     ``azimuths`` (degrees), scaled by ``scale_mode`` (:data:`SCALE_MODES`); ``flow_targets``: also the warp
-    head's backward flow and visibility, ``forward_flow`` the splat head's forward ones."""
+    head's backward flow and visibility."""
 
     azimuths: tuple[float, ...] = (0.0,)
     view_mode: str = "fixed"
     scale_mode: str = "shape"
     flow_targets: bool = False
-    forward_flow: bool = False
 
     def __post_init__(self):
         object.__setattr__(self, "azimuths", _tuple(self.azimuths))
@@ -215,14 +214,12 @@ class SplitSettings:
 class TrainingSettings:
     """What only the training items get: ``flip_lr`` (mirrored left-right, p = 1/2), ``roll_deg`` (turned in
     the image plane by up to that), ``blend_poses`` extra blended poses per subject; batches drawn with every
-    subject equally often (``balance_subjects``) or as ``batch_size / batch_poses`` subjects x ``batch_poses``
-    poses (``batch_poses`` >= 2)."""
+    subject equally often (``balance_subjects``)."""
 
     flip_lr: bool = False
     roll_deg: float = 0.0
     blend_poses: int = 0
     balance_subjects: bool = False
-    batch_poses: int = 0
 
 
 def _choice(name: str, value, choices: Sequence[str]) -> None:

@@ -3,21 +3,21 @@ today's: the one place that knows the old layouts.
 
 :func:`upgrade_checkpoint` rewrites a loaded checkpoint dict in place and returns it: its
 ``hyper_parameters`` (:func:`upgrade_hparams`) and, in its lit3d metadata, the task config and the data
-config (:func:`datamodules.canonical.flat_config.upgrade_data_config`); the parked options
-(:data:`PARKED`: measured and not adopted, removed; their code is at the git tag :data:`PARKED_TAG`) dropped
-where they hold their default, and the checkpoint refused where one does not. A checkpoint of today's
-layout, or of another task, comes back unchanged. Every loader of a canonical checkpoint calls it: ``lit3d-eval``
-(:func:`lit3d.runtime.checkpoints.read_checkpoint`), the API and ``lit3d-reconstruct --canonical``
-(:func:`lit3d.reconstruct.pipeline.load_task`) and ``task.init_weights``
-(:meth:`lit3d.canonical.module.CanonicalTask.load_initial_weights`).
+config (:func:`datamodules.canonical.flat_config.upgrade_data_config`); the parked options (:data:`PARKED`, and
+the data's :data:`datamodules.canonical.parked.PARKED_DATA`: measured and not adopted, removed; their code is at
+the git tag :data:`datamodules.canonical.parked.PARKED_TAG`) dropped where they hold their default, and the
+checkpoint refused where one does not. A checkpoint of today's layout, or of another task, comes back unchanged.
+Every loader of a canonical checkpoint calls it: ``lit3d-eval`` (:func:`lit3d.runtime.checkpoints.read_checkpoint`),
+the API and ``lit3d-reconstruct --canonical`` (:func:`lit3d.reconstruct.pipeline.load_task`) and
+``task.init_weights`` (:meth:`lit3d.canonical.module.CanonicalTask.load_initial_weights`).
 """
 from __future__ import annotations
 
 from collections.abc import Mapping
 
 from datamodules.canonical.flat_config import upgrade_data_config
+from datamodules.canonical.parked import ANY, drop_parked, refuse
 from lit3d.utils.checkpoints import META_KEY
-from lit3d.utils.errors import Lit3dError
 
 TASK_TARGET = "lit3d.canonical.module.CanonicalTask"
 
@@ -45,9 +45,8 @@ FLAT_TASK_KEYS = {
 }
 
 
-PARKED_TAG = "parked-canonical-options"
-ANY = object()  # a parked key dropped whatever its value: it acted only with its node's weight > 0
-# a parked option of the task config (today's node layout) -> the value at which it was off (studies/canonical/LOG.md)
+# a parked option of the task config (today's node layout) -> the value at which it was off (studies/canonical/LOG.md);
+# the data's: datamodules.canonical.parked.PARKED_DATA, dropped with the data config's upgrade
 PARKED = {
     "net.head.normalise_depth": False, "net.head.depth": "affine", "net.head.parts": 0, "net.head.attend_grid": 0,
     "net.head.refine_steps": 1, "net.head.affine_cell": 8,
@@ -57,53 +56,9 @@ PARKED = {
     **{f"contrastive.{k}": ANY for k in ("embed", "temperature", "dim", "channels")}, "contrastive.weight": 0.0,
 }
 PARKED_VALUES = {"net.head.kind": ("splat",)}  # parked values of a kept key
-# the same for the data config (datamodules.canonical.settings)
-PARKED_DATA = {"render.forward_flow": False, "phenotype_targets": False, "training.batch_poses": 0}
 # a warp head's output conv of the per-pixel depth offset (net.head.depth=offset, the default before the key
 # existed): flow 2 + offset 1 + visibility and fills 3 channels
 OFFSET_HEAD = ("net.head.out.weight", 6)
-
-
-class ParkedOptionError(Lit3dError, ValueError):
-    """A checkpoint that used an option removed from the product (measured and not adopted)."""
-
-
-def _refuse(source: str | None, key: str, value) -> ParkedOptionError:
-    where = f"{source}: " if source else ""
-    return ParkedOptionError(f"{where}{key}={value!r} is a parked canonical option (measured and not adopted, removed); "
-                             f"this checkpoint needs the code at git tag {PARKED_TAG}")
-
-
-def drop_parked(config: Mapping, parked: Mapping, prefix: str, source: str | None = None,
-                values: Mapping = PARKED_VALUES) -> dict:
-    """``config`` (nested mappings) without the keys of ``parked`` (dotted) that hold their default (or any value
-    for :data:`ANY`), nor nodes left empty by that; :class:`ParkedOptionError` naming ``source`` and
-    ``<prefix><key>`` for one at another value, or a key of ``values`` at one of its parked values."""
-    def walk(node: Mapping, path: str) -> dict:
-        out = {}
-        for key, value in node.items():
-            dotted = f"{path}{key}"
-            if dotted in parked:
-                default = parked[dotted]
-                if default is not ANY and not _same(value, default):
-                    raise _refuse(source, prefix + dotted, value)
-                continue
-            if dotted in values and value in values[dotted]:
-                raise _refuse(source, prefix + dotted, value)
-            if isinstance(value, Mapping) and value and any(k.startswith(dotted + ".") for k in (*parked, *values)):
-                value = walk(value, dotted + ".")
-                if not value:
-                    continue  # a node of parked keys only (phenotype, contrastive)
-            out[key] = value
-        return out
-    return walk(config, "")
-
-
-def _same(value, default) -> bool:
-    """``value`` equals ``default`` (numbers by value: 1 == 1.0)."""
-    if isinstance(default, (int, float)) and not isinstance(default, bool) and isinstance(value, (int, float)):
-        return float(value) == float(default)
-    return value == default
 
 
 def is_canonical(ckpt: Mapping) -> bool:
@@ -143,7 +98,8 @@ def upgrade_hparams(hparams: Mapping, keep_evaluation: bool = False, source: str
     into theirs (:func:`upgrade_net`); the evaluation
     settings of :data:`EVALUATION_LEGACY` dropped (``keep_evaluation``: kept, for the task config). Today's
     layout comes back unchanged. The parked options of :data:`PARKED` are dropped at their defaults
-    (:func:`drop_parked`: :class:`ParkedOptionError` naming ``source`` and the key for one at another value).
+    (:func:`~datamodules.canonical.parked.drop_parked`: :class:`~datamodules.canonical.parked.ParkedOptionError`
+    naming ``source`` and the key for one at another value).
     ValueError for ``unet_baseline=true`` (removed: the plain U-Net is a run of its
     own, ``task.arch=unet``)."""
     out: dict = {}
@@ -166,14 +122,14 @@ def upgrade_hparams(hparams: Mapping, keep_evaluation: bool = False, source: str
         out["net"] = upgrade_net({**dict(out.get("net") or {}), **moved.pop(None, {})})
     for node, values in moved.items():
         out[node] = {**dict(out.get(node) or {}), **values}
-    return drop_parked(out, PARKED, "task.", source)
+    return drop_parked(out, PARKED, "task.", source, PARKED_VALUES)
 
 
 def upgrade_checkpoint(ckpt: dict, source: str | None = None) -> dict:
     """``ckpt`` (a loaded checkpoint dict) with its hyper-parameters, task config and data config in
     today's layout, when it is a canonical checkpoint; in place, returned. Parked options at their defaults
-    are dropped; :class:`ParkedOptionError` (a ValueError naming ``source``, the file, and the key) for one
-    that the checkpoint used, and for a warp head with the per-pixel depth offset (its state dict's
+    are dropped; :class:`~datamodules.canonical.parked.ParkedOptionError` (a ValueError naming ``source``, the
+    file, and the key) for one that the checkpoint used, and for a warp head with the per-pixel depth offset (its state dict's
     :data:`OFFSET_HEAD`, from before ``net.head.depth`` existed)."""
     if not isinstance(ckpt, dict) or not is_canonical(ckpt):
         return ckpt
@@ -185,8 +141,8 @@ def upgrade_checkpoint(ckpt: dict, source: str | None = None) -> dict:
         task = upgrade_hparams({k: v for k, v in meta["task"].items() if k not in keep}, True, source)
         meta["task"] = {**task, **keep}
     if isinstance(meta.get("data"), Mapping):
-        meta["data"] = drop_parked(upgrade_data_config(meta["data"]), PARKED_DATA, "data.", source, values={})
+        meta["data"] = upgrade_data_config(meta["data"], source)
     out = (ckpt.get("state_dict") or {}).get(OFFSET_HEAD[0])
     if out is not None and out.shape[0] == OFFSET_HEAD[1]:
-        raise _refuse(source, "task.net.head.depth", "offset")
+        raise refuse(source, "task.net.head.depth", "offset")
     return ckpt

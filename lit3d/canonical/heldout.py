@@ -94,10 +94,10 @@ def coverage_problems(items, expected) -> list[str]:
     return out
 
 
-def data_but_fold(data) -> dict:
+def data_but_fold(data, source: str | None = None) -> dict:
     """The data config of a ``heldout.npz`` (its JSON) spelt out (either layout: :func:`full_data_config`), less
-    the fold."""
-    data = full_data_config(json.loads(str(data)))
+    the fold; ``source``: the file, named by the error for a parked option in use."""
+    data = full_data_config(json.loads(str(data)), source)
     data["split"] = {k: v for k, v in dict(data.get("split") or {}).items() if k != "fold"}
     return data
 
@@ -109,13 +109,12 @@ def pool(run_dirs, strict: bool = True) -> dict[str, np.ndarray]:
     folds = [load_heldout(d) for d in run_dirs]
     if not folds:
         raise ValueError("no run dirs given")
-    def same(key, a, b):
-        if key == "data":  # every setting but the fold (files of either config layout)
-            return data_but_fold(a) == data_but_fold(b)
-        return np.array_equal(a, b)
-
+    data = [data_but_fold(f["data"], str(d)) for f, d in zip(folds, run_dirs)]  # every setting but the fold
+    differ = {"data": any(d != data[0] for d in data[1:])}  # (files of either config layout)
+    for key in ("source", "expected"):
+        differ[key] = any(not np.array_equal(f[key], folds[0][key]) for f in folds[1:])
     for key in ("data", "source", "expected"):
-        if any(not same(key, f[key], folds[0][key]) for f in folds[1:]):
+        if differ[key]:
             raise ValueError(f"the runs differ in '{key}': pool only the folds of one cross-validation")
     merged = {k: np.concatenate([f[k] for f in folds]) for k in (*IMAGES, "subject", "pose", "view", "item")}
     problems = coverage_problems(merged["item"], folds[0]["expected"])

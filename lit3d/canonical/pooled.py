@@ -252,9 +252,9 @@ def compose(overrides: list[str]):
         return hydra_compose(config_name="train", overrides=["task=canonical", *overrides])
 
 
-def build_datamodule(data: dict):
-    """The DataModule of a data config (either layout: :func:`upgrade_data_config`)."""
-    data = {k: v for k, v in upgrade_data_config(data).items() if k != "_target_"}
+def build_datamodule(data: dict, source: str | None = None):
+    """The DataModule of a data config (either layout: :func:`upgrade_data_config`; ``source``: the file it came from)."""
+    data = {k: v for k, v in upgrade_data_config(data, source).items() if k != "_target_"}
     return CanonicalDataModule(**data)
 
 
@@ -281,7 +281,7 @@ def run(run_dirs, seeds, out_dir, overrides=(), rows=None, strict: bool = True, 
     if run_dirs:
         items = pool(run_dirs, strict=strict)
         data, settings = json.loads(str(items["data"])), json.loads(str(items["settings"]))
-        dm = build_datamodule(data)
+        dm = build_datamodule(data, str(run_dirs[0]))
         meta = {"runs": [str(d) for d in run_dirs], "folds": items["folds"].tolist()}
     else:
         cfg = compose(list(overrides))

@@ -95,7 +95,6 @@ RULES: tuple[Rule, ...] = (
     Rule("data.prepare.progress",              "bool"),
     Rule("data.training.flip_lr",              "bool"),
     Rule("data.render.flow_targets",           "bool"),
-    Rule("data.render.forward_flow",           "bool"),
     Rule("data.training.balance_subjects",     "bool"),
     # task: optimisers and losses
     Rule("task.lr",                            "number",  "> 0"),

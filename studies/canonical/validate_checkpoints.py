@@ -39,8 +39,9 @@ def _trainer() -> pl.Trainer:
 def validate(ckpt: Path, all_val: bool, heldout: Path | None = None) -> dict[str, float]:
     """``{metric: value}`` of ``ckpt`` on the validation split of its run's data config; with ``heldout``
     (a folder) the validation predictions are written there as ``heldout.npz``."""
-    cfg = OmegaConf.load(ckpt.parent.parent / "config.yaml")
-    data = upgrade_data_config(OmegaConf.to_container(cfg.data, resolve=True))  # a run config of either layout
+    config = ckpt.parent.parent / "config.yaml"
+    cfg = OmegaConf.load(config)
+    data = upgrade_data_config(OmegaConf.to_container(cfg.data, resolve=True), str(config))  # either layout
     if all_val:
         data["split"] = {**(data.get("split") or {}), "max_val_items": None}
     dm = build_datamodule(data)

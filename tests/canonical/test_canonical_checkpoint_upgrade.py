@@ -206,11 +206,51 @@ def test_a_checkpoint_that_used_a_parked_option_is_refused_naming_file_key_and_t
         CanonicalTask(net=NET_NODES, identity={"weight": 1.0, "classes": 9}).load_initial_weights(path)
 
 
-def test_a_parked_data_option_in_use_and_an_offset_depth_head_are_refused(old_checkpoint, tmp_path):
-    path = _with(old_checkpoint[0], tmp_path, lambda c: c[META_KEY]["data"].update(batch_poses=4))
-    with pytest.raises(ValueError, match=rf"^{path}: data.training.batch_poses=4 is a parked"):
+@pytest.mark.parametrize("flat,key,value", [("batch_poses", "data.training.batch_poses", 4),
+                                            ("forward_flow", "data.render.forward_flow", True),
+                                            ("phenotype_targets", "data.phenotype_targets", True)])
+def test_a_checkpoint_that_used_a_parked_data_option_is_refused_naming_file_key_and_tag(old_checkpoint, tmp_path, flat,
+                                                                                       key, value):
+    from lit3d.runtime.errors import UserError
+
+    path = _with(old_checkpoint[0], tmp_path, lambda c: c[META_KEY]["data"].update({flat: value}))
+    with pytest.raises(UserError, match=rf"^{path}: {key}={value!r} is a parked canonical option .*parked-canonical-options$"):
+        read_checkpoint(path)
+    with pytest.raises(ValueError, match=rf"^{path}: {key}={value!r} is a parked"):
         upgrade_checkpoint(torch.load(path, weights_only=False), path)
 
+
+# the same data in the layout of nodes as lit3d-train wrote it before the parked data options left (run configs,
+# checkpoints and heldout.npz files of that time hold them at their defaults)
+NODES_WITH_PARKED = {"data_dir": "DATA/canonical_synth", "image_size": 48, "seed": 42, "phenotype_targets": False,
+                     "source": {"kind": "synth", "kinds": ["humanoid"], "n_subjects": 9, "n_poses": 9,
+                                "mesh_resolution": 32, "seed": 42},
+                     "render": {"flow_targets": True, "forward_flow": False},
+                     "split": {"val_subjects": 2}, "training": {"flip_lr": False, "batch_poses": 0}}
+
+
+def test_a_config_of_nodes_loses_the_parked_data_options_at_their_defaults():
+    data = upgrade_data_config(NODES_WITH_PARKED)
+    assert "phenotype_targets" not in data and data["render"] == {"flow_targets": True}
+    assert data["training"] == {"flip_lr": False}
+    assert CanonicalDataModule(**data).config_hash() == OLD_CONFIG_HASH  # the same cache as before
+    written = {"_target_": OLD_DATA["_target_"], **NODES_WITH_PARKED}
+    assert full_data_config(written) == full_data_config(OLD_DATA)  # heldout.npz files of either layout still pool
+
+
+@pytest.mark.parametrize("node,key,value", [("render", "forward_flow", True), ("training", "batch_poses", 2),
+                                            (None, "phenotype_targets", True)])
+def test_a_config_of_nodes_that_used_a_parked_data_option_is_refused(node, key, value):
+    cfg = {**NODES_WITH_PARKED, **({key: value} if node is None else {node: {**NODES_WITH_PARKED[node], key: value}})}
+    dotted = f"data.{key}" if node is None else f"data.{node}.{key}"
+    with pytest.raises(ValueError, match=rf"^run/heldout.npz: {dotted}={value!r} is a parked canonical option .*"
+                                         r"git tag parked-canonical-options$"):
+        full_data_config(cfg, "run/heldout.npz")
+    with pytest.raises(ValueError, match=rf"^{dotted}={value!r} is a parked"):
+        upgrade_data_config(cfg)
+
+
+def test_an_offset_depth_head_is_refused(old_checkpoint, tmp_path):
     def offset_head(ckpt):  # a warp head from before task.net.head.depth: flow 2 + offset 1 + vis and fills 3
         ckpt["state_dict"]["net.head.out.weight"] = torch.zeros(6, 16, 1, 1)
         for hp in (ckpt["hyper_parameters"], ckpt[META_KEY]["task"]):

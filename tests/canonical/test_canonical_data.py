@@ -1,5 +1,4 @@
 """Synthetic figures, depth camera, canonical DataModule (cache, manifest, strict splits), TOSCA source."""
-import dataclasses
 import json
 
 import numpy as np
@@ -14,6 +13,7 @@ from datamodules.canonical.sources import SynthSource
 from datamodules.canonical.splits import OWN_POSE_BASE, fold_pairs
 from datamodules.canonical.figures import KINDS, figure_mesh, joint_positions, make_pose, make_subject
 from lit3d.render.depth import depth_to_mesh, depth_to_points, render_depth
+from tests.helpers.entry_points import Ctx, data_cli
 from tests.helpers.paths import SHARED_DATA
 
 SHARED = SHARED_DATA / "tosca8k"
@@ -90,9 +90,6 @@ def test_datamodule_cache_manifest_and_strict_split(tmp_path):
     assert b["depth"].shape == b["canon_mask"].shape == (4, 1, 32, 32)
     assert float(b["depth"].max()) <= 1 and float(b["depth"][b["mask"] > 0].min()) >= 0.1 - 1e-3
     assert ((b["depth"] > 0) == (b["mask"] > 0)).all()
-    dm.training = dataclasses.replace(dm.training, batch_poses=2)  # data.training.batch_poses: 2 subjects x 2 poses a batch
-    for b in dm.train_dataloader():
-        assert b["subject_idx"][0] == b["subject_idx"][1] and b["subject_idx"][2] == b["subject_idx"][3]
     png = dm.show(3, tmp_path / "show.png")
     assert png.stat().st_size > 100
     width, height = Image.open(png).size  # 4 labelled columns, 3 rows, the 32 px images enlarged to 256 px
@@ -158,6 +155,20 @@ def test_bad_config_is_named(tmp_path):
         CanonicalDataModule.from_flat(str(tmp_path), image_size=32, source="tosca")
     with pytest.raises(DataError, match="unknown canonical data source"):
         CanonicalDataModule.from_flat(str(tmp_path), image_size=32, source="nope")
+
+
+@pytest.mark.parametrize("override,key", [("+data.render.forward_flow=true", "data.render.forward_flow"),
+                                          ("+data.training.batch_poses=4", "data.training.batch_poses"),
+                                          ("+data.phenotype_targets=true", "phenotype_targets")])
+def test_a_removed_data_option_is_refused_naming_it(override, key, tmp_path, capsys, monkeypatch):
+    """The parked options' data keys (git tag parked-canonical-options) are gone: lit3d-data stops before any
+    work with exit 2 and one line naming the key, instead of running their old code."""
+    arg = f"experiment=canonical_tiny {override} paths.data_dir={tmp_path}/data hydra.run.dir={tmp_path}/run"
+    out = data_cli(arg, Ctx(tmp_path, capsys, monkeypatch, None))
+    lines = [ln for ln in out.err.splitlines() if ln.strip()]
+    assert out.code == 2 and len(lines) == 1 and lines[0].startswith("error: data config: "), out
+    assert key in lines[0]
+    assert not (tmp_path / "data").exists()
 
 
 def test_tosca_source_on_written_files(tmp_path):

@@ -126,18 +126,10 @@ def test_anny_datamodule_pairs_share_each_subjects_canonical(tmp_path):
     assert dm2.config_hash() == dm.config_hash()
     dm2.setup()
     assert dm2.splits["test"] == dm.splits["test"]
-    # phenotype targets (task.phenotype.weight) come from the same draw, not from a new cache
-    dm3 = CanonicalDataModule.from_flat(str(tmp_path / "anny"), source="anny", n_subjects=4, n_poses=4, image_size=48,
-                              split="subject_pose", n_folds=2, split_seed=0, seed=1, batch_size=4,
-                              phenotype_targets=True)
-    assert dm3.config_hash() == dm.config_hash()
-    dm3.setup()
-    batch = next(iter(dm3.test_dataloader()))
-    want = [[bodies.sample_phenotype(0, int(s[len("anny"):]))[k] for k in bodies.PHENOTYPE_RANGES]
-            for s in batch["subject"]]
-    assert batch["phenotype"].shape == (len(want), 6)
-    assert np.allclose(batch["phenotype"].numpy(), want, atol=1e-6)
-    assert "phenotype" not in next(iter(dm.test_dataloader()))
+    # the contact sheet labels each person with the phenotype drawn from body_seed (the cache holds none)
+    for s in man["subjects"]:
+        assert dm.source.phenotype(s) == bodies.sample_phenotype(0, int(s[len("anny"):]))
+    assert dm.source.phenotype("anny0000") != dm.source.phenotype("anny0001")
 
 
 # ------------------------------------------------------------------ FAUST and Sumner readers

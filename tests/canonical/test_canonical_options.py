@@ -1,6 +1,7 @@
-"""Every setting of the canonical task's config is set by an experiment, sweep or search, or listed in the
-"Supported options" table of docs/results_canonical.md (studies.canonical.unset_keys); a key that nobody sets
-and nobody documents fails here, and so does a table row for a key the config no longer has."""
+"""Every setting of the canonical task's config is set by an experiment, sweep or search, and every setting of
+its DataModule by those or a data config, or listed in the "Supported options" table of docs/results_canonical.md
+(studies.canonical.unset_keys); a key that nobody sets and nobody documents fails here, and so does a table row for
+a key the config or the DataModule no longer has."""
 import shutil
 from pathlib import Path
 
@@ -14,12 +15,22 @@ def test_every_unset_key_is_a_documented_option():
     documented = uk.documented_keys()
     assert len(keys) > 40 and unset, "the counter found no keys: it reads nothing"
     assert [k for k in unset if k not in documented] == []
-    assert [k for k in documented if k not in keys] == [], "table rows for keys the task config does not have"
+    data = {uk.dotted(k) for k in uk.data_keys()}
+    assert [k for k in documented if k not in keys and k not in data] == [], "table rows for keys nothing has"
+
+
+def test_every_unset_data_key_is_a_documented_option():
+    keys, unset = uk.unset_data_keys()
+    assert len(keys) > 40 and "data.render.flow_targets" in keys and "data.source.classes (tosca)" in keys
+    assert "data.render.forward_flow" not in keys and "data.phenotype_targets" not in keys  # parked, removed
+    documented = uk.documented_keys()
+    assert [k for k in unset if uk.dotted(k) not in documented] == []
 
 
 def _tree(tmp_path: Path) -> Path:
     """A copy of the files the counter reads, under ``tmp_path``."""
-    for rel in [str(uk.TASK_CONFIG), str(uk.OPTIONS_PAGE), *(str(p.relative_to(uk.ROOT)) for p in uk.setting_files())]:
+    files = [*uk.setting_files(), *uk.data_configs()]
+    for rel in [str(uk.TASK_CONFIG), str(uk.OPTIONS_PAGE), *(str(p.relative_to(uk.ROOT)) for p in files)]:
         (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(uk.ROOT / rel, tmp_path / rel)
     return tmp_path
@@ -37,6 +48,27 @@ def test_a_new_key_that_no_experiment_sets_is_caught(tmp_path):
     assert "task.new_knob" not in uk.unset_keys(root)[1]
 
 
+def test_a_data_key_that_no_config_sets_is_caught_until_the_table_lists_it(tmp_path):
+    root = _tree(tmp_path)
+    synth = root / "lit3d/conf/data/canonical_synth.yaml"
+    text = synth.read_text()
+    assert "\n  own_poses: 0" in text
+    synth.write_text(text.replace("\n  own_poses: 0", "\n  # own_poses: 0"))
+    experiment = root / "lit3d/conf/experiment/canonical_demo.yaml"
+    experiment.write_text(experiment.read_text().replace("own_poses: 16", "# own_poses: 16"))
+    unset = uk.unset_data_keys(root)[1]
+    assert unset == ["data.source.own_poses (synth)"] and "data.source.own_poses" not in uk.documented_keys(root)
+    page = root / uk.OPTIONS_PAGE
+    row = "| `data.source.own_poses` | `0` | N more training-only poses of each figure |\n"
+    page.write_text(page.read_text().replace("\n## Known limits", row + "\n## Known limits"))
+    assert "data.source.own_poses" in uk.documented_keys(root)
+    # a source field is set only by a data config of its own kind: tosca's up_axis, though shrec14 sets its own
+    tosca = root / "lit3d/conf/data/tosca.yaml"
+    tosca.write_text(tosca.read_text().replace("\n  up_axis: z", ""))
+    assert "data.source.up_axis (tosca)" in uk.unset_data_keys(root)[1]
+    assert "data.source.up_axis (shrec14)" not in uk.unset_data_keys(root)[1]
+
+
 def test_a_node_set_whole_sets_its_leaves_and_interpolations_are_not_options(tmp_path):
     root = _tree(tmp_path)
     (root / "lit3d/conf/experiment/canonical_whole.yaml").write_text("task:\n  panels: {every_n_epochs: 0, n: 2}\n")
@@ -47,6 +79,11 @@ def test_a_node_set_whole_sets_its_leaves_and_interpolations_are_not_options(tmp
 
 def test_bad_files_are_one_line_naming_the_file(tmp_path, capsys, monkeypatch):
     root = _tree(tmp_path)
+    kindless = root / "lit3d/conf/data/views/kindless.yaml"
+    kindless.write_text("source:\n  n_poses: 3\n")
+    with pytest.raises(uk.ConfigFileError, match=r"data/views/kindless\.yaml: its source node has no kind$"):
+        uk.unset_data_keys(root)
+    kindless.unlink()
     (root / "sweeps" / "canonical_bad.yaml").write_text("hydra: [unclosed\n")
     with pytest.raises(uk.ConfigFileError, match=r"canonical_bad\.yaml: not readable as YAML"):
         uk.unset_keys(root)
