@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from datamodules.cache import DataError
+from datamodules.canonical.parked import PARKED_DATA, PARKED_TAG
 from lit3d.geometry.broadside import VIEW_MODES
 from lit3d.utils.settings_nodes import parse_node
 
@@ -230,7 +231,12 @@ def _choice(name: str, value, choices: Sequence[str]) -> None:
 
 def parse(cls, node, name: str):
     """``node`` (a mapping, None for the defaults, or already a ``cls``) as a ``cls``; DataError naming
-    ``data.<name>.<key>`` for a key ``cls`` does not have (:func:`lit3d.utils.settings_nodes.parse_node`)."""
+    ``data.<name>.<key>`` for a key ``cls`` does not have (:func:`lit3d.utils.settings_nodes.parse_node`), and
+    where the code of a removed option is for one of :data:`datamodules.canonical.parked.PARKED_DATA`."""
+    removed = [k for k in (node or {}) if not isinstance(node, cls) and f"{name}.{k}" in PARKED_DATA]
+    if removed:
+        raise DataError(f"data.{name}.{removed[0]}: removed (an option measured and not adopted); its code is at "
+                        f"git tag {PARKED_TAG}")
     return parse_node(cls, node, f"data.{name}", DataError)
 
 

@@ -157,17 +157,18 @@ def test_bad_config_is_named(tmp_path):
         CanonicalDataModule.from_flat(str(tmp_path), image_size=32, source="nope")
 
 
-@pytest.mark.parametrize("override,key", [("+data.render.forward_flow=true", "data.render.forward_flow"),
-                                          ("+data.training.batch_poses=4", "data.training.batch_poses"),
-                                          ("+data.phenotype_targets=true", "phenotype_targets")])
-def test_a_removed_data_option_is_refused_naming_it(override, key, tmp_path, capsys, monkeypatch):
+@pytest.mark.parametrize("override,key,tag", [("+data.render.forward_flow=true", "data.render.forward_flow", True),
+                                              ("+data.training.batch_poses=4", "data.training.batch_poses", True),
+                                              ("+data.phenotype_targets=true", "phenotype_targets", False)])
+def test_a_removed_data_option_is_refused_naming_it(override, key, tag, tmp_path, capsys, monkeypatch):
     """The parked options' data keys (git tag parked-canonical-options) are gone: lit3d-data stops before any
-    work with exit 2 and one line naming the key, instead of running their old code."""
+    work with exit 2 and one line naming the key (and, for a key of a settings node, the tag), instead of
+    running their old code."""
     arg = f"experiment=canonical_tiny {override} paths.data_dir={tmp_path}/data hydra.run.dir={tmp_path}/run"
     out = data_cli(arg, Ctx(tmp_path, capsys, monkeypatch, None))
     lines = [ln for ln in out.err.splitlines() if ln.strip()]
     assert out.code == 2 and len(lines) == 1 and lines[0].startswith("error: data config: "), out
-    assert key in lines[0]
+    assert key in lines[0] and (f"{key}: removed" in lines[0] and "git tag parked-canonical-options" in lines[0]) == tag
     assert not (tmp_path / "data").exists()
 
 
