@@ -29,7 +29,7 @@ from tests.helpers.paths import REPO
 LIMIT_S = 2.0  # from the signal that forces the exit to the process's end
 
 PRELUDE = """
-import hashlib, os, signal, sys, time
+import hashlib, os, signal, sys, threading, time
 from pathlib import Path
 from lit3d.utils import forced_exit
 from lit3d.utils.io import atomic_file
@@ -128,7 +128,6 @@ def test_a_second_signal_during_a_native_call_ends_within_2_s(tmp_path):
                      "half-written; resume with ckpt_path=last"], lines
 
 
-@pytest.mark.slow  # under load the child may end by the first KeyboardInterrupt (-2) before the forced exit: a race
 @pytest.mark.parametrize("stage", ["staging", "committed"])
 def test_a_forced_exit_leaves_a_file_set_whole_or_absent(tmp_path, stage):
     """lit3d-reconstruct's sets (lit3d.utils.io.write_file_set) stopped twice inside a native call: one still
@@ -139,7 +138,15 @@ def test_a_forced_exit_leaves_a_file_set_whole_or_absent(tmp_path, stage):
         (out / "a.json").write_bytes(b"old")
 
         def stall(*args):
-            print("ready", flush=True)
+            # "ready" only once the main thread is inside the native call: a first Ctrl-C before it (no handler
+            # here but Python's) would end the program by KeyboardInterrupt, not the forced exit under test
+            main = threading.main_thread().ident
+            def say_ready():
+                while sys._current_frames()[main].f_code.co_name != "native_call":
+                    time.sleep(0.01)
+                time.sleep(0.2)
+                print("ready", flush=True)
+            threading.Thread(target=say_ready, daemon=True).start()
             native_call()
 
         if "{stage}" == "committed":  # the journal is written: the renames come next
