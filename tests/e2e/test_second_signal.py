@@ -23,7 +23,6 @@ from pathlib import Path
 import pytest
 
 from lit3d.utils import progress as progress_module
-from lit3d.utils.progress import duration, heartbeat_line, ticking
 from tests.helpers.paths import REPO
 
 LIMIT_S = 2.0  # from the signal that forces the exit to the process's end
@@ -40,6 +39,16 @@ def native_call():
     # one long C call that releases the GIL and is not broken off by signals (as a torch op):
     # Python's handlers cannot run until it returns, minutes later
     hashlib.pbkdf2_hmac("sha256", b"x", b"y", 10**9)
+
+def ready_inside(name):
+    # print "ready" once the main thread runs the function ``name`` (a first signal sent before would not test it)
+    main = threading.main_thread().ident
+    def say():
+        while sys._current_frames()[main].f_code.co_name != name:
+            time.sleep(0.01)
+        time.sleep(0.2)
+        print("ready", flush=True)
+    threading.Thread(target=say, daemon=True).start()
 """
 
 
@@ -137,16 +146,8 @@ def test_a_forced_exit_leaves_a_file_set_whole_or_absent(tmp_path, stage):
         (out / "a.obj").write_bytes(b"old")
         (out / "a.json").write_bytes(b"old")
 
-        def stall(*args):
-            # "ready" only once the main thread is inside the native call: a first Ctrl-C before it (no handler
-            # here but Python's) would end the program by KeyboardInterrupt, not the forced exit under test
-            main = threading.main_thread().ident
-            def say_ready():
-                while sys._current_frames()[main].f_code.co_name != "native_call":
-                    time.sleep(0.01)
-                time.sleep(0.2)
-                print("ready", flush=True)
-            threading.Thread(target=say_ready, daemon=True).start()
+        def stall(*args):  # no handler here but Python's: "ready" only once inside the native call
+            ready_inside("native_call")
             native_call()
 
         if "{stage}" == "committed":  # the journal is written: the renames come next
@@ -240,27 +241,6 @@ def test_a_forked_childs_ctrl_c_is_not_the_parents_second(tmp_path):
     os.killpg(proc.pid, signal.SIGINT)
     rc, took, lines = _ends_within(proc, limit=30)
     assert rc == 143 and lines == ["clean stop"], (rc, lines)
-
-
-# ----------------------------------------------------------------------------- the heartbeat
-def test_heartbeat_lines_say_the_time_and_what_is_left():
-    assert [duration(s) for s in (0.4, 40, 60, 110, 150)] == ["0 s", "40 s", "1 min", "1 min 50 s", "2 min 30 s"]
-    assert heartbeat_line("building", 40, 150) == "building: 40 s, about 1 min 50 s left"
-    assert heartbeat_line("building", 190, 150) == \
-        "building: 3 min 10 s, longer than the usual 2 min 30 s (a busy machine is slower)"
-
-
-def test_ticking_beats_while_the_block_runs_and_stops_with_it():
-    lines = []
-    with ticking("step", expected_s=100, emit=lines.append, every_s=0.25):
-        time.sleep(1.2)
-    n = len(lines)
-    assert 2 <= n <= 5 and all(ln.startswith("step: ") and ln.endswith(" s left") for ln in lines), lines
-    time.sleep(0.6)
-    assert len(lines) == n, "a heartbeat after the block ended"
-    with ticking("quick", expected_s=100, emit=lines.append, every_s=0.25):
-        pass
-    assert len(lines) == n, "a quick step said something"
 
 
 # ----------------------------------------------------------------------------- the Anny cache's first build

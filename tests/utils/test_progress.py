@@ -1,13 +1,15 @@
-"""Progress lines of long loops: every 10 s and at the end of a long loop, silent in a quick one."""
+"""Progress lines of long loops: every 10 s and at the end of a long loop, silent in a quick one; the heartbeat of
+one long step (its lines, and silence once the step has ended)."""
 from __future__ import annotations
 
 import logging
+import time
 
 import numpy as np
 import trimesh
 
 from lit3d.utils import progress as progress_module
-from lit3d.utils.progress import progress, progress_line
+from lit3d.utils.progress import duration, heartbeat_line, progress, progress_line, ticking
 
 
 class _Clock:
@@ -50,3 +52,23 @@ def test_canonical_baselines_report_progress(monkeypatch, caplog):
     with caplog.at_level(logging.INFO, logger="lit3d"):
         canonical_forms_multi(meshes, ["posed"])
     assert [r.getMessage() for r in caplog.records if r.name == "lit3d"][-1] == "canonical forms (posed): 3/3 done in 0 s"
+
+
+def test_heartbeat_lines_say_the_time_and_what_is_left():
+    assert [duration(s) for s in (0.4, 40, 60, 110, 150)] == ["0 s", "40 s", "1 min", "1 min 50 s", "2 min 30 s"]
+    assert heartbeat_line("building", 40, 150) == "building: 40 s, about 1 min 50 s left"
+    assert heartbeat_line("building", 190, 150) == \
+        "building: 3 min 10 s, longer than the usual 2 min 30 s (a busy machine is slower)"
+
+
+def test_ticking_beats_while_the_block_runs_and_stops_with_it():
+    lines = []
+    with ticking("step", expected_s=100, emit=lines.append, every_s=0.25):
+        time.sleep(1.2)
+    n = len(lines)
+    assert 2 <= n <= 5 and all(ln.startswith("step: ") and ln.endswith(" s left") for ln in lines), lines
+    time.sleep(0.6)
+    assert len(lines) == n, "a heartbeat after the block ended"
+    with ticking("quick", expected_s=100, emit=lines.append, every_s=0.25):
+        pass
+    assert len(lines) == n, "a quick step said something"
