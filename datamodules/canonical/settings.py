@@ -233,7 +233,7 @@ def parse(cls, node, name: str):
     """``node`` (a mapping, None for the defaults, or already a ``cls``) as a ``cls``; DataError naming
     ``data.<name>.<key>`` for a key ``cls`` does not have (:func:`lit3d.utils.settings_nodes.parse_node`), and
     where the code of a removed option is for one of :data:`datamodules.canonical.parked.PARKED_DATA`."""
-    removed = [k for k in (node or {}) if not isinstance(node, cls) and f"{name}.{k}" in PARKED_DATA]
+    removed = [] if isinstance(node, cls) else [k for k in (node or {}) if f"{name}.{k}" in PARKED_DATA]
     if removed:
         raise DataError(f"data.{name}.{removed[0]}: removed (an option measured and not adopted); its code is at "
                         f"git tag {PARKED_TAG}")

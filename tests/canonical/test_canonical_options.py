@@ -1,12 +1,15 @@
 """Every setting of the canonical task's config is set by an experiment, sweep or search, and every setting of
 its DataModule by those or a data config, or listed in the "Supported options" table of docs/results_canonical.md
 (studies.canonical.unset_keys); a key that nobody sets and nobody documents fails here, and so does a table row for
-a key the config or the DataModule no longer has."""
+a key the config or the DataModule no longer has. The DataModule's settings nodes are taken as mappings or as their
+dataclasses."""
 import shutil
 from pathlib import Path
 
 import pytest
 
+from datamodules.canonical import CanonicalDataModule
+from datamodules.canonical.settings import RenderSettings, TrainingSettings
 from studies.canonical import unset_keys as uk
 
 
@@ -96,3 +99,11 @@ def test_bad_files_are_one_line_naming_the_file(tmp_path, capsys, monkeypatch):
     assert uk.main([]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: sweeps/canonical_bad.yaml: not readable as YAML")
+
+
+def test_settings_given_as_their_dataclasses_are_taken_as_they_are(tmp_path):
+    """The nodes may come as their dataclasses (the constructor's types), not only as mappings: the check for
+    removed keys reads the keys of a mapping only."""
+    render, training = RenderSettings(azimuths=(0.0, 90.0), flow_targets=True), TrainingSettings(flip_lr=True)
+    dm = CanonicalDataModule(str(tmp_path), image_size=32, render=render, training=training)
+    assert dm.render is render and dm.training is training
