@@ -105,10 +105,18 @@ def heldout_items(task, outputs: dict[str, torch.Tensor], datamodule, settings: 
     trainer = getattr(task, "_trainer", None)
     if (trainer is not None and not trainer.is_global_zero) or not isinstance(datamodule, ListsHeldOut):
         return None
-    return heldout_arrays(
-        outputs, {i: s for s, i in datamodule.subject_index.items()}, datamodule.held_out_ids(),
-        prediction_source(task), dict(datamodule.hparams), datamodule.split.fold, datamodule.split.n_folds,
-        settings_of({"mask_threshold": task.hparams.mask_threshold, **settings}))
+    return _heldout(task, outputs, datamodule, settings, datamodule.held_out_ids(), datamodule.split.fold,
+                    datamodule.split.n_folds)
+
+
+def _heldout(task, outputs: dict[str, torch.Tensor], datamodule, settings: Mapping, expected, fold: int,
+             n_folds: int) -> dict:
+    """:func:`lit3d.canonical.heldout.heldout_arrays` of ``outputs`` with ``expected`` item ids as fold ``fold``
+    of ``n_folds``: the subjects named by the datamodule, its data config, the task's prediction source, and
+    ``settings`` with the task's ``mask_threshold``."""
+    return heldout_arrays(outputs, {i: s for s, i in datamodule.subject_index.items()}, expected,
+                          prediction_source(task), dict(datamodule.hparams), fold, n_folds,
+                          settings_of({"mask_threshold": task.hparams.mask_threshold, **settings}))
 
 
 def validation_protocol(trainer, task, datamodule, settings: Mapping) -> Evaluation:
@@ -126,9 +134,7 @@ def validation_protocol(trainer, task, datamodule, settings: Mapping) -> Evaluat
         return Evaluation()
     names = {i: s for s, i in datamodule.subject_index.items()}
     expected = item_ids([names[int(i)] for i in outputs["subject_idx"]], outputs["pose"], outputs["view"])
-    held = heldout_arrays(outputs, names, expected.tolist(), prediction_source(task), dict(datamodule.hparams), 0, 1,
-                          settings_of({"mask_threshold": task.hparams.mask_threshold, **settings}))
-    return Evaluation({}, {"heldout": held})
+    return Evaluation({}, {"heldout": _heldout(task, outputs, datamodule, settings, expected.tolist(), 0, 1)})
 
 
 def write_artefacts(evaluation: Evaluation, out_dir: Path) -> list[Path]:
