@@ -106,10 +106,13 @@ def unset_keys(root: Path = ROOT) -> tuple[list[str], list[str]]:
     """(every key of :func:`task_keys`, those that no setting file sets, nor a node above them)."""
     keys = task_keys(root)
     given = set().union(*(keys_set_by(path) for path in setting_files(root)))
-    def is_set(key: str) -> bool:
-        parts = key.split(".")
-        return any(".".join(parts[:i]) in given for i in range(1, len(parts) + 1))
-    return keys, [key for key in keys if not is_set(key)]
+    return keys, [key for key in keys if not covered(key, given)]
+
+
+def covered(key: str, given: set[str]) -> bool:
+    """Whether ``given`` holds the dotted ``key`` or a node above it (``task.net`` covers ``task.net.init``)."""
+    parts = key.split(".")
+    return any(".".join(parts[:i]) in given for i in range(1, len(parts) + 1))
 
 
 def data_keys() -> list[str]:
@@ -159,12 +162,8 @@ def unset_data_keys(root: Path = ROOT) -> tuple[list[str], list[str]]:
             if not isinstance(kind, str):
                 raise ConfigFileError(f"{shown(path)}: its source node has no kind")
             by_kind.setdefault(kind, set()).update(leaves(source, "data.source"))
-
-    def is_set(key: str) -> bool:
-        parts, kind = dotted(key).split("."), key.partition(" (")[2].rstrip(")")
-        above = {".".join(parts[:i]) for i in range(1, len(parts) + 1)}
-        return bool(above & given or above & by_kind.get(kind, set()))
-    return keys, [key for key in keys if not is_set(key)]
+    return keys, [key for key in keys
+                  if not covered(dotted(key), given | by_kind.get(key.partition(" (")[2].rstrip(")"), set()))]
 
 
 def documented_keys(root: Path = ROOT) -> list[str]:
